@@ -1,0 +1,1 @@
+"""fdikit.detect."""

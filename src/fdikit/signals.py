@@ -1,0 +1,244 @@
+"""Time-aligned, named signal arrays: the data type every fdikit stage consumes and produces.
+
+A :class:`Signals` holds a time vector ``t`` of shape ``(T,)`` and values of shape
+``(runs, T, channels)``; a single run is stored with ``runs == 1``. Channel names (and
+optional units) travel with the values so that stages pick their inputs by name.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from typing import Any
+
+import numpy as np
+
+from .errors import DataError
+
+__all__ = ["Signals", "check_finite", "check_time"]
+
+
+def check_time(t: np.ndarray, *, name: str = "t") -> np.ndarray:
+    """Validate a time vector: 1-D, finite, strictly increasing. Returns it as float64."""
+    t = np.asarray(t, dtype=float)
+    if t.ndim != 1:
+        raise DataError(f"time vector {name!r} must be 1-D, got shape {t.shape}")
+    bad = np.flatnonzero(~np.isfinite(t))
+    if bad.size:
+        raise DataError(f"time vector {name!r} has a non-finite value at sample {bad[0]}")
+    if t.size > 1:
+        dt = np.diff(t)
+        bad = np.flatnonzero(dt <= 0)
+        if bad.size:
+            k = int(bad[0]) + 1
+            raise DataError(
+                f"time vector {name!r} is not strictly increasing at sample {k} "
+                f"(t[{k - 1}] = {t[k - 1]!r}, t[{k}] = {t[k]!r})"
+            )
+    return t
+
+
+def check_finite(values: np.ndarray, names: Sequence[str], *, what: str = "signal") -> None:
+    """Raise :class:`DataError` naming the channel, run and sample of the first NaN or inf.
+
+    ``values`` has shape ``(runs, T, channels)`` (or ``(T, channels)``).
+    """
+    v = np.asarray(values)
+    if v.dtype.kind not in "fc":
+        return
+    ok = np.isfinite(v)
+    if ok.all():
+        return
+    idx = np.argwhere(~ok)[0]
+    if v.ndim == 3:
+        run, k, c = (int(i) for i in idx)
+        where = f"run {run}, sample {k}"
+    else:
+        k, c = (int(i) for i in idx)
+        where = f"sample {k}"
+    raise DataError(f"{what} channel {names[c]!r} has a non-finite value ({v[tuple(idx)]}) at {where}")
+
+
+class Signals:
+    """Named, time-aligned signals for one or many runs.
+
+    Parameters
+    ----------
+    t : array_like, shape (T,)
+        Sample times in seconds, strictly increasing.
+    values : array_like, shape (T, C) or (runs, T, C)
+        Sample values. A 2-D array is one run.
+    names : sequence of str, length C
+        Channel names (unique).
+    units : sequence of str, optional
+        Channel units (``""`` when unknown).
+    check : bool
+        Validate finiteness of the values (default True). Time is always validated.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from fdikit import Signals
+    >>> s = Signals(np.arange(3) * 0.1, np.ones((3, 2)), ["a", "b"])
+    >>> s.values.shape, s["b"].shape
+    ((1, 3, 2), (1, 3))
+    """
+
+    __slots__ = ("names", "t", "units", "values")
+
+    def __init__(
+        self,
+        t: Any,
+        values: Any,
+        names: Sequence[str],
+        units: Sequence[str] | None = None,
+        *,
+        check: bool = True,
+    ):
+        t = check_time(t)
+        v = np.asarray(values, dtype=float)
+        if v.ndim == 1:
+            v = v[:, None]
+        if v.ndim == 2:
+            v = v[None]
+        if v.ndim != 3:
+            raise DataError(f"values must have shape (T, C) or (runs, T, C), got {v.shape}")
+        names = [str(n) for n in names]
+        if v.shape[1] != t.size:
+            raise DataError(
+                f"values have {v.shape[1]} samples along time but t has {t.size} (shape {v.shape})"
+            )
+        if v.shape[2] != len(names):
+            raise DataError(f"values have {v.shape[2]} channels but {len(names)} names: {names}")
+        if len(set(names)) != len(names):
+            dup = sorted({n for n in names if names.count(n) > 1})
+            raise DataError(f"duplicated channel names: {dup}")
+        if units is None:
+            units = [""] * len(names)
+        units = [str(u) for u in units]
+        if len(units) != len(names):
+            raise DataError(f"{len(units)} units for {len(names)} channels")
+        if check:
+            check_finite(v, names)
+        self.t = t
+        self.values = v
+        self.names = names
+        self.units = units
+
+    # ------------------------------------------------------------------ basic properties
+    @property
+    def runs(self) -> int:
+        return self.values.shape[0]
+
+    @property
+    def n_samples(self) -> int:
+        return self.values.shape[1]
+
+    @property
+    def n_channels(self) -> int:
+        return self.values.shape[2]
+
+    @property
+    def dt(self) -> float:
+        """Mean sample interval (s)."""
+        return float((self.t[-1] - self.t[0]) / max(self.t.size - 1, 1))
+
+    def __len__(self) -> int:
+        return self.n_samples
+
+    def __repr__(self) -> str:
+        ch = ", ".join(self.names[:8]) + (", ..." if self.n_channels > 8 else "")
+        span = f"{self.t[0]:g}..{self.t[-1]:g} s" if self.t.size else "empty"
+        return f"Signals(runs={self.runs}, samples={self.n_samples}, {span}, channels=[{ch}])"
+
+    # ------------------------------------------------------------------ channel access
+    def index(self, names: str | Iterable[str]) -> list[int]:
+        """Column indices of the given channel names; a clear error for unknown ones."""
+        if isinstance(names, str):
+            names = [names]
+        out = []
+        lookup = {n: i for i, n in enumerate(self.names)}
+        for n in names:
+            if n not in lookup:
+                raise DataError(f"unknown channel {n!r}; available channels: {self.names}")
+            out.append(lookup[n])
+        return out
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        """Values of one channel, shape ``(runs, T)``."""
+        return self.values[:, :, self.index(name)[0]]
+
+    def __contains__(self, name: object) -> bool:
+        return name in self.names
+
+    def select(self, names: Iterable[str]) -> Signals:
+        """A new :class:`Signals` with only the named channels, in that order."""
+        names = list(names)
+        idx = self.index(names)
+        return Signals(
+            self.t,
+            self.values[:, :, idx],
+            names,
+            [self.units[i] for i in idx],
+            check=False,
+        )
+
+    def run(self, i: int) -> Signals:
+        """Run ``i`` alone (still 3-D with ``runs == 1``)."""
+        if not -self.runs <= i < self.runs:
+            raise DataError(f"run {i} out of range for {self.runs} runs")
+        return Signals(self.t, self.values[i : i + 1], self.names, self.units, check=False)
+
+    def window(self, t0: float | None = None, t1: float | None = None) -> Signals:
+        """Samples with ``t0 <= t <= t1``."""
+        m = np.ones(self.t.size, bool)
+        if t0 is not None:
+            m &= self.t >= t0
+        if t1 is not None:
+            m &= self.t <= t1
+        return Signals(self.t[m], self.values[:, m], self.names, self.units, check=False)
+
+    def concat_channels(self, other: Signals) -> Signals:
+        """Channels of ``self`` followed by those of ``other`` (same time grid and runs)."""
+        if self.t.shape != other.t.shape or not np.array_equal(self.t, other.t):
+            raise DataError("cannot join channels of signals on different time grids")
+        if self.runs != other.runs:
+            raise DataError(f"cannot join signals with {self.runs} and {other.runs} runs")
+        return Signals(
+            self.t,
+            np.concatenate([self.values, other.values], axis=2),
+            self.names + other.names,
+            self.units + other.units,
+            check=False,
+        )
+
+    # ------------------------------------------------------------------ pandas edges
+    def to_pandas(self, run: int | None = None):
+        """A :class:`pandas.DataFrame` indexed by time (one run), or with a (run, t) MultiIndex."""
+        import pandas as pd
+
+        if run is not None or self.runs == 1:
+            r = 0 if run is None else run
+            return pd.DataFrame(self.values[r], index=pd.Index(self.t, name="t"), columns=self.names)
+        idx = pd.MultiIndex.from_product([range(self.runs), self.t], names=["run", "t"])
+        return pd.DataFrame(self.values.reshape(-1, self.n_channels), index=idx, columns=self.names)
+
+    @classmethod
+    def from_pandas(cls, df, time: str | None = None, units: Sequence[str] | None = None) -> Signals:
+        """Build from a DataFrame indexed by time (or with a ``time`` column)."""
+        if time is not None:
+            if time not in df.columns:
+                raise DataError(f"time column {time!r} not in {list(df.columns)}")
+            t = df[time].to_numpy(float)
+            df = df.drop(columns=[time])
+        else:
+            t = df.index.to_numpy(float)
+        return cls(t, df.to_numpy(float), [str(c) for c in df.columns], units)
+
+    def equals(self, other: Signals, *, atol: float = 0.0) -> bool:
+        """Same names, time and values (within ``atol``)."""
+        return (
+            self.names == other.names
+            and np.array_equal(self.t, other.t)
+            and self.values.shape == other.values.shape
+            and bool(np.allclose(self.values, other.values, rtol=0, atol=atol))
+        )
