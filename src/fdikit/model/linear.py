@@ -324,7 +324,7 @@ class LinearFaultModel:
         *,
         states: Sequence[str] | None = None,
         outputs: Sequence[str] | None = None,
-        dt: float | None | str = "same",
+        dt: float | str | None = "same",
     ) -> LinearFaultModel:
         """A model with the same input names and new matrices (used by reduction and transforms)."""
         new = object.__new__(LinearFaultModel)

@@ -1,0 +1,322 @@
+"""Shared runtime interfaces: residual generators, residual processors and the Monitor.
+
+Every stage works in two forms that must give identical numbers:
+
+* **batch**: ``run(signals) -> Signals`` over a whole record, vectorised over runs (and over
+  time where the algorithm allows);
+* **streaming**: ``reset(runs)`` then ``step(...)`` once per sample, for live data.
+
+A :class:`ResidualGenerator` consumes named input channels ``u`` (known inputs) and ``y``
+(measurements) and produces named residual channels (and, for reconstructors, fault
+estimates). A :class:`ResidualProcessor` consumes named residual channels and produces test
+statistics, probabilities or alarms. The :class:`Monitor` chains generators, processors and a
+decision rule.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ..errors import DataError
+from ..signals import Signals, check_finite
+
+__all__ = [
+    "Decision",
+    "Event",
+    "Monitor",
+    "MonitorResult",
+    "ResidualGenerator",
+    "ResidualProcessor",
+]
+
+
+def _as_batch(x: Any, n: int, what: str, names: Sequence[str]) -> np.ndarray:
+    """A sample as a ``(runs, n)`` float array; 1-D input is one run."""
+    x = np.asarray(x, dtype=float)
+    if x.ndim == 1:
+        x = x[None]
+    if x.ndim != 2 or x.shape[1] != n:
+        raise DataError(f"{what} sample must have shape (runs, {n}) for channels {list(names)}, "
+                        f"got {x.shape}")
+    return x
+
+
+class ResidualGenerator:
+    """Base class of residual generators (observers, filters, parity equations, SMOs).
+
+    Subclasses set ``u_names`` (known-input channels), ``y_names`` (measured channels),
+    ``output_names`` (what they produce) and implement :meth:`reset` and :meth:`_step`.
+    :meth:`run` defaults to a loop over :meth:`step`; subclasses override it with a vectorised
+    form and a test asserts both agree.
+    """
+
+    u_names: list[str]
+    y_names: list[str]
+    output_names: list[str]
+    output_units: list[str] | None = None
+
+    def reset(self, runs: int = 1) -> None:  # pragma: no cover - interface
+        raise NotImplementedError
+
+    def _step(self, u: np.ndarray, y: np.ndarray) -> np.ndarray:  # pragma: no cover - interface
+        raise NotImplementedError
+
+    def step(self, u_k: Any, y_k: Any) -> np.ndarray:
+        """Advance one sample. ``u_k``: (runs, n_u), ``y_k``: (runs, n_y) -> (runs, n_out)."""
+        u = _as_batch(u_k, len(self.u_names), "input", self.u_names)
+        y = _as_batch(y_k, len(self.y_names), "measurement", self.y_names)
+        return self._step(u, y)
+
+    def _inputs(self, signals: Signals) -> tuple[np.ndarray, np.ndarray]:
+        u = signals.values[:, :, signals.index(self.u_names)] if self.u_names else \
+            np.zeros((signals.runs, signals.n_samples, 0))
+        y = signals.values[:, :, signals.index(self.y_names)]
+        return u, y
+
+    def run(self, signals: Signals) -> Signals:
+        """Residuals over a whole record (default: streaming loop; subclasses vectorise)."""
+        u, y = self._inputs(signals)
+        self.reset(signals.runs)
+        out = np.empty((signals.runs, signals.n_samples, len(self.output_names)))
+        for k in range(signals.n_samples):
+            out[:, k] = self._step(u[:, k], y[:, k])
+        return Signals(signals.t, out, self.output_names, self.output_units, check=False)
+
+
+class ResidualProcessor:
+    """Base class of residual processors (threshold rules, GLRT, CUSUM, MHSSPT).
+
+    Subclasses set ``input_names`` and ``output_names`` and implement :meth:`reset` and
+    :meth:`_step`; :meth:`run` defaults to the streaming loop.
+    """
+
+    input_names: list[str]
+    output_names: list[str]
+
+    def reset(self, runs: int = 1) -> None:  # pragma: no cover - interface
+        raise NotImplementedError
+
+    def _step(self, r: np.ndarray) -> np.ndarray:  # pragma: no cover - interface
+        raise NotImplementedError
+
+    def step(self, r_k: Any) -> np.ndarray:
+        """Advance one sample: ``r_k`` (runs, n_in) -> (runs, n_out)."""
+        return self._step(_as_batch(r_k, len(self.input_names), "residual", self.input_names))
+
+    def run(self, signals: Signals) -> Signals:
+        r = signals.values[:, :, signals.index(self.input_names)]
+        self.reset(signals.runs)
+        out = np.empty((signals.runs, signals.n_samples, len(self.output_names)))
+        for k in range(signals.n_samples):
+            out[:, k] = self._step(r[:, k])
+        return Signals(signals.t, out, self.output_names, check=False)
+
+
+@dataclass(frozen=True)
+class Event:
+    """An announcement: at time ``t`` (sample ``k``) of run ``run``, ``hypothesis`` was declared."""
+
+    run: int
+    k: int
+    t: float
+    hypothesis: str
+    value: float
+
+
+@dataclass
+class Decision:
+    """Turns processor outputs into announcements.
+
+    Each channel in ``alarm_channels`` is an alarm (announced at its first sample with value
+    >= ``level``; re-armed when it falls below). ``names`` maps a channel to the hypothesis it
+    announces (default: the channel name).
+    """
+
+    alarm_channels: Sequence[str]
+    level: float = 0.5
+    names: dict[str, str] = field(default_factory=dict)
+
+    def events(self, t: np.ndarray, stats: Signals) -> list[Event]:
+        idx = stats.index(self.alarm_channels)
+        on = stats.values[:, :, idx] >= self.level  # (runs, T, A)
+        rising = on.copy()
+        rising[:, 1:] &= ~on[:, :-1]
+        out = []
+        for run, k, a in np.argwhere(rising):
+            ch = self.alarm_channels[a]
+            out.append(Event(int(run), int(k), float(t[k]), self.names.get(ch, ch),
+                             float(stats.values[run, k, idx[a]])))
+        out.sort(key=lambda e: (e.run, e.k, e.hypothesis))
+        return out
+
+
+@dataclass
+class MonitorResult:
+    """What a Monitor run produced: residuals, statistics and events."""
+
+    residuals: Signals
+    statistics: Signals
+    events: list[Event]
+
+    def first_event(self, run: int = 0) -> Event | None:
+        ev = [e for e in self.events if e.run == run]
+        return ev[0] if ev else None
+
+
+class Monitor:
+    """A chain: residual generators -> residual processors -> decision.
+
+    Parameters
+    ----------
+    generators : sequence of ResidualGenerator
+        Their outputs are concatenated (names must be unique).
+    processors : sequence of ResidualProcessor
+        Each reads named residual channels (and outputs of earlier processors).
+    decision : Decision, optional
+        Announcement rule over the processors' outputs.
+    validate : bool
+        Check every incoming sample for NaN/inf and raise :class:`DataError` naming the channel.
+
+    Batch (:meth:`run`) and streaming (:meth:`reset` / :meth:`step`) give identical outputs.
+    """
+
+    def __init__(
+        self,
+        generators: Sequence[ResidualGenerator],
+        processors: Sequence[ResidualProcessor] = (),
+        decision: Decision | None = None,
+        *,
+        validate: bool = True,
+    ):
+        self.generators = list(generators)
+        self.processors = list(processors)
+        self.decision = decision
+        self.validate = validate
+        self.residual_names = [n for g in self.generators for n in g.output_names]
+        if len(set(self.residual_names)) != len(self.residual_names):
+            raise DataError(f"residual channel names collide: {self.residual_names}")
+        self.stat_names = [n for p in self.processors for n in p.output_names]
+        avail = set(self.residual_names)
+        for p in self.processors:
+            missing = [n for n in p.input_names if n not in avail]
+            if missing:
+                raise DataError(f"processor {type(p).__name__} needs channels {missing} that no "
+                                f"generator or earlier processor produces; have {sorted(avail)}")
+            avail |= set(p.output_names)
+        if decision is not None:
+            missing = [c for c in decision.alarm_channels if c not in self.stat_names]
+            if missing:
+                raise DataError(f"decision needs channels {missing}; statistics are {self.stat_names}")
+        self.input_names = sorted({n for g in self.generators for n in (*g.u_names, *g.y_names)})
+        self._k = 0
+        self._t_prev: float | None = None
+        self._on: np.ndarray | None = None
+
+    # ------------------------------------------------------------------ batch
+    def run(self, signals: Signals) -> MonitorResult:
+        """Run the whole chain over a record (all runs at once)."""
+        if self.validate:
+            check_finite(signals.select(self.input_names).values, self.input_names)
+        res = [g.run(signals) for g in self.generators]
+        r = res[0]
+        for s in res[1:]:
+            r = r.concat_channels(s)
+        pool = r
+        stats = []
+        for p in self.processors:
+            s = p.run(pool)
+            stats.append(s)
+            pool = pool.concat_channels(s)
+        st = pool.select(self.stat_names) if self.stat_names else Signals(
+            signals.t, np.zeros((signals.runs, signals.n_samples, 0)), [], check=False)
+        events = self.decision.events(signals.t, st) if self.decision is not None else []
+        return MonitorResult(r, st, events)
+
+    # ------------------------------------------------------------------ streaming
+    def reset(self, runs: int = 1) -> None:
+        for g in self.generators:
+            g.reset(runs)
+        for p in self.processors:
+            p.reset(runs)
+        self._k = 0
+        self._t_prev = None
+        self._on = None
+        self._runs = runs
+
+    def step(self, t: float, sample: dict[str, Any] | np.ndarray,
+             names: Sequence[str] | None = None) -> tuple[np.ndarray, np.ndarray, list[Event]]:
+        """Advance one sample.
+
+        ``sample`` is a mapping channel -> value (scalar or (runs,)) or an array
+        ``(runs, len(names))``. Returns residuals ``(runs, R)``, statistics ``(runs, S)`` and the
+        events announced at this sample.
+        """
+        if self._t_prev is not None and not t > self._t_prev:
+            raise DataError(f"time is not increasing at sample {self._k}: {t} after {self._t_prev}")
+        if isinstance(sample, dict):
+            names = list(sample)
+            vals = np.column_stack([np.broadcast_to(np.asarray(sample[n], float), (self._runs,))
+                                    for n in names])
+        else:
+            if names is None:
+                raise DataError("give channel names with an array sample")
+            names = list(names)
+            vals = _as_batch(sample, len(names), "monitor", names)
+        lookup = {n: i for i, n in enumerate(names)}
+        for n in self.input_names:
+            if n not in lookup:
+                raise DataError(f"sample {self._k} lacks channel {n!r}; it has {names}")
+        if self.validate:
+            sel = [lookup[n] for n in self.input_names]
+            bad = ~np.isfinite(vals[:, sel])
+            if bad.any():
+                run, c = np.argwhere(bad)[0]
+                raise DataError(f"channel {self.input_names[c]!r} has a non-finite value at "
+                                f"sample {self._k} (run {run})")
+        outs = []
+        for g in self.generators:
+            u = vals[:, [lookup[n] for n in g.u_names]]
+            y = vals[:, [lookup[n] for n in g.y_names]]
+            outs.append(g.step(u, y))
+        r = np.concatenate(outs, axis=1) if outs else np.zeros((vals.shape[0], 0))
+        pool = dict(zip(self.residual_names, r.T))
+        stats = []
+        for p in self.processors:
+            s = p.step(np.column_stack([pool[n] for n in p.input_names]))
+            stats.append(s)
+            pool.update(zip(p.output_names, s.T))
+        st = np.concatenate(stats, axis=1) if stats else np.zeros((vals.shape[0], 0))
+        events: list[Event] = []
+        if self.decision is not None:
+            idx = [self.stat_names.index(c) for c in self.decision.alarm_channels]
+            on = st[:, idx] >= self.decision.level
+            prev = self._on if self._on is not None else np.zeros_like(on)
+            for run, a in np.argwhere(on & ~prev):
+                ch = self.decision.alarm_channels[a]
+                events.append(Event(int(run), self._k, float(t), self.decision.names.get(ch, ch),
+                                    float(st[run, idx[a]])))
+            events.sort(key=lambda e: (e.run, e.k, e.hypothesis))
+            self._on = on
+        self._k += 1
+        self._t_prev = t
+        return r, st, events
+
+    def stream(self, signals: Signals) -> MonitorResult:
+        """Run the streaming path over a record (for tests and follow mode)."""
+        self.reset(signals.runs)
+        R = np.empty((signals.runs, signals.n_samples, len(self.residual_names)))
+        S = np.empty((signals.runs, signals.n_samples, len(self.stat_names)))
+        events: list[Event] = []
+        for k, t in enumerate(signals.t):
+            r, s, ev = self.step(float(t), signals.values[:, k], signals.names)
+            R[:, k], S[:, k] = r, s
+            events.extend(ev)
+        events.sort(key=lambda e: (e.run, e.k, e.hypothesis))
+        return MonitorResult(Signals(signals.t, R, self.residual_names, check=False),
+                             Signals(signals.t, S, self.stat_names, check=False), events)
+
+
