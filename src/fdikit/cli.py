@@ -1,0 +1,81 @@
+"""The ``fdikit`` command.
+
+Subcommands live in :mod:`fdikit.commands`, one module each, with a ``register(subparsers)``
+function that adds its parser and sets ``func`` (called with the parsed arguments; returns the
+exit code). Commands that report results accept ``--json`` and then print exactly one JSON
+object on standard output.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+import sys
+from typing import Any
+
+import numpy as np
+
+from . import __version__
+from .errors import FdikitError
+
+#: Modules under fdikit.commands that register subcommands, in help order.
+COMMAND_MODULES = ("demo", "reconstruct", "abs", "car")
+
+
+def _to_jsonable(obj: Any) -> Any:
+    if isinstance(obj, dict):
+        return {str(k): _to_jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_to_jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return _to_jsonable(obj.tolist())
+    if isinstance(obj, np.bool_):
+        return bool(obj)
+    if isinstance(obj, np.integer):
+        return int(obj)
+    if isinstance(obj, np.floating | float):
+        f = float(obj)
+        return f if np.isfinite(f) else None
+    return obj
+
+
+def print_json(obj: Any) -> None:
+    """Print exactly one JSON object on stdout (NaN/inf become null)."""
+    sys.stdout.write(json.dumps(_to_jsonable(obj), allow_nan=False) + "\n")
+    sys.stdout.flush()
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="fdikit",
+        description="Model-based fault detection, isolation and reconstruction for vehicles.",
+    )
+    parser.add_argument("--version", action="version", version=f"fdikit {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for name in COMMAND_MODULES:
+        try:
+            mod = importlib.import_module(f"fdikit.commands.{name}")
+        except ModuleNotFoundError as exc:
+            if exc.name == f"fdikit.commands.{name}":
+                continue  # that system has not landed yet
+            raise
+        mod.register(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "func", None):
+        parser.print_help()
+        return 0
+    try:
+        return int(args.func(args) or 0)
+    except FdikitError as exc:
+        print(f"fdikit: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,1 @@
+"""Subcommands of the fdikit CLI, one module each (see fdikit.cli)."""
