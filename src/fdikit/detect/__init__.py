@@ -1,1 +1,5 @@
-"""fdikit.detect."""
+"""Residual processors: threshold rules, GLRT, CUSUM, MHSSPT."""
+
+from .threshold import Hold, consecutive_count
+
+__all__ = ["Hold", "consecutive_count"]

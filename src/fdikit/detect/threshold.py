@@ -1,0 +1,97 @@
+"""Threshold rules: a statistic above a threshold for Z consecutive samples raises an alarm.
+
+This is the alarm rule of paper luo-et-al, eq. (34): a test declares a fault at sample k when its
+statistic exceeds the threshold at samples k-Z+1, ..., k. ``Z = 1`` is a plain threshold.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from ..errors import DataError
+from ..monitor.core import ResidualProcessor
+from ..signals import Signals
+
+__all__ = ["Hold", "consecutive_count"]
+
+
+def consecutive_count(exceed: np.ndarray, axis: int = 1) -> np.ndarray:
+    """Length of the current run of ``True`` values along ``axis`` (0 where ``exceed`` is False).
+
+    Vectorised with cumulative maxima: ``c_k = k - (index of the last False at or before k)``.
+
+    Examples
+    --------
+    >>> consecutive_count(np.array([[1, 1, 0, 1, 1, 1]], bool)).tolist()
+    [[1, 2, 0, 1, 2, 3]]
+    """
+    e = np.moveaxis(np.asarray(exceed, bool), axis, -1)
+    T = e.shape[-1]
+    k = np.arange(T)
+    last_false = np.where(~e, k, -1)
+    np.maximum.accumulate(last_false, axis=-1, out=last_false)
+    return np.moveaxis(k - last_false, -1, axis) * np.moveaxis(e, -1, axis)
+
+
+class Hold(ResidualProcessor):
+    """Alarm when a statistic exceeds its threshold for ``Z`` consecutive samples (luo-et-al eq. (34)).
+
+    Parameters
+    ----------
+    inputs : sequence of str
+        Channels to test (residuals or test statistics).
+    threshold : float or sequence of float
+        One threshold for all channels or one per channel (> 0 when ``absolute``).
+    Z : int
+        Number of consecutive exceedances required (>= 1).
+    absolute : bool
+        Compare ``|x|`` (default) or the signed ``x`` with the threshold.
+
+    Outputs one alarm channel per input, named ``"<input>:alarm"``, valued 0.0 or 1.0.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from fdikit import Signals
+    >>> from fdikit.detect import Hold
+    >>> s = Signals(np.arange(6.0), [0, 2, 2, 0, 2, 2], ["r"])
+    >>> Hold(["r"], 1.0, Z=2).run(s)["r:alarm"].tolist()
+    [[0.0, 0.0, 1.0, 0.0, 0.0, 1.0]]
+    """
+
+    def __init__(self, inputs: Sequence[str], threshold, Z: int = 1, *, absolute: bool = True):
+        self.input_names = [str(s) for s in inputs]
+        if not self.input_names:
+            raise DataError("Hold needs at least one input channel")
+        thr = np.broadcast_to(np.asarray(threshold, float), (len(self.input_names),)).copy()
+        if not np.all(np.isfinite(thr)):
+            raise DataError(f"thresholds must be finite, got {thr.tolist()}")
+        if absolute and np.any(thr <= 0):
+            raise DataError(f"thresholds on |x| must be positive, got {thr.tolist()}")
+        if int(Z) != Z or Z < 1:
+            raise DataError(f"Z must be an integer >= 1, got {Z}")
+        self.threshold = thr
+        self.Z = int(Z)
+        self.absolute = bool(absolute)
+        self.output_names = [f"{s}:alarm" for s in self.input_names]
+        self._count = np.zeros((1, len(self.input_names)), int)
+
+    def _exceed(self, r: np.ndarray) -> np.ndarray:
+        return (np.abs(r) if self.absolute else r) > self.threshold
+
+    def reset(self, runs: int = 1) -> None:
+        self._count = np.zeros((runs, len(self.input_names)), int)
+
+    def _step(self, r: np.ndarray) -> np.ndarray:
+        e = self._exceed(r)
+        self._count = (self._count + 1) * e
+        return (self._count >= self.Z).astype(float)
+
+    def run(self, signals: Signals) -> Signals:
+        r = signals.values[:, :, signals.index(self.input_names)]
+        c = consecutive_count(self._exceed(r), axis=1)
+        self.reset(signals.runs)
+        self._count = c[:, -1].copy() if c.shape[1] else self._count
+        return Signals(signals.t, (c >= self.Z).astype(float), self.output_names, check=False)
