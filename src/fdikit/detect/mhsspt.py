@@ -1,0 +1,258 @@
+"""Multiple-hypothesis Shiryayev sequential probability test (MHSSPT), in the log domain.
+
+Paper ng-chen-speyer, Section IV-E, after Malladi & Speyer (IEEE TAC 44(8), 1999); the recursion
+and densities are written out in shared/notes/residual-processing.md. Hypothesis 0 is "no
+fault"; hypotheses 1..M are faults. At every sample a change from H0 occurs with probability
+``p``, to H_j with probability ``pi_j``; an optional return probability ``q`` lets a fault
+hypothesis fall back to H0 (intermittent faults). With the posterior ``F`` of the previous
+sample::
+
+    phi_0 = F_0 (1 - p) + q sum_{j>=1} F_j
+    phi_j = F_j (1 - q) + F_0 p pi_j
+    F_j  <- phi_j f_j(x_k) / sum_i phi_i f_i(x_k)
+
+computed with log-sum-exp so that likelihoods of 1e-300 neither underflow nor give 0/0.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+from numba import njit
+from scipy.special import log_ndtr
+
+from ..errors import DataError
+from ..monitor.core import ResidualProcessor
+from ..signals import Signals
+
+__all__ = ["MHSSPT", "UniformMeanGaussian"]
+
+_LOG_SQRT_2PI = 0.5 * np.log(2 * np.pi)
+
+
+def _log_diff_ndtr(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """log(Phi(u) - Phi(v)) for u > v, accurate in both tails."""
+    # upper tail (v > 0): Phi(u) - Phi(v) = Phi(-v) - Phi(-u)
+    upper = v > 0
+    hi = np.where(upper, -v, u)
+    lo = np.where(upper, -u, v)
+    lhi, llo = log_ndtr(hi), log_ndtr(lo)
+    return lhi + np.log1p(-np.exp(np.minimum(llo - lhi, 0.0)))
+
+
+class UniformMeanGaussian:
+    """Density of a residual vector whose components are Gaussian with an unknown mean that is
+    uniformly distributed on ``[low_c, high_c]`` (paper ng-chen-speyer, Section IV-E)::
+
+        f(x) = prod_c [Phi((x_c - a_c)/s_c) - Phi((x_c - b_c)/s_c)] / (b_c - a_c)
+
+    ``a_c == b_c`` falls back to the Gaussian density with mean ``a_c``.
+
+    Parameters
+    ----------
+    low, high, std : array_like (C,)
+        Mean range and standard deviation of each component (std > 0, high >= low).
+
+    Examples
+    --------
+    >>> d = UniformMeanGaussian([0.0], [0.0], [1.0])
+    >>> round(float(d.logpdf([0.0])), 6)      # log of the standard normal density at 0
+    -0.918939
+    """
+
+    def __init__(self, low, high, std):
+        self.low = np.atleast_1d(np.asarray(low, float))
+        self.high = np.atleast_1d(np.asarray(high, float))
+        self.std = np.atleast_1d(np.asarray(std, float))
+        if not (self.low.shape == self.high.shape == self.std.shape) or self.low.ndim != 1:
+            raise DataError(f"low, high and std must be 1-D of equal length, got shapes "
+                            f"{self.low.shape}, {self.high.shape}, {self.std.shape}")
+        if not (np.all(np.isfinite(self.low)) and np.all(np.isfinite(self.high))
+                and np.all(np.isfinite(self.std))):
+            raise DataError("density parameters must be finite")
+        if np.any(self.std <= 0):
+            raise DataError(f"std must be positive, got {self.std.tolist()}")
+        if np.any(self.high < self.low):
+            c = int(np.argmax(self.high < self.low))
+            raise DataError(f"component {c}: high {self.high[c]} < low {self.low[c]}")
+        self._point = (self.high - self.low) <= 1e-12 * np.maximum(1.0, np.abs(self.high))
+
+    @property
+    def size(self) -> int:
+        return self.low.size
+
+    def logpdf(self, x) -> np.ndarray:
+        """Log density of ``x`` shaped (..., C), summed over the components -> (...)."""
+        x = np.asarray(x, float)
+        if x.shape[-1] != self.size:
+            raise DataError(f"density has {self.size} components, sample has {x.shape[-1]}")
+        s = self.std
+        gauss = -0.5 * ((x - self.low) / s) ** 2 - np.log(s) - _LOG_SQRT_2PI
+        width = np.where(self._point, 1.0, self.high - self.low)
+        with np.errstate(divide="ignore", invalid="ignore"):  # point components are not used
+            unif = _log_diff_ndtr((x - self.low) / s, (x - self.high) / s) - np.log(width)
+        return np.where(self._point, gauss, unif).sum(axis=-1)
+
+    def to_dict(self) -> dict:
+        return {"low": self.low.tolist(), "high": self.high.tolist(), "std": self.std.tolist()}
+
+
+@njit(cache=True)
+def _mhsspt_recursion(loglik, logF, log1mp, logp_pi, logq, log1mq, out):  # pragma: no cover
+    """loglik (R, T, H) -> out (R, T, H) log posteriors; logF (R, H) is updated in place."""
+    R, T, H = loglik.shape
+    phi = np.empty(H)
+    for r in range(R):
+        for k in range(T):
+            # log-sum-exp of the fault hypotheses (for the return probability)
+            m = -np.inf
+            for j in range(1, H):
+                if logF[r, j] > m:
+                    m = logF[r, j]
+            sf = 0.0
+            if m > -np.inf:
+                for j in range(1, H):
+                    sf += np.exp(logF[r, j] - m)
+                lse_f = m + np.log(sf)
+            else:
+                lse_f = -np.inf
+            a = logF[r, 0] + log1mp
+            b = logq + lse_f
+            mx = max(a, b)
+            phi[0] = mx + np.log(np.exp(a - mx) + np.exp(b - mx)) if mx > -np.inf else -np.inf
+            for j in range(1, H):
+                a = logF[r, j] + log1mq
+                b = logF[r, 0] + logp_pi[j]
+                mx = max(a, b)
+                phi[j] = mx + np.log(np.exp(a - mx) + np.exp(b - mx)) if mx > -np.inf else -np.inf
+            # Bayes update
+            m = -np.inf
+            for j in range(H):
+                phi[j] += loglik[r, k, j]
+                if phi[j] > m:
+                    m = phi[j]
+            s = 0.0
+            for j in range(H):
+                s += np.exp(phi[j] - m)
+            lz = m + np.log(s)
+            for j in range(H):
+                logF[r, j] = phi[j] - lz
+                out[r, k, j] = logF[r, j]
+
+
+class MHSSPT(ResidualProcessor):
+    """Multiple-hypothesis Shiryayev test over a vector of residual features.
+
+    Parameters
+    ----------
+    inputs : sequence of str
+        Feature channels (e.g. the norm of each filter's residual), C of them.
+    densities : mapping hypothesis name -> density
+        Ordered; the FIRST entry is the no-fault hypothesis H0. A density has ``logpdf(x)``
+        for ``x`` (..., C) -> (...) (e.g. :class:`UniformMeanGaussian`).
+    p : float
+        Probability of a change from H0 at each sample (0 < p < 1).
+    pi : sequence of float, optional
+        Probability of each fault hypothesis given a change (default uniform).
+    q : float
+        Return probability from a fault hypothesis to H0 (0 = the exact MHSSPT).
+    groups : mapping name -> list of hypothesis names, optional
+        Extra outputs summing hypotheses, e.g. ``{"brake": ["brake_small", "brake_large"]}``.
+
+    Outputs ``"P:<hypothesis>"`` for every hypothesis, then ``"P:<group>"`` for every group.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from fdikit import Signals
+    >>> test = MHSSPT(["r"], {"none": UniformMeanGaussian([0], [0], [1]),
+    ...                       "bias": UniformMeanGaussian([2], [4], [1])}, p=1e-3)
+    >>> x = np.r_[np.zeros(20), np.full(10, 3.0)]
+    >>> P = test.run(Signals(np.arange(30.0), x, ["r"]))["P:bias"][0]
+    >>> bool(P[19] < 0.01), bool(P[-1] > 0.99)
+    (True, True)
+    """
+
+    def __init__(
+        self,
+        inputs: Sequence[str],
+        densities: Mapping[str, object],
+        p: float,
+        pi: Sequence[float] | None = None,
+        q: float = 0.0,
+        groups: Mapping[str, Sequence[str]] | None = None,
+    ):
+        self.input_names = [str(s) for s in inputs]
+        self.hypotheses = [str(h) for h in densities]
+        self.densities = list(densities.values())
+        H = len(self.hypotheses)
+        if H < 2:
+            raise DataError("MHSSPT needs H0 and at least one fault hypothesis")
+        for h, d in zip(self.hypotheses, self.densities):
+            size = getattr(d, "size", len(self.input_names))
+            if size != len(self.input_names):
+                raise DataError(f"density of hypothesis {h!r} has {size} components for "
+                                f"{len(self.input_names)} inputs {self.input_names}")
+        if not 0 < p < 1:
+            raise DataError(f"change probability p must be in (0, 1), got {p}")
+        if not 0 <= q < 1:
+            raise DataError(f"return probability q must be in [0, 1), got {q}")
+        pi = np.full(H - 1, 1.0 / (H - 1)) if pi is None else np.asarray(pi, float)
+        if pi.shape != (H - 1,) or np.any(pi < 0) or abs(pi.sum() - 1) > 1e-9:
+            raise DataError(f"pi must be {H - 1} non-negative probabilities summing to 1, got {pi}")
+        self.p, self.q, self.pi = float(p), float(q), pi
+        self.groups = {str(g): list(m) for g, m in (groups or {}).items()}
+        for g, members in self.groups.items():
+            for h in members:
+                if h not in self.hypotheses:
+                    raise DataError(f"group {g!r} names unknown hypothesis {h!r}; "
+                                    f"hypotheses: {self.hypotheses}")
+        self._gidx = [[self.hypotheses.index(h) for h in m] for m in self.groups.values()]
+        self.output_names = [f"P:{h}" for h in self.hypotheses] + [f"P:{g}" for g in self.groups]
+        with np.errstate(divide="ignore"):
+            self._logp_pi = np.r_[-np.inf, np.log(self.p) + np.log(pi)]
+            self._logq = np.log(self.q) if self.q > 0 else -np.inf
+        self._log1mp, self._log1mq = np.log1p(-self.p), np.log1p(-self.q)
+        self.reset(1)
+
+    def loglik(self, x: np.ndarray) -> np.ndarray:
+        """Log densities of every hypothesis: x (..., C) -> (..., H)."""
+        return np.stack([d.logpdf(x) for d in self.densities], axis=-1)
+
+    def reset(self, runs: int = 1) -> None:
+        self._logF = np.full((runs, len(self.hypotheses)), -np.inf)
+        self._logF[:, 0] = 0.0
+        self._k = 0
+
+    def _outputs(self, logF: np.ndarray) -> np.ndarray:
+        P = np.exp(logF)
+        if not self._gidx:
+            return P
+        return np.concatenate([P] + [P[..., i].sum(axis=-1, keepdims=True) for i in self._gidx], axis=-1)
+
+    def _advance(self, x: np.ndarray) -> np.ndarray:
+        bad = ~np.isfinite(x)
+        if bad.any():
+            run, k, c = np.argwhere(bad)[0]
+            raise DataError(f"MHSSPT input {self.input_names[c]!r} is not finite at sample "
+                            f"{self._k + k} (run {run})")
+        if x.shape[0] != self._logF.shape[0]:
+            raise DataError(f"sample has {x.shape[0]} runs; the test was reset for {self._logF.shape[0]}")
+        ll = np.ascontiguousarray(self.loglik(x))
+        out = np.empty_like(ll)
+        _mhsspt_recursion(ll, self._logF, self._log1mp, self._logp_pi, self._logq, self._log1mq, out)
+        self._k += x.shape[1]
+        return out
+
+    def _step(self, r: np.ndarray) -> np.ndarray:
+        return self._outputs(self._advance(r[:, None, :])[:, 0])
+
+    def run(self, signals: Signals) -> Signals:
+        x = signals.values[:, :, signals.index(self.input_names)]
+        self.reset(signals.runs)
+        return Signals(signals.t, self._outputs(self._advance(x)), self.output_names, check=False)
+
+    def log_posterior(self) -> np.ndarray:
+        """Current log posterior of every hypothesis, (runs, H)."""
+        return self._logF.copy()
