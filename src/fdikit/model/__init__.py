@@ -3,5 +3,33 @@ structural analysis."""
 
 from .linear import GROUPS, InputGroup, LinearFaultModel
 from .nonlinear import NonlinearModel, NonlinearModelProtocol
+from .structure import (
+    RelativeDegree,
+    default_tol,
+    invariant_zeros,
+    is_detectable,
+    is_observable,
+    markov_parameters,
+    observability_matrix,
+    rank,
+    relative_degree,
+    unobservable_modes,
+)
 
-__all__ = ["GROUPS", "InputGroup", "LinearFaultModel", "NonlinearModel", "NonlinearModelProtocol"]
+__all__ = [
+    "GROUPS",
+    "InputGroup",
+    "LinearFaultModel",
+    "NonlinearModel",
+    "NonlinearModelProtocol",
+    "RelativeDegree",
+    "default_tol",
+    "invariant_zeros",
+    "is_detectable",
+    "is_observable",
+    "markov_parameters",
+    "observability_matrix",
+    "rank",
+    "relative_degree",
+    "unobservable_modes",
+]
