@@ -67,7 +67,7 @@ def default_tol(shape: tuple[int, ...], sigma_max: float) -> float:
     >>> default_tol((3, 2), 1.0) == 3 * np.finfo(float).eps
     True
     """
-    return float(max(shape, default=0)) * _EPS * float(sigma_max)
+    return float(max(shape, default=0) * _EPS * sigma_max)
 
 
 def _arr(M: Any, what: str) -> np.ndarray:
