@@ -68,7 +68,12 @@ class FaultInjector:
         for f in self.faults:
             if not isinstance(f, Fault):
                 raise DataError(f"faults must be Fault objects (Bias, Ramp, ...), got {f!r}")
-            self._targets.append((f.kind, self._resolve(f)))
+            if f.target in self.names["input"] and f.kind != "input":
+                # a linear model may declare a fault input named like "param:K_f" (a linearised
+                # parametric fault direction): the declared name wins.
+                self._targets.append(("input", self._check_input(f)))
+            else:
+                self._targets.append((f.kind, self._resolve(f)))
         self._bound: list[BoundFault] = []
         self.eps = 0.0
 
@@ -91,11 +96,16 @@ class FaultInjector:
         if isinstance(f, Parametric) and f.kind != "param":
             raise ModelError(f"fault target {f.target!r}: a Parametric fault needs a 'param:<name>' "
                              "target (use Gain or Bias on signals)")
-        if f.kind == "input" and not type(f).additive:
+        if f.kind == "input":
+            return self._check_input(f)
+        return names.index(f.channel)
+
+    def _check_input(self, f: Fault) -> int:
+        if not type(f).additive:
             raise ModelError(f"fault target {f.target!r} is an additive fault input (0 when healthy); "
                              f"a {type(f).__name__} fault has no meaning there: use Bias, Ramp, "
                              "Sinusoid or Intermittent")
-        return names.index(f.channel)
+        return self.names["input"].index(f.target)
 
     # ------------------------------------------------------------------ per batch
     def bind(self, run_ids: Any, total: int | None = None, *, eps: float = 0.0) -> None:
