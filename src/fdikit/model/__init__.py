@@ -2,6 +2,7 @@
 structural analysis."""
 
 from .linear import GROUPS, InputGroup, LinearFaultModel
+from .linearize import linearize, trim
 from .nonlinear import NonlinearModel, NonlinearModelProtocol
 from .structure import (
     RelativeDegree,
@@ -27,9 +28,11 @@ __all__ = [
     "invariant_zeros",
     "is_detectable",
     "is_observable",
+    "linearize",
     "markov_parameters",
     "observability_matrix",
     "rank",
     "relative_degree",
+    "trim",
     "unobservable_modes",
 ]
