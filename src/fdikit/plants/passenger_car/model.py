@@ -47,8 +47,8 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import ModelError
-from ..model.nonlinear import NonlinearModel
+from ...errors import ModelError
+from ...model.nonlinear import NonlinearModel
 
 __all__ = [
     "DEFAULT_PARAMS",
@@ -459,7 +459,7 @@ class PassengerCar(NonlinearModel):
         x0 : ndarray (22,)
         u0 : ndarray (4,)  [throttle (deg), 0, 0, slope]
         """
-        from ..model.linearize import trim
+        from ...model.linearize import trim
 
         p = self.param_values(params)
         i_tot = p["i_gear"] * p["i_final"]
