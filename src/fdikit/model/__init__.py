@@ -4,6 +4,15 @@ structural analysis."""
 from .linear import GROUPS, InputGroup, LinearFaultModel
 from .linearize import linearize, trim
 from .nonlinear import NonlinearModel, NonlinearModelProtocol
+from .reduction import (
+    FrequencyResponseError,
+    balanced_truncation,
+    dc_gain,
+    frequency_response,
+    frequency_response_error,
+    reduce_fast_modes,
+    residualize,
+)
 from .structure import (
     RelativeDegree,
     default_tol,
@@ -19,12 +28,17 @@ from .structure import (
 
 __all__ = [
     "GROUPS",
+    "FrequencyResponseError",
     "InputGroup",
     "LinearFaultModel",
     "NonlinearModel",
     "NonlinearModelProtocol",
     "RelativeDegree",
+    "balanced_truncation",
+    "dc_gain",
     "default_tol",
+    "frequency_response",
+    "frequency_response_error",
     "invariant_zeros",
     "is_detectable",
     "is_observable",
@@ -32,7 +46,9 @@ __all__ = [
     "markov_parameters",
     "observability_matrix",
     "rank",
+    "reduce_fast_modes",
     "relative_degree",
+    "residualize",
     "trim",
     "unobservable_modes",
 ]
