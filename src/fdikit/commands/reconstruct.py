@@ -17,6 +17,7 @@ import time
 
 import numpy as np
 
+from ..errors import DataError
 from ..plants import aircraft
 from ..residuals.smo import design_reconstructor, integrate_observers, simulate_plant
 
@@ -64,6 +65,9 @@ def run_aircraft(*, t_final: float = 15.0, h: float = 1e-5, settle: float = 1.0,
     f = aircraft.fault_signal(t)
     U = np.zeros((1, t.size, len(aircraft.INPUTS)))
     sel = t >= settle
+    if not np.any(f[sel] != 0):
+        raise DataError(f"the fault is zero over the scoring window [{settle}, {t_final}] s (it starts "
+                        "at 2 s): choose t_final > 2 s to score the reconstruction")
     out = {}
     ts = time.perf_counter()
     for key, A in (("rmse_ratio", aircraft.A_TRUE), ("rmse_ratio_nominal", aircraft.A_NOMINAL)):

@@ -36,8 +36,10 @@ def _solve(prob, what: str) -> float:
 
     try:
         prob.solve(solver=cp.CLARABEL)
-    except cp.error.SolverError as exc:  # pragma: no cover - solver crash
-        raise ConditionError("LMI", f"{what}: the Clarabel solver failed ({exc})") from None
+    except cp.error.SolverError as exc:
+        raise ConditionError("LMI", f"{what} has no solution: the Clarabel solver failed "
+                             f"(infeasible or numerically ill-posed: {exc})",
+                             {"status": "solver_error"}) from None
     if prob.status not in _OK:
         raise ConditionError("LMI", f"{what} is {prob.status} (Clarabel)", {"status": prob.status})
     return float(prob.value)

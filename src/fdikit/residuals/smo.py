@@ -136,10 +136,11 @@ class SMOConditions:
                 "B1", f"rank [[CAM, CM], [CM, 0]] = {self.rank_H} but rank CM + rank M = "
                 f"{self.rank_CM} + {self.rank_M} = {self.rank_CM + self.rank_M} (and A1 fails: "
                 f"rank CM = {self.rank_CM} < rank M = {self.rank_M})", d)
-        if not self.B2:
-            bad = [complex(z) for z in self.zeros if z.real >= 0]
+        if not self.B2 or not self.A2:
+            bad = ", ".join(f"{z.real:.6g}{z.imag:+.6g}j" for z in self.zeros if z.real >= 0)
             name = "A2" if self.A1 else "B2"
-            raise ConditionError(name, f"invariant zeros of (A, M, C) not stable: {bad}", d)
+            raise ConditionError(name, f"invariant zeros of (A, M, C) not stable: {bad} "
+                                 f"(all zeros: {np.round(self.zeros, 6).tolist()})", d)
         return self.case
 
 
@@ -1125,7 +1126,7 @@ def simulate_plant(A: Any, B: Any, C: Any, U: np.ndarray, h: float, x0: Any = No
     >>> import numpy as np
     >>> from fdikit.residuals.smo import simulate_plant
     >>> y = simulate_plant([[-1.0]], [[1.0]], [[1.0]], np.ones((1001, 1)), 1e-3)
-    >>> round(float(y[0, -1, 0]), 6) == round(1 - np.exp(-1.0), 6)
+    >>> abs(float(y[0, -1, 0]) - (1 - float(np.exp(-1.0)))) < 1e-12
     True
     """
     from scipy.linalg import expm
