@@ -11,6 +11,7 @@ from .injector import FaultInjector
 from .scenario import PROCESS_NOISE_MODES, Noise, Scenario
 from .signals import (
     TARGET_KINDS,
+    TIME_TOL,
     Bias,
     BoundFault,
     Drift,
@@ -29,6 +30,7 @@ from .signals import (
 __all__ = [
     "PROCESS_NOISE_MODES",
     "TARGET_KINDS",
+    "TIME_TOL",
     "Bias",
     "BoundFault",
     "Drift",

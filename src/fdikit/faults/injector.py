@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import DataError, ModelError
-from .signals import BoundFault, Fault, Parametric
+from .signals import TIME_TOL, BoundFault, Fault, Parametric
 
 __all__ = ["FaultInjector"]
 
@@ -75,7 +75,7 @@ class FaultInjector:
             else:
                 self._targets.append((f.kind, self._resolve(f)))
         self._bound: list[BoundFault] = []
-        self.eps = 0.0
+        self.eps = TIME_TOL
 
     def valid_targets(self) -> list[str]:
         """Every target string this model accepts."""
@@ -108,7 +108,7 @@ class FaultInjector:
         return self.names["input"].index(f.target)
 
     # ------------------------------------------------------------------ per batch
-    def bind(self, run_ids: Any, total: int | None = None, *, eps: float = 0.0) -> None:
+    def bind(self, run_ids: Any, total: int | None = None, *, eps: float = TIME_TOL) -> None:
         """Resolve per-run magnitudes for the runs ``run_ids`` and clear the memories.
 
         ``total`` is the batch size when the run ids are ``range(total)`` (then per-run arrays

@@ -37,6 +37,7 @@ from ..errors import DataError
 
 __all__ = [
     "TARGET_KINDS",
+    "TIME_TOL",
     "Bias",
     "Drift",
     "Fault",
@@ -50,6 +51,10 @@ __all__ = [
     "parse_target",
     "per_run",
 ]
+
+#: Tolerance (s) of the time-window comparisons: ``t`` computed as ``k * dt`` may miss ``start``
+#: by rounding (``12 * 0.1 - 1.0 < 0.2``); a time within ``TIME_TOL`` of an edge counts as past it.
+TIME_TOL = 1e-9
 
 #: Target prefixes; any other string is the name of a fault input declared on a linear model.
 TARGET_KINDS = ("actuator", "sensor", "param")
@@ -163,13 +168,13 @@ class Fault:
         return f"{type(self).__name__} fault on {self.target!r}"
 
     # ------------------------------------------------------------------ time windows
-    def in_window(self, t: float, eps: float = 0.0) -> bool:
-        """``start <= t < end`` (with a tolerance ``eps`` on the time grid)."""
+    def in_window(self, t: float, eps: float = TIME_TOL) -> bool:
+        """``start <= t < end``, with a tolerance ``eps`` (s) for times computed on a grid."""
         if t < self.start - eps:
             return False
         return self.end is None or t < self.end - eps
 
-    def is_active(self, t: float, eps: float = 0.0) -> bool:
+    def is_active(self, t: float, eps: float = TIME_TOL) -> bool:
         """Whether the fault changes its channel at time ``t`` (s)."""
         return self.in_window(t, eps)
 
@@ -234,7 +239,7 @@ class BoundFault:
     def __init__(self, fault: Fault, vals: dict[str, Any], runs: int):
         self.fault, self.vals, self.runs, self.mem = fault, vals, runs, {}
 
-    def apply(self, t: float, v: np.ndarray, eps: float = 0.0) -> np.ndarray:
+    def apply(self, t: float, v: np.ndarray, eps: float = TIME_TOL) -> np.ndarray:
         """Faulty value of the channel at time ``t``; ``v`` shape (runs,). Returns a new array
         (or ``v`` itself while the fault is inactive)."""
         if not self.fault.is_active(t, eps):
@@ -351,7 +356,7 @@ class Intermittent(Fault):
             if not 0.0 <= self.duty <= 1.0:
                 raise DataError(f"{self._label()}: duty must be in [0, 1], got {self.duty}")
 
-    def is_active(self, t: float, eps: float = 0.0) -> bool:
+    def is_active(self, t: float, eps: float = TIME_TOL) -> bool:
         if not self.in_window(t, eps):
             return False
         if self.windows is not None:
