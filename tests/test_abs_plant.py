@@ -1,0 +1,321 @@
+"""ABS benchmark plant (paper 2, Sections II-III): model, faults, noise, determinism."""
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from fdikit.errors import DataError, ModelError
+from fdikit.model import NonlinearModelProtocol
+from fdikit.plants import abs as absp
+from fdikit.plants.abs import (
+    FAULT_CLASSES,
+    PARAM_NAMES,
+    ABSPlant,
+    Scenario,
+    mu,
+    simulate,
+    slip,
+)
+
+G = 9.81
+QUIET = {"snr_db": None, "meas_var": 0.0}
+
+
+@pytest.fixture(scope="module")
+def plant():
+    return ABSPlant()
+
+
+@pytest.fixture(scope="module")
+def nominal(plant):
+    """Noise-free nominal stop, true states at every 1 ms step."""
+    return simulate(plant, Scenario(**QUIET), keep_states=True, state_stride=1)
+
+
+# ------------------------------------------------------------------ model pieces
+def test_mu_table_matches_burckhardt_closed_form():
+    c1, c2, c3 = 1.2801, 23.99, 0.52  # Burckhardt, dry asphalt
+    lam = np.linspace(0, 1, 1001)
+    exact = c1 * (1 - np.exp(-c2 * lam)) - c3 * lam
+    # linear interpolation error <= h^2/8 max|mu''| = 0.01^2/8 * c1 c2^2
+    bound = 0.01**2 / 8 * c1 * c2**2
+    assert np.max(np.abs(mu(lam) - exact)) <= bound
+    assert np.allclose(mu(-lam), -mu(lam))
+    peak = lam[np.argmax(mu(lam))]
+    assert 0.14 <= peak <= 0.20 and 1.15 < mu(peak) < 1.18
+
+
+def test_slip_definition():
+    assert slip(80.0, 100.0) == pytest.approx(0.2)
+    assert slip(0.0, 5.0) == pytest.approx(1.0)
+    assert slip(0.0, 0.0) == 0.0
+
+
+def test_plant_is_a_named_nonlinear_model(plant):
+    assert isinstance(plant, NonlinearModelProtocol)
+    assert plant.states == ["omega_w", "omega_v", "T_b", "dT_b", "P_s", "P_m"]
+    assert plant.groups["w"] == ["w1", "w2", "w3", "w4", "w5", "w6"]
+    assert set(PARAM_NAMES) == set(plant.params)
+    with pytest.raises(ModelError, match="unknown ABS parameter 'Kf'"):
+        ABSPlant({"Kf": 1.0})
+
+
+def test_f_matches_hand_computed_equation_19(plant):
+    p = plant.params
+    x = np.array([[60.0, 75.0, 900.0, 120.0, 9.0, 14.0]])
+    u = np.zeros((1, 9))
+    u[0, :3] = [7.0, 0.6, 0.0]
+    u[0, 3:] = [1, 2, 3, 4, 5, 6]
+    lam = 0.2
+    m = 1.2801 * (1 - np.exp(-23.99 * lam)) - 0.52 * lam  # on a grid point: the table is exact
+    dP = 14.0 - 9.0
+    q_in = p["C_in"] * 0.6 * p["A_0"] * np.sqrt(2 * dP * 1e6 / p["rho"])
+    expect = [
+        (p["R_w"] * p["N_v"] * m - 900.0) / p["I_w"] + 1,
+        -4 * p["N_v"] * m / (p["R_w"] * p["M_v"]) + 2,
+        120.0 + 3,
+        p["omega_n"] ** 2 * (p["K_f"] * 9.0 - 2 * p["zeta"] * 120.0 / p["omega_n"] - 900.0) + 4,
+        p["beta_s"] * q_in / p["V_s"] + 5,
+        p["K_m"] * 7000.0 / p["A_m"] / 1e6 / p["tau_m"] - 14.0 / p["tau_m"] + 6,
+    ]
+    assert np.allclose(plant.f(0.0, x, u, p)[0], expect, rtol=1e-12)
+    # eq. (30): with N_v = m g/4 and M_v = 4 m, dx2/dt = -g mu/(4 R_w)
+    assert expect[1] - 2 == pytest.approx(-G * m / (4 * p["R_w"]), rel=1e-12)
+
+
+def test_numba_kernel_rhs_agrees_with_model_f_on_random_states(plant):
+    rng = np.random.default_rng(0)
+    n = 500
+    x = np.column_stack([
+        rng.uniform(0, 100, n), rng.uniform(0.5, 100, n), rng.uniform(-200, 2000, n),
+        rng.uniform(-5e3, 5e3, n), rng.uniform(0, 16, n), rng.uniform(0, 16, n),
+    ])
+    x[:20, 1] = 0.0  # car at rest
+    x[20:40, 0] = x[20:40, 1] * 1.05  # negative slip
+    u = np.column_stack([rng.uniform(0, 8, n), rng.uniform(0, 1, n), rng.uniform(0, 1, n)])
+    # per-run parameters (parametric faults) as (runs,) arrays
+    over = {"K_f": rng.uniform(90, 110, n), "R_w": rng.uniform(0.25, 0.33, n),
+            "I_w": rng.uniform(4.5, 5.5, n)}
+    P = plant.param_matrix(n, over)
+    p = plant.param_values(over)
+    dx_nb = absp._rhs_batch(x, u, P, absp._MU_TAB)
+    dx_np = plant.f(0.0, x, np.column_stack([u, np.zeros((n, 6))]), p)
+    scale = np.abs(dx_np).max(axis=0) + 1.0
+    assert np.max(np.abs(dx_nb - dx_np) / scale) < 1e-12
+
+
+# ------------------------------------------------------------------ closed-loop behaviour
+def test_nominal_stop_behaves_like_the_paper(plant, nominal):
+    x = nominal.x.values[0]
+    t = nominal.x.t
+    ev = {k: v[0] for k, v in nominal.events.items()}
+    lam = slip(x[:, 0], x[:, 1])
+    assert np.isfinite(ev["t_abs_on"]) and ev["t_abs_on"] > 0.5  # ABS engages after braking
+    assert np.isfinite(ev["t_stop"]) and ev["t_stop"] < 12.5  # the car stops inside the record
+    assert ev["t_stop"] - 0.5 > 8.0  # ... and brakes over most of it
+    active = (t >= ev["t_abs_on"]) & (t < ev["t_abs_off"])
+    assert 0.12 < lam[active].mean() < 0.22  # slip regulated near the 0.2 target
+    assert np.quantile(lam[active], 0.95) < 0.3
+    # the deceleration can never exceed the friction limit g mu_max / 4 of eq. (30)
+    R_w = plant.params["R_w"]
+    i0, i1 = np.flatnonzero(active)[[0, -1]]
+    decel = (x[i0, 1] - x[i1, 1]) * R_w / (t[i1] - t[i0])
+    assert 0.6 * G * MU_MAX / 4 < decel <= G * MU_MAX / 4
+    # stopping distance equals the integral of the speed
+    dist = np.sum(x[t >= 0.5, 1]) * R_w * 1e-3
+    assert ev["stop_distance"] == pytest.approx(dist, rel=1e-9)
+
+
+MU_MAX = float(np.max(mu(np.linspace(0, 1, 10001))))
+
+
+def test_sanity_noise_free_and_noisy(plant, nominal):
+    x = nominal.x.values[0]
+    t = nominal.x.t
+    dv = np.diff(x[:, 1])
+    assert np.all(dv <= 1e-12)  # vehicle speed non-increasing
+    assert np.all(dv[t[:-1] < 0.5] == 0.0)  # constant before the brake is applied
+    lam = slip(x[:, 0], x[:, 1])
+    assert lam.min() >= 0.0 and lam.max() <= 1.0
+    res = simulate(plant, Scenario(snr_db=17.0), runs=20, seed=4, keep_states=True)
+    xs = res.x.values
+    lam = slip(xs[..., 0], xs[..., 1])
+    assert lam.min() > -0.02 and lam.max() <= 1.0
+    assert xs[..., 0].min() >= 0 and xs[..., 1].min() >= 0
+    # with process noise the speed may rise by noise only: bounded by 6 sigma of one 10 ms block
+    sig = np.sqrt(res.process_noise_var[1]) * 1e-3 * np.sqrt(10)
+    assert np.diff(xs[..., 1], axis=1).max() < 6 * sig
+
+
+# ------------------------------------------------------------------ faults
+def _pair(plant, fault, magnitude, **kw):
+    base = dict(QUIET, **kw)
+    a = simulate(plant, Scenario(**base), keep_states=True, state_stride=1, seed=2)
+    b = simulate(plant, Scenario(fault=fault, magnitude=magnitude, **base), keep_states=True,
+                 state_stride=1, seed=2)
+    return a, b
+
+
+def _parity_r1(plant, x, dt=1e-3):
+    """Eq. (25) on the true states with nominal parameters: dx2/dt + 4 N_v mu / (R_w M_v)."""
+    p = plant.params
+    lam = slip(x[:-1, 0], x[:-1, 1])
+    return np.diff(x[:, 1]) / dt + 4 * p["N_v"] * mu(lam) / (p["R_w"] * p["M_v"])
+
+
+def test_sensor_fault_changes_only_the_wheel_speed_measurement(plant):
+    sc = Scenario(snr_db=23.0)
+    a = simulate(plant, sc, runs=3, seed=9, keep_states=True)
+    b = simulate(plant, Scenario(fault="F1.2", magnitude=-0.07, snr_db=23.0), runs=3, seed=9,
+                 keep_states=True)
+    assert np.array_equal(a.x.values, b.x.values)  # true states untouched
+    assert np.array_equal(a.y["omega_v"], b.y["omega_v"])
+    # same noise stream: y1_fault - y1_nominal = -0.07 * omega_w
+    assert np.allclose(b.y["omega_w"] - a.y["omega_w"], -0.07 * a.x["omega_w"], atol=1e-9)
+
+
+@pytest.mark.parametrize("fault,mag", [("F3", 0.1), ("F4", -0.1), ("F5", 0.5)])
+def test_kf_iw_taum_faults_leave_parity_r1_zero(plant, fault, mag):
+    a, b = _pair(plant, fault, mag)
+    xa, xb = a.x.values[0], b.x.values[0]
+    moving = xb[1:, 1] > 0  # the step that clamps the speed at rest is excluded
+    r1 = _parity_r1(plant, xb)[moving]
+    assert np.max(np.abs(r1)) < 1e-9  # eq. (25) unaffected
+    assert np.max(np.abs(xb[:, 0] - xa[:, 0])) > 0.5  # but the wheel speed changes
+
+
+def test_rw_fault_breaks_parity_r1(plant):
+    _, b = _pair(plant, "F2.2", -0.25)
+    xb = b.x.values[0]
+    t = b.x.t[:-1]
+    sel = (xb[1:, 1] > 0) & (t > b.events["t_abs_on"][0])
+    r1 = _parity_r1(plant, xb)[sel]
+    # true dx2/dt = -4 N_v mu/(0.75 R_w M_v): residual = -(1/0.75 - 1) * 4 N_v mu /(R_w M_v)
+    p = plant.params
+    lam = slip(xb[:-1, 0], xb[:-1, 1])[sel]
+    expect = -(1 / 0.75 - 1) * 4 * p["N_v"] * mu(lam) / (p["R_w"] * p["M_v"])
+    assert np.allclose(r1, expect, rtol=1e-6, atol=1e-9)
+    assert np.abs(r1).mean() > 2.0
+
+
+def test_kf_fault_scales_torque_path_only(plant):
+    a, b = _pair(plant, "F3", -0.08)
+    xa, xb = a.x.values[0], b.x.values[0]
+    t = a.x.t
+    # before the brake acts nothing differs; the master-cylinder pressure never differs
+    assert np.array_equal(xa[t < 0.5], xb[t < 0.5])
+    assert np.array_equal(xa[:, 5], xb[:, 5])
+    # before the first valve action the wheel pressure is the same, the torque is 8 % lower
+    early = (t > 0.55) & (t < min(a.events["t_abs_on"][0], b.events["t_abs_on"][0]) - 0.01)
+    assert np.allclose(xb[early, 4], xa[early, 4], rtol=1e-12)
+    assert np.allclose(xb[early, 2], 0.92 * xa[early, 2], rtol=1e-9)
+
+
+def test_taum_fault_changes_true_pm_but_not_the_known_input(plant):
+    a, b = _pair(plant, "F5", 0.3)
+    assert np.array_equal(a.u.values, b.u.values)
+    t = a.x.t
+    sel = (t > 0.5) & (t < 0.6)
+    assert np.max(np.abs(a.x.values[0, sel, 5] - b.x.values[0, sel, 5])) > 0.5  # MPa
+    # the known input is the nominal master-cylinder pressure, eq. (5) closed form for tau_p = tau_m
+    p = plant.params
+    tt = np.maximum(a.u.t - 0.5, 0)
+    tau = p["tau_m"]
+    pss = p["K_m"] * p["K_p"] / p["A_m"] / 1e3
+    closed = np.where(a.u.t >= 0.5, pss * (1 - (1 + tt / tau) * np.exp(-tt / tau)), 0)
+    assert np.max(np.abs(a.u["P_m"][0] - closed)) < 0.03 * pss  # Euler at 1 ms vs exact
+
+
+def test_fault_classes_and_drawn_magnitudes(plant):
+    for name, fc in FAULT_CLASSES.items():
+        res = simulate(plant, Scenario(fault=name, t_end=0.5, **QUIET), runs=40, seed=1)
+        m = res.magnitudes
+        if fc.param is None:
+            assert np.all(m == 0)
+            continue
+        a = np.abs(m) if fc.symmetric else m
+        assert np.all((a >= fc.lo) & (a <= fc.hi)), name
+        assert np.unique(m).size == 40
+        if fc.symmetric:
+            assert (m > 0).any() and (m < 0).any()
+        assert np.allclose(res.params[fc.param], plant.params[fc.param] * (1 + m))
+    with pytest.raises(DataError, match=r"outside fault class F3"):
+        Scenario(fault="F3", magnitude=0.2)
+    with pytest.raises(DataError, match="unknown fault 'F9'"):
+        Scenario(fault="F9")
+
+
+# ------------------------------------------------------------------ noise
+def test_measurement_noise_variance(plant):
+    res = simulate(plant, Scenario(fault="F1.1", magnitude=-0.03), runs=10, seed=7, keep_states=True)
+    x = res.x.values  # same 10 ms grid as y
+    v1 = res.y["omega_w"] - 0.97 * x[..., 0]
+    v2 = res.y["omega_v"] - x[..., 1]
+    for v in (v1, v2):
+        assert v.var() == pytest.approx(0.004, rel=0.05)
+        assert abs(v.mean()) < 4 * np.sqrt(0.004 / v.size)
+
+
+@pytest.mark.parametrize("snr", [23.0, 17.0])
+def test_process_noise_matches_requested_snr(plant, nominal, snr):
+    """Recover w_k = (x_{k+1} - x_k)/dt - f(x_k) with the model's f, compare with SNR * mean square."""
+    ms = np.mean(nominal.x.values[0] ** 2, axis=0)  # nominal noise-free run, every 1 ms step
+    res = simulate(plant, Scenario(snr_db=snr, meas_var=0.0), runs=2, seed=11, keep_states=True,
+                   state_stride=1)
+    ratio = 10 ** (-snr / 10)
+    for r in range(2):
+        x = res.x.values[r]
+        t = res.x.t
+        end = min(res.events["t_abs_off"][r], res.events["t_stop"][r]) - 0.01
+        sel = t[:-1] < end
+        u = np.zeros((sel.sum(), 9))
+        u[:, 0] = plant.pedal_force(t[:-1][sel], 0.5)
+        w = (x[1:][sel] - x[:-1][sel]) / 1e-3 - plant.f(0.0, x[:-1][sel], u, plant.params)
+        for i in (0, 1, 2, 3, 5):  # x5 is advanced by the exact orifice step, not Euler
+            assert w[:, i].var() / ms[i] == pytest.approx(ratio, rel=0.05), (snr, r, i)
+    assert np.allclose(res.process_noise_var, ratio * ms, rtol=1e-9)
+
+
+# ------------------------------------------------------------------ determinism
+def test_run_identical_alone_and_in_batches_of_any_size(plant):
+    sc = Scenario(fault="F4", t_end=3.0)
+    big = simulate(plant, sc, runs=9, seed=5, keep_states=True)
+    for i in (0, 4, 8):
+        alone = simulate(plant, sc, runs=1, seed=5, first_run=i, keep_states=True)
+        assert np.array_equal(alone.y.values[0], big.y.values[i])
+        assert np.array_equal(alone.x.values[0], big.x.values[i])
+        assert alone.magnitudes[0] == big.magnitudes[i]
+    mid = simulate(plant, sc, runs=3, seed=5, first_run=3)
+    assert np.array_equal(mid.y.values, big.y.values[3:6])
+    other = simulate(plant, sc, runs=1, seed=6, first_run=4)
+    assert not np.array_equal(other.y.values[0], big.y.values[4])
+
+
+def test_run_identical_across_processes(plant, tmp_path):
+    sc = Scenario(fault="F2.1", t_end=2.0)
+    here = simulate(plant, sc, runs=4, seed=13)
+    out = tmp_path / "y.npy"
+    code = (
+        "import numpy as np, json\n"
+        "from fdikit.plants.abs import Scenario, simulate\n"
+        "r = simulate(None, Scenario(fault='F2.1', t_end=2.0), runs=1, seed=13, first_run=2)\n"
+        f"np.save({str(out)!r}, r.y.values[0])\n"
+        "print(json.dumps(float(r.magnitudes[0])))\n"
+    )
+    cp = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert json.loads(cp.stdout.strip().splitlines()[-1]) == here.magnitudes[2]
+    assert np.array_equal(np.load(out), here.y.values[2])
+
+
+# ------------------------------------------------------------------ scale
+@pytest.mark.slow
+@pytest.mark.parametrize("fault", list(FAULT_CLASSES))
+def test_no_nan_in_5000_runs_of_every_class(plant, fault):
+    res = simulate(plant, Scenario(fault=fault), runs=5000, seed=100)
+    assert np.isfinite(res.y.values).all()
+    assert np.isfinite(res.events["t_abs_on"]).all()  # ABS engaged in every run
+    assert np.isfinite(res.events["mean_slip"]).all()
+    assert 0.08 < np.mean(res.events["mean_slip"]) < 0.25
