@@ -623,7 +623,8 @@ def _mv_py(A, x, out, add):
 _mv = njit(cache=True, inline="always")(_mv_py)
 
 
-def _smo_step_py(h, A, B, C, Gl, Gn, rho, delta, SV, Smu, u, y, x, e, started, nu, dx, xt, w, wt):
+def _smo_step_py(h, A, B, C, Gl, Gn, rho, delta, SV, Smu, u, y, x, e, started, nu, dx, xt, w, wt,
+                 implicit):
     """One step of ``x' = A x + B u - Gl e + Gn nu``, ``nu = -rho e / (||e|| + delta)``.
 
     Explicit Euler for the linear part; the switched term (24) is taken at the new time
@@ -631,8 +632,32 @@ def _smo_step_py(h, A, B, C, Gl, Gn, rho, delta, SV, Smu, u, y, x, e, started, n
     ``w = C (x + h (A x + B u - Gl e)) - y_new``, solve ``e+ = w - h rho S e+ / (||e+|| + delta)``
     for ``s = ||e+||`` by a safeguarded Newton iteration (bracket ``[0, ||w||]``, unique root).
     On the first sample the state is kept and ``e = C x - y``. ``dx, xt, w, wt`` are work arrays.
+
+    With ``implicit=False`` the plain explicit Euler step is used instead: ``e = C x - y`` and
+    ``nu(e)`` from the current state (output), then ``x += h (A x + B u - Gl e + Gn nu)``.
     """
     n, p = A.shape[0], C.shape[0]
+    if not implicit:
+        _mv(C, x, e, False)
+        ne = 0.0
+        for i in range(p):
+            e[i] -= y[i]
+            ne += e[i] * e[i]
+        ne = np.sqrt(ne)
+        for i in range(p):
+            nu[i] = -rho * e[i] / (ne + delta)  # paper 3, eq. (24)
+        _mv(A, x, dx, False)
+        _mv(Gn, nu, dx, True)
+        for i in range(n):
+            acc = 0.0
+            for j in range(p):
+                acc += Gl[i, j] * e[j]
+            dx[i] -= acc
+        if B.shape[1] > 0:
+            _mv(B, u, dx, True)
+        for i in range(n):
+            x[i] += h * dx[i]
+        return
     if started:
         _mv(A, x, dx, False)
         for i in range(n):
@@ -708,12 +733,12 @@ def _smo_step_py(h, A, B, C, Gl, Gn, rho, delta, SV, Smu, u, y, x, e, started, n
             x[i] += h * dx[i]
 
 
-_smo_step = njit(cache=True)(_smo_step_py)
+_smo_step = njit(cache=True, inline="always")(_smo_step_py)
 
 
 def _kernel_py(h, cascade, A1, B1, C1, Gl1, Gn1, rho1, del1, S1V, S1mu, Tv, r, Zsel, Af,
                A2, B2, C2, Gl2, Gn2, rho2, del2, S2V, S2mu, Wf,
-               U, Y, x1, e1, x2, e2, vf, started, out):
+               U, Y, x1, e1, x2, e2, vf, started, out, implicit):
     """Fixed-step integration of the primary and secondary (or single) observers.
 
     Per sample ``k``: primary step with ``y[k]`` -> ``nu`` (15)-(18), (24); ``v = T^T Po^-1 nu``
@@ -737,7 +762,8 @@ def _kernel_py(h, cascade, A1, B1, C1, Gl1, Gn1, rho1, del1, S1V, S1mu, Tv, r, Z
             u = U[run, k]
             if cascade:
                 _smo_step(h, A1, B1, C1, Gl1, Gn1, rho1, del1, S1V, S1mu, u, Y[run, k],
-                          x1[run], e1[run], started[run], nu1, dx1, xt1, w1, wt1)
+                          x1[run], e1[run], started[run], nu1, dx1, xt1, w1, wt1,
+                          implicit)
                 _mv(Tv, nu1, v, False)  # paper 3, eq. (23)
                 for i in range(Zsel.shape[0]):
                     ybar[i] = v[Zsel[i]]  # paper 3, eq. (27)
@@ -753,10 +779,12 @@ def _kernel_py(h, cascade, A1, B1, C1, Gl1, Gn1, rho1, del1, S1V, S1mu, Tv, r, Z
                     for i in range(r):
                         ybar[p2 - r + i] = vf[run, i]
                 _smo_step(h, A2, B2, C2, Gl2, Gn2, rho2, del2, S2V, S2mu, u, ybar,
-                          x2[run], e2[run], started[run], nu2, dx2, xt2, w2, wt2)
+                          x2[run], e2[run], started[run], nu2, dx2, xt2, w2, wt2,
+                          implicit)
             else:
                 _smo_step(h, A2, B2, C2, Gl2, Gn2, rho2, del2, S2V, S2mu, u, Y[run, k],
-                          x2[run], e2[run], started[run], nu2, dx2, xt2, w2, wt2)
+                          x2[run], e2[run], started[run], nu2, dx2, xt2, w2, wt2,
+                          implicit)
             started[run] = True
             for i in range(q):
                 acc = 0.0
@@ -799,6 +827,8 @@ class SlidingModeReconstructor(ResidualGenerator):
         Step (s).
     info : dict
         Case, conditions, ranks, pbar, L2 bound, H-infinity check, timings.
+    scheme : {"implicit", "explicit"}
+        Treatment of the switched term in the Euler step (see :func:`integrate_observers`).
     """
 
     cascade: bool
@@ -815,8 +845,11 @@ class SlidingModeReconstructor(ResidualGenerator):
     output_names: list[str]
     info: dict = field(default_factory=dict)
     details: dict = field(default_factory=dict, repr=False)
+    scheme: str = "implicit"
 
     def __post_init__(self):
+        if self.scheme not in ("implicit", "explicit"):
+            raise ModelError(f"scheme must be 'implicit' or 'explicit', got {self.scheme!r}")
         self.output_units = None
         self._state: dict[str, np.ndarray] | None = None
         n1 = self.primary["A"].shape[0]
@@ -855,7 +888,8 @@ class SlidingModeReconstructor(ResidualGenerator):
           self.Zsel, self.Af, S["A"], S["B"], S["C"], S["Gl"], S["Gn"], float(S["rho"]),
           float(S["delta"]), S["SV"], S["Smu"], self.Wf,
           np.ascontiguousarray(U, dtype=float), np.ascontiguousarray(Y, dtype=float),
-          st["x1"], st["e1"], st["x2"], st["e2"], st["vf"], st["started"], out)
+          st["x1"], st["e1"], st["x2"], st["e2"], st["vf"], st["started"], out,
+          self.scheme == "implicit")
         return out
 
     def _step(self, u: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -909,6 +943,7 @@ def design_reconstructor(
     dt: float = 1e-5,
     tol: float | None = None,
     hinf_check: bool = True,
+    scheme: str = "implicit",
 ) -> SlidingModeReconstructor:
     """Design a robust SMO fault reconstructor; single observer or cascade, chosen automatically.
 
@@ -940,6 +975,9 @@ def design_reconstructor(
         Rank tolerance.
     hinf_check : bool
         Compute the H-infinity norm of ``G(s)`` (40) independently of the LMI.
+    scheme : {"implicit", "explicit"}
+        Euler step with the switched term at the new time (default; no numerical chattering)
+        or the plain explicit Euler step.
 
     Returns
     -------
@@ -1054,7 +1092,7 @@ def design_reconstructor(
         Tv=np.ascontiguousarray(Tv), Zsel=np.asarray(Zsel, dtype=np.int64),
         Af=np.ascontiguousarray(Af), Wf=np.ascontiguousarray(Wf), r=int(r if case == "cascade" else 0),
         dt=float(dt), u_names=list(model.inputs), y_names=list(model.outputs),
-        output_names=[f"fhat:{f}" for f in fnames], info=info, details=details)
+        output_names=[f"fhat:{f}" for f in fnames], info=info, details=details, scheme=scheme)
     return rec
 
 
