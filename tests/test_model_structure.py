@@ -129,6 +129,22 @@ def test_unobservable_defective_eigenvalue_found():
     assert is_detectable(T.T @ A @ T, C @ T)
 
 
+@pytest.mark.parametrize("seed", range(6))
+def test_unobservable_modes_random_hidden_blocks(seed):
+    # x_u is driven by x_o but never reaches y: exactly eig(Au) is unobservable. Long single-output
+    # chains in random coordinates make a plain staircase with a tight tolerance miss them.
+    rng = np.random.default_rng(seed)
+    for _ in range(15):
+        no, nu, p = int(rng.integers(5, 18)), int(rng.integers(1, 5)), int(rng.integers(1, 3))
+        Au = rng.standard_normal((nu, nu))
+        A = np.block([[rng.standard_normal((no, no)), np.zeros((no, nu))],
+                      [rng.standard_normal((nu, no)), Au]])
+        C = np.hstack([rng.standard_normal((p, no)), np.zeros((p, nu))])
+        T = rng.standard_normal((no + nu, no + nu)) + np.sqrt(no + nu) * np.eye(no + nu)
+        At, Ct = np.linalg.solve(T, A @ T), C @ T
+        assert_same_set(unobservable_modes(At, Ct), np.linalg.eigvals(Au), rtol=1e-6)
+
+
 def test_detectable_boundary_and_model():
     # an unobservable integrator is not detectable (continuous); a mode on the unit circle neither
     assert not is_detectable(np.diag([-1.0, 0.0]), [[1.0, 0.0]])

@@ -12,9 +12,10 @@ All rank decisions in fdikit use one rule (NumPy's ``matrix_rank`` rule): a sing
 
 with ``eps`` the float64 machine epsilon (see :func:`default_tol`). Algorithms that take many
 rank decisions on sub-blocks of one object (the observability staircase, the zero reduction)
-apply the rule once to the whole object (``[A; C]`` or the system matrix ``[[A, B], [C, D]]``)
-and use that absolute tolerance for every sub-block, so that a tiny block is never promoted to
-full rank by its own small norm.
+apply the rule once to the whole object (``[A; C]`` or the system matrix ``[[A, B], [C, D]]``),
+times ``min(rows, cols)`` for the accumulation of rounding errors over the successive
+decisions, and use that absolute tolerance for every sub-block, so that a tiny block is never
+promoted to full rank by its own small norm.
 """
 
 from __future__ import annotations
@@ -203,7 +204,7 @@ def _observability_staircase(A: np.ndarray, C: np.ndarray, tol: float | None):
     Z = np.eye(n)
     if tol is None:
         big = np.vstack([A, C]) if C.size else A
-        tol = default_tol(big.shape, _norm2(big))
+        tol = min(big.shape) * default_tol(big.shape, _norm2(big))
     nc = 0
     while nc < n and Bk.size:
         U, s, _ = np.linalg.svd(Bk, full_matrices=True)
@@ -223,18 +224,27 @@ def _observability_staircase(A: np.ndarray, C: np.ndarray, tol: float | None):
 def unobservable_modes(A: Any, C: Any = None, tol: float | None = None) -> np.ndarray:
     """Unobservable eigenvalues of ``(A, C)``: the ``lambda`` with ``rank [A - lambda I; C] < n``.
 
-    The set is the PBH (Popov-Belevitch-Hautus) test's answer, computed robustly: an orthogonal
-    observability staircase (Van Dooren 1981; the dual of the controllability staircase)
-    separates the unobservable subsystem, whose eigenvalues are returned. This avoids deciding
-    ``rank [A - lambda I; C]`` at computed eigenvalues, which fails for repeated (defective)
-    eigenvalues whose computed values are perturbed by ``eps**(1/k)``.
+    The set is the PBH (Popov-Belevitch-Hautus) test's answer, computed robustly in two steps:
+
+    1. An orthogonal observability staircase (Van Dooren 1981; the dual of the controllability
+       staircase) separates an unobservable subsystem, whose eigenvalues are returned. This
+       avoids deciding ``rank [A - lambda I; C]`` at computed eigenvalues, which fails for
+       repeated (defective) unobservable eigenvalues, computed only to ``eps**(1/k)``.
+    2. The PBH test checks the result: every eigenvalue ``mu`` of the observable block
+       ``(A_o, C_o)`` must have ``sigma_min([A_o - mu I; C_o]) > sqrt(eps) ||[A; C]||_2``. When
+       it fails (rounding errors accumulated along a long staircase, typical of single-output
+       systems with many states, made a zero coupling look nonzero), the staircase is repeated
+       with a tolerance 100 times larger, up to ``sqrt(eps) ||[A; C]||_2``.
 
     Parameters
     ----------
     A : array_like (n, n) or LinearFaultModel
     C : array_like (p, n)
     tol : float, optional
-        Absolute rank tolerance of the staircase; default ``(n + p) * eps * ||[A; C]||_2``.
+        Absolute rank tolerance of the staircase, used as given (no PBH escalation). Default:
+        start at ``n (n + p) eps ||[A; C]||_2`` (the fdikit rule on ``[A; C]`` times ``n`` for the
+        up to ``n`` successive rank decisions, as in SLICOT's staircase routines) and escalate as
+        described above.
 
     Returns
     -------
@@ -250,9 +260,30 @@ def unobservable_modes(A: Any, C: Any = None, tol: float | None = None) -> np.nd
     [2.0]
     """
     A, _, C, _, _ = _system(A, None, C, need_B=False)
-    nc, _, At = _observability_staircase(A, C, tol)
-    ev = np.linalg.eigvals(At[nc:, nc:]) if nc < A.shape[0] else np.zeros(0, complex)
+    n = A.shape[0]
+    if tol is not None:
+        nc, _, At = _observability_staircase(A, C, tol)
+    else:
+        big = np.vstack([A, C])
+        norm = _norm2(big)
+        t, t_max = min(big.shape) * default_tol(big.shape, norm), np.sqrt(_EPS) * norm
+        while True:
+            nc, Z, At = _observability_staircase(A, C, t)
+            if nc == 0 or t >= t_max or _pbh_ok(At[:nc, :nc], (C @ Z)[:, :nc], t_max):
+                break
+            t = min(100.0 * t, t_max)
+    ev = np.linalg.eigvals(At[nc:, nc:]) if nc < n else np.zeros(0, complex)
     return np.asarray(ev[np.lexsort((ev.imag, ev.real))], dtype=complex)
+
+
+def _pbh_ok(Ao: np.ndarray, Co: np.ndarray, thresh: float) -> bool:
+    """PBH: every eigenvalue mu of Ao has sigma_min([Ao - mu I; Co]) > thresh."""
+    k = Ao.shape[0]
+    for mu in np.linalg.eigvals(Ao):
+        M = np.vstack([Ao - mu * np.eye(k), Co])
+        if np.linalg.svd(M, compute_uv=False)[-1] <= thresh:
+            return False
+    return True
 
 
 def is_observable(A: Any, C: Any = None, tol: float | None = None) -> bool:
