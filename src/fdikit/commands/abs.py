@@ -1,0 +1,113 @@
+"""``fdikit abs``: the antilock braking benchmark of paper 2 (Luo et al.).
+
+Actions (sub-subcommands):
+
+* ``fdikit abs simulate --fault F3 --magnitude -0.05 [--runs N] [--json] [--plot FILE]``:
+  simulate braking stops with one fault class and print a summary (stopping time and
+  distance, when the ABS engaged, mean slip while it is active, number of samples);
+  ``--plot`` writes a figure like the paper's Fig. 3 for the first run.
+
+Later actions (``campaign``, ...) register themselves on the same ``abs`` parser.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+from ..errors import DataError
+
+
+def _snr(text: str) -> float | None:
+    if text.lower() in ("none", "off", "inf"):
+        return None
+    try:
+        return float(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"--snr expects a number of dB or 'none', got {text!r}") from exc
+
+
+def register(subparsers) -> argparse.ArgumentParser:
+    """Add the ``abs`` command and its actions; returns the ``abs`` parser's action subparsers."""
+    from ..plants.abs import FAULT_CLASSES
+
+    p = subparsers.add_parser("abs", help="antilock braking system benchmark (paper 2)",
+                              description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    actions = p.add_subparsers(dest="abs_action", metavar="ACTION")
+    p.set_defaults(func=lambda args: (p.print_help(), 0)[1])
+    p.abs_actions = actions  # later issues: register more actions here
+
+    s = actions.add_parser("simulate", help="simulate ABS stops with a fault and print a summary")
+    s.add_argument("--fault", default="F0", choices=list(FAULT_CLASSES),
+                   help="fault class (default F0, nominal)")
+    s.add_argument("--magnitude", type=float, default=None,
+                   help="relative parameter change, e.g. -0.05 for -5 %% "
+                   "(default: drawn per run inside the class)")
+    s.add_argument("--runs", type=int, default=1, help="number of Monte Carlo runs (default 1)")
+    s.add_argument("--seed", type=int, default=0, help="master seed (default 0)")
+    s.add_argument("--snr", type=_snr, default=23.0,
+                   help="process-noise SNR in dB (23, 20, 17 in the paper) or 'none' (default 23)")
+    s.add_argument("--meas-var", type=float, default=0.004,
+                   help="measurement noise variance, (rad/s)^2 (default 0.004)")
+    s.add_argument("--v0", type=float, default=28.0, help="initial speed, m/s (default 28)")
+    s.add_argument("--t-brake", type=float, default=0.5, help="brake application time, s (default 0.5)")
+    s.add_argument("--t-end", type=float, default=12.5, help="record length, s (default 12.5)")
+    s.add_argument("--json", action="store_true", help="print one JSON object")
+    s.add_argument("--plot", metavar="FILE", default=None, help="write a figure like Fig. 3 (first run)")
+    s.set_defaults(func=_simulate)
+    return actions
+
+
+def _simulate(args) -> int:
+    from ..cli import print_json
+    from ..plants.abs import Scenario, simulate, summarize
+
+    if args.runs < 1:
+        raise DataError(f"--runs must be >= 1, got {args.runs}")
+    sc = Scenario(fault=args.fault, magnitude=args.magnitude, snr_db=args.snr, meas_var=args.meas_var,
+                  v0=args.v0, t_brake=args.t_brake, t_end=args.t_end)
+    res = simulate(None, sc, runs=args.runs, seed=args.seed, keep_states=bool(args.plot))
+    out = summarize(res)
+    if args.plot:
+        _plot(res, args.plot)
+        out["plot"] = args.plot
+    if args.json:
+        print_json(out)
+    else:
+        for k, v in out.items():
+            print(f"{k:>20}: {v:.4g}" if isinstance(v, float) else f"{k:>20}: {v}")
+    return 0
+
+
+def _plot(res, path: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    from ..plants.abs import slip
+
+    x = res.x.values[0]
+    t = res.x.t
+    R_w = float(np.broadcast_to(res.params["R_w"], (res.y.runs,))[0])
+    fig, ax = plt.subplots(4, 1, figsize=(7, 9), sharex=True)
+    ax[0].plot(t, x[:, 1] * R_w, label="vehicle speed")
+    ax[0].plot(t, x[:, 0] * R_w, label="wheel speed")
+    ax[0].set_ylabel("m/s")
+    ax[0].legend()
+    ax[1].plot(t, slip(x[:, 0], x[:, 1]))
+    ax[1].axhline(0.2, color="k", lw=0.8, ls="--")
+    ax[1].set_ylabel("slip")
+    ax[1].set_ylim(-0.05, 1.05)
+    ax[2].plot(t, x[:, 2])
+    ax[2].set_ylabel("brake torque (N·m)")
+    ax[3].plot(t, x[:, 4], label="wheel cylinder P_s")
+    ax[3].plot(t, x[:, 5], label="master cylinder P_m")
+    ax[3].set_ylabel("MPa")
+    ax[3].set_xlabel("time (s)")
+    ax[3].legend()
+    sc = res.scenario
+    ax[0].set_title(f"ABS stop, fault {sc.fault} (magnitude {res.magnitudes[0]:+.3f})")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
