@@ -33,8 +33,8 @@ from .model import (
 
 __all__ = [
     "ACTUATOR_FAULTS",
-    "CarLinearization",
     "SENSOR_FAULTS",
+    "CarLinearization",
     "balanced_residualization",
     "block",
     "decoupling_residue",
@@ -175,7 +175,8 @@ def frequency_response_error(full: LinearFaultModel, reduced: LinearFaultModel, 
     -------
     dict
         ``max`` (worst channel), ``per_channel`` (outputs x inputs), ``dc_abs`` (largest absolute
-        DC-gain difference), ``dc_rel``, ``f_5pct`` (lowest frequency in Hz where some channel
+        DC-gain difference), ``dc_rel`` (the same relative, with the floor), ``f_5pct`` (lowest
+        frequency in Hz where some channel
         exceeds 5 %, or None), ``inputs``, ``outputs``, ``f_max``.
 
     Examples
@@ -206,7 +207,7 @@ def frequency_response_error(full: LinearFaultModel, reduced: LinearFaultModel, 
     per = rel.max(axis=0)
     over = np.flatnonzero((rel > 0.05).any(axis=(1, 2)))
     dc_abs = float(np.max(np.abs(G[0] - Gr[0])))
-    dc_rel = float(np.max(np.abs(G[0] - Gr[0]) / np.maximum(np.abs(G[0]), 1e-12)))
+    dc_rel = float(np.max(np.abs(G[0] - Gr[0]) / den[0]))
     return {"max": float(per.max()), "per_channel": per, "dc_abs": dc_abs, "dc_rel": dc_rel,
             "f_5pct": float(w[over[0]] / (2 * np.pi)) if over.size else None,
             "inputs": inputs, "outputs": list(reduced.outputs), "f_max": f_max}
@@ -240,7 +241,7 @@ def decoupling_residue(full: LinearFaultModel) -> dict[str, float]:
     """Largest longitudinal/lateral cross term of A, B, C, D, each relative to the largest entry of
     that matrix (paper 1, Section III: the blocks decouple exactly in straight driving)."""
     L, T = full.state_index(LONGITUDINAL_STATES), full.state_index(LATERAL_STATES)
-    uL = [full.input_names().index(s) for s in LONGITUDINAL_INPUTS + ["slope"] if s in full.input_names()]
+    uL = [full.input_names().index(s) for s in [*LONGITUDINAL_INPUTS, "slope"] if s in full.input_names()]
     uT = [full.input_names().index(s) for s in LATERAL_INPUTS]
     yL = full.output_index([y for y in OUTPUTS if y not in LATERAL_OUTPUTS])
     yT = full.output_index(LATERAL_OUTPUTS)
@@ -350,7 +351,8 @@ def linearize_car(speed: float = 20.0, *, car: PassengerCar | None = None, metho
     car = car or PassengerCar()
     x0, u0 = car.cruise(speed)
     full = linearize(car, x0, u0, faults=SENSOR_FAULTS + ACTUATOR_FAULTS, name=f"car @ {speed:g} m/s")
-    long_faults = [f"actuator:{u}" for u in LONGITUDINAL_INPUTS] + [f"sensor:{y}" for y in LONGITUDINAL_OUTPUTS]
+    long_faults = ([f"actuator:{u}" for u in LONGITUDINAL_INPUTS]
+                   + [f"sensor:{y}" for y in LONGITUDINAL_OUTPUTS])
     lat_faults = [f"actuator:{u}" for u in LATERAL_INPUTS] + [f"sensor:{y}" for y in LATERAL_OUTPUTS]
     lon = block(full, LONGITUDINAL_STATES, LONGITUDINAL_INPUTS, LONGITUDINAL_OUTPUTS, ["slope"], long_faults,
                 name=f"car longitudinal @ {speed:g} m/s")

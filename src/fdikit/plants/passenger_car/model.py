@@ -366,7 +366,7 @@ class PassengerCar(NonlinearModel):
         x = np.atleast_2d(np.asarray(x, float))
         u = np.atleast_2d(np.asarray(u, float))
         F = self._forces(x, u, p)
-        (_m_air, w_e, v_x, _z, v_z, theta, q, _s_f, _s_r, p_b, ds_f, ds_r, w_f, w_r,
+        (_m_air, _w_e, v_x, _z, v_z, theta, q, _s_f, _s_r, p_b, ds_f, ds_r, _w_f, _w_r,
          v_y, phi, pr, r, _d_f, _d_r, dd_f, dd_r) = x.T
         brake = u[:, 1]
         a, b = p["a"], p["b"]

@@ -1,0 +1,298 @@
+"""Passenger car (paper 1, Section III): physics of the nonlinear model, linearisation, decoupling,
+reduction, and the RAV4 fit."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fdikit.errors import ModelError
+from fdikit.faults import Scenario
+from fdikit.model import linearize, trim
+from fdikit.plants.passenger_car import (
+    LATERAL_OUTPUTS,
+    LATERAL_REDUCED,
+    LATERAL_STATES,
+    LONGITUDINAL_OUTPUTS,
+    LONGITUDINAL_REDUCED,
+    LONGITUDINAL_STATES,
+    PARAM_DOC,
+    PassengerCar,
+    decoupling_residue,
+    frequency_response_error,
+    linearize_car,
+    residualize_states,
+)
+from fdikit.sim import simulate
+
+G = 9.80665
+DATA = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "rav4-highway"
+
+
+@pytest.fixture(scope="module")
+def car():
+    return PassengerCar()
+
+
+@pytest.fixture(scope="module")
+def lin20():
+    return linearize_car(20.0)
+
+
+@pytest.fixture(scope="module")
+def lin24():
+    return linearize_car(24.0)
+
+
+def _sim(car, x0, u, duration, dt=5e-4, params=None, slope=0.0):
+    sc = Scenario(duration=duration, dt=dt, sample_time=10 * dt, x0=x0, inputs=np.asarray(u, float),
+                  disturbances=np.array([slope]), params=params)
+    return simulate(car, sc, keep=("y", "x"))
+
+
+# ------------------------------------------------------------------ the model and its documentation
+def test_every_parameter_documented(car):
+    assert set(car.params) == set(PARAM_DOC)
+    for name, (value, unit, source) in PARAM_DOC.items():
+        assert np.isfinite(value) and unit and len(source) > 10, name
+    with pytest.raises(ModelError, match="unknown passenger-car parameter 'massa'"):
+        PassengerCar({"massa": 1.0})
+
+
+def test_vectorised_over_runs_and_params(car):
+    x0, u0 = car.cruise(20.0)
+    X = np.repeat(x0[None], 3, 0)
+    U = np.repeat(u0[None], 3, 0)
+    p = dict(car.params)
+    p["m"] = np.array([1500.0, 1650.0, 1800.0])
+    dx = car.f(0.0, X, U, p)
+    single = [car.f(0.0, x0[None], u0[None], {**car.params, "m": m})[0] for m in (1500.0, 1650.0, 1800.0)]
+    assert np.allclose(dx, np.array(single), rtol=1e-12, atol=1e-12)
+    assert car.h(0.0, X, U, car.params).shape == (3, 11)
+
+
+# ------------------------------------------------------------------ physics
+@pytest.mark.parametrize("speed", [20.0, 24.0])
+def test_engine_speed_matches_wheel_speed_through_the_gear(car, speed):
+    x0, u0 = car.cruise(speed)
+    y = dict(zip(car.outputs, car.h(0.0, x0[None], u0[None], car.params)[0], strict=True))
+    p = car.params
+    i_tot = p["i_gear"] * p["i_final"]
+    # the wheels roll at v / r_w (slip < 0.5 %), the engine turns i_tot times faster plus converter slip
+    assert y["w_front_sum"] / 2 == pytest.approx(speed / p["r_w"], rel=5e-3)
+    assert y["w_rear_sum"] / 2 == pytest.approx(speed / p["r_w"], rel=1e-6)  # undriven, no brake
+    slip = y["w_engine"] / (i_tot * y["w_front_sum"] / 2) - 1
+    assert 0.0 < slip < 0.06
+    # plausible cruise: 1,100-1,600 rpm, part throttle, manifold 30-50 kPa
+    assert 1100 < y["w_engine"] * 30 / np.pi < 1600
+    assert 30 < y["p_man"] < 50 and 2 < u0[0] < 15
+
+
+def test_steady_cornering_understeer_gradient(car):
+    """K_us = m/L (b/C_f - a/C_r) (Gillespie 1992 eq. 6-15; Rajamani 2012 eq. 3.xx) from a steady
+    nonlinear trim at 20 m/s; sedans: 1-4 deg/g."""
+    p = car.params
+    L = p["a"] + p["b"]
+    K = p["m"] / L * (p["b"] / (2 * p["C_alpha_f"]) - p["a"] / (2 * p["C_alpha_r"]))
+    assert 1.0 < np.rad2deg(K * G) < 4.0
+    v = 20.0
+    x0, u0 = car.cruise(v)
+    free = [s for s in car.states if s != "v_x"]
+    Ks, ays = [], []
+    for delta in (0.004, 0.008, 0.012):
+        xg, ug = x0.copy(), u0.copy()
+        xg[car.states.index("r")] = v * delta / L
+        ug[2] = delta
+        xs, _us, _info = trim(car, xg, ug, free_states=free, free_inputs=["throttle"], tol=1e-8)
+        r = xs[car.states.index("r")]
+        ay = v * r  # steady state: v_y' = 0 so a_y = r v_x
+        Ks.append((delta - L * r / v) / ay)
+        ays.append(ay)
+        # left steer -> left turn, body rolls outward (phi > 0: left side up)
+        assert r > 0 and xs[car.states.index("phi")] > 0
+    assert max(ays) > 1.0
+    assert np.allclose(Ks, K, rtol=0.03)
+    # roll gradient of a sedan: 3-8 deg/g
+    roll = np.rad2deg(xs[car.states.index("phi")]) / (ays[-1] / G)
+    assert 3.0 < roll < 8.0
+
+
+def test_braking_limit(car):
+    """Full brake from 20 m/s: deceleration reaches the friction limit mu g but never exceeds
+    (mu m g + drag + rolling resistance) / m."""
+    x0, _ = car.cruise(20.0)
+    res = _sim(car, x0, [0.0, 10.0, 0.0], 1.2)
+    t = res.t
+    vx = res.x["v_x"][0]
+    decel = -np.gradient(vx, t)
+    p = car.params
+    drag = 0.5 * p["rho_air"] * p["cd_A"] * 20.0**2
+    upper = (p["mu"] * p["m"] * G + drag + p["f_roll"] * p["m"] * G) / p["m"]
+    assert decel.max() <= upper * 1.005
+    assert decel.max() >= 0.85 * p["mu"] * G
+    # a weak brake (1 MPa) decelerates ~ torque / (r_w m): well below the limit, and it agrees
+    res = _sim(car, x0, [0.0, 1.0, 0.0], 1.5)
+    vx = res.x["v_x"][0]
+    decel = -np.gradient(vx, res.t)[-50:].mean()
+    expect = ((p["k_bf"] + p["k_br"]) * 1.0 / p["r_w"] + 0.5 * p["rho_air"] * p["cd_A"] * vx[-50:].mean()**2
+              + p["f_roll"] * p["m"] * G) / p["m"]
+    # engine drag through the converter (throttle held at its trim) adds a little: within 15 %
+    assert decel == pytest.approx(expect, rel=0.15)
+
+
+def test_acceleration_limit(car):
+    """Full throttle: at 20 m/s in 4th the acceleration is bounded by the engine's power; on a
+    slippery road in 1st gear it is capped by the front-axle traction limit
+    a = mu g b / (L + mu h_cg) (front-wheel drive, Gillespie 1992 eq. 2-x)."""
+    p = car.params
+    x0, _ = car.cruise(20.0)
+    res = _sim(car, x0, [83.0, 0.0, 0.0], 2.0, dt=1e-3)
+    vx = res.x["v_x"][0]
+    acc = np.gradient(vx, res.t)
+    # power bound: wide-open torque at ambient manifold pressure and this engine speed
+    w_e = res.x["w_e"][0][-1]
+    imep = p["eta_ind"] * p["H_l"] * p["eta_vol"] * p["p_amb"] / (p["afr"] * p["R_air"] * p["T_m"])
+    T_max = p["V_d"] / (4 * np.pi) * imep
+    bound = (T_max * w_e * p["eta_dl"] / vx[-1]) / p["m"]
+    assert 0.5 < acc[-200:].mean() < bound
+    # first gear on a wet/icy road (mu = 0.3), starting at 8 m/s
+    pr = {"i_gear": 2.92, "mu": 0.3}
+    car1 = PassengerCar(pr)
+    x1, _ = car1.cruise(8.0)
+    res = _sim(car1, x1, [83.0, 0.0, 0.0], 1.5, params=None)
+    acc = np.gradient(res.x["v_x"][0], res.t)
+    L = p["a"] + p["b"]
+    limit = 0.3 * G * p["b"] / (L + 0.3 * p["h_cg"])
+    assert acc.max() <= limit * 1.03
+    assert acc.max() >= 0.85 * limit  # passing through the peak of the slip curve
+    # beyond the peak the front wheels spin and the force falls to the sliding value (< limit)
+    assert acc[-100:].mean() < 0.9 * acc.max()
+    assert res.x["w_f"][0][-1] * p["r_w"] > 1.05 * res.x["v_x"][0][-1]
+
+
+def test_slope_is_a_disturbance(car):
+    _x0, u0 = car.cruise(20.0)
+    xs, us = car.cruise(20.0, slope=0.03)
+    # holding 20 m/s up a 3 % grade needs about m g sin(slope) * v more power -> more throttle
+    assert us[0] > u0[0]
+    y = car.h(0.0, xs[None], us[None], car.params)[0]
+    # a parked-still accelerometer on a slope reads g sin(slope) (body pitch is zero in steady cruise)
+    assert y[car.outputs.index("a_x")] == pytest.approx(G * np.sin(0.03), rel=1e-3, abs=2e-3)
+
+
+# ------------------------------------------------------------------ linearisation
+def test_linearisation_against_directional_differences(car):
+    """A and B of the 24 m/s model against an independent directional forward/backward difference
+    of the nonlinear f along random directions at that second operating point."""
+    lin = linearize_car(24.0)
+    x0, u0 = lin.x0, lin.u0
+    rng = np.random.default_rng(3)
+    scale = np.array([1e-4, 5.0, 1.0, 0.01, 0.05, 0.01, 0.05, 0.01, 0.01, 0.5, 0.05, 0.05, 3.0, 3.0,
+                      0.5, 0.01, 0.05, 0.05, 0.01, 0.01, 0.05, 0.05])
+    p = car.params
+    for _ in range(4):
+        dx = rng.standard_normal(22) * scale * 1e-4
+        du = np.r_[rng.standard_normal(3) * np.array([1.0, 0.5, 0.01]) * 1e-4, 0.0]
+        fp = car.f(0.0, (x0 + dx)[None], (u0 + du)[None], p)[0]
+        fm = car.f(0.0, (x0 - dx)[None], (u0 - du)[None], p)[0]
+        ref = (fp - fm) / 2
+        got = lin.full.A @ dx + lin.full.B @ du[:3]
+        assert np.allclose(got, ref, rtol=1e-4, atol=1e-9 * np.abs(ref).max())
+        hp = car.h(0.0, (x0 + dx)[None], (u0 + du)[None], p)[0]
+        hm = car.h(0.0, (x0 - dx)[None], (u0 - du)[None], p)[0]
+        got_y = lin.full.C @ dx + lin.full.D @ du[:3]
+        assert np.allclose(got_y, (hp - hm) / 2, rtol=1e-4, atol=1e-9 * np.abs(hp - hm).max())
+
+
+@pytest.mark.parametrize("which", ["lin20", "lin24"])
+def test_longitudinal_lateral_decoupling(which, request):
+    lin = request.getfixturevalue(which)
+    assert lin.decoupling["max"] <= 1e-9
+    assert lin.longitudinal.states == LONGITUDINAL_STATES and lin.lateral.states == LATERAL_STATES
+
+
+def test_decoupling_test_can_fail(car):
+    """In a steady turn the blocks do couple: the same residue is then far above 1e-9."""
+    v = 20.0
+    x0, u0 = car.cruise(v)
+    xg, ug = x0.copy(), u0.copy()
+    ug[2] = 0.02
+    xg[car.states.index("r")] = 0.14
+    free = [s for s in car.states if s != "v_x"]
+    xs, us, _ = trim(car, xg, ug, free_states=free, free_inputs=["throttle"], tol=1e-8)
+    full = linearize(car, xs, us)
+    assert decoupling_residue(full)["max"] > 1e-4
+
+
+def test_lateral_block_matches_the_bicycle_yaw_gain(car, lin20):
+    """Steady-state yaw-rate gain r/delta = v / (L + K_us v^2) (Rajamani 2012 eq. 3.xx)."""
+    p = car.params
+    L = p["a"] + p["b"]
+    K = p["m"] / L * (p["b"] / (2 * p["C_alpha_f"]) - p["a"] / (2 * p["C_alpha_r"]))
+    lat = lin20.lateral
+    dc = lat.D - lat.C @ np.linalg.solve(lat.A, lat.B)
+    assert dc[lat.outputs.index("yaw_rate"), 0] == pytest.approx(20.0 / (L + K * 400.0), rel=0.01)
+    # lateral acceleration gain = v * yaw gain + g * roll gain (the accelerometer rolls with the body)
+    roll = -np.linalg.solve(lat.A, lat.B)[LATERAL_STATES.index("phi"), 0]
+    expect = 20.0 * 20.0 / (L + K * 400.0) + G * roll
+    assert dc[lat.outputs.index("a_y"), 0] == pytest.approx(expect, rel=0.01)
+    # wheel-speed differences are track * yaw rate / rolling radius
+    assert dc[lat.outputs.index("w_rear_diff"), 0] == pytest.approx(
+        -p["t_r"] / p["r_w"] * dc[lat.outputs.index("yaw_rate"), 0], rel=1e-6)
+
+
+# ------------------------------------------------------------------ reduction
+@pytest.mark.parametrize("which", ["lin20", "lin24"])
+def test_reduced_models(which, request):
+    lin = request.getfixturevalue(which)
+    lon_r, lat_r = lin.longitudinal_reduced, lin.lateral_reduced
+    assert lon_r.states == LONGITUDINAL_REDUCED and len(lon_r.states) == 10
+    assert lon_r.inputs == ["throttle", "brake"] and lon_r.outputs == LONGITUDINAL_OUTPUTS
+    assert lat_r.states == LATERAL_REDUCED and len(lat_r.states) == 6
+    assert lat_r.inputs == ["steer"] and lat_r.outputs == LATERAL_OUTPUTS
+    assert "sensor:yaw_rate" in lat_r.fault_names and "actuator:brake" in lon_r.fault_names
+    # DC gain exact, every group (controls, slope disturbance, faults): -C A^-1 B + D
+    for full, red in ((lin.longitudinal, lon_r), (lin.lateral, lat_r)):
+        g_full = full.D_all - full.C @ np.linalg.solve(full.A, full.B_all)
+        g_red = red.D_all - red.C @ np.linalg.solve(red.A, red.B_all)
+        assert np.allclose(g_red, g_full, rtol=1e-9, atol=1e-9 * np.abs(g_full).max())
+        assert np.all(np.linalg.eigvals(red.A).real < 0)
+    # lateral: within 5 % up to 5 Hz (the removed wheel-hop modes barely reach the sensors)
+    assert lin.fr_error["lateral"]["max"] < 0.05
+    # longitudinal with the paper's named states: the removed wheel-spin modes (|lambda| ~ 300-500
+    # rad/s) dominate brake -> wheel speed at a few Hz; the 5 % bound holds up to ~1 Hz only
+    e = lin.fr_error["longitudinal"]
+    assert e["max"] < 0.15
+    assert e["f_5pct"] is not None and e["f_5pct"] > 0.8
+
+
+def test_wheel_spin_causes_the_longitudinal_error(lin20):
+    lon = lin20.longitudinal
+    keep_spin = [s for s in LONGITUDINAL_STATES if s not in ("ds_f", "ds_r")]
+    e = frequency_response_error(lon, residualize_states(lon, keep_spin))
+    assert e["max"] < 0.01  # wheel hop alone: < 1 %
+    # and the spin mode frequency predicts the error: |w / lambda| at 5 Hz
+    lam = np.sort(np.abs(np.linalg.eigvals(lon.A)))[-2:]
+    assert lin20.fr_error["longitudinal"]["max"] == pytest.approx(2 * np.pi * 5 / lam.min(), rel=0.35)
+
+
+def test_balanced_reduction_meets_the_target():
+    lin = linearize_car(20.0, method="balanced")
+    assert lin.longitudinal_reduced.n_states == 10 and lin.lateral_reduced.n_states == 6
+    assert lin.fr_error["longitudinal"]["max"] < 0.05
+    assert lin.fr_error["lateral"]["max"] < 0.05
+    assert lin.fr_error["longitudinal"]["dc_rel"] < 1e-6
+
+
+def test_residualize_by_hand():
+    from fdikit.model import LinearFaultModel
+
+    # x1' = -x1 + x2, x2' = -10 x2 + 10 u: residualised x2 = u -> x1' = -x1 + u
+    m = LinearFaultModel([[-1.0, 1.0], [0.0, -10.0]], [[0.0], [10.0]], [[1.0, 1.0]], faults=["sensor:y0"])
+    r = residualize_states(m, ["x0"])
+    assert r.A.tolist() == [[-1.0]] and r.B.tolist() == [[1.0]]
+    assert r.C.tolist() == [[1.0]] and r.D.tolist() == [[1.0]]
+    with pytest.raises(ModelError, match="singular"):
+        residualize_states(LinearFaultModel([[0.0, 0.0], [0.0, 0.0]], [[1.0], [1.0]], [[1.0, 1.0]]), ["x0"])
