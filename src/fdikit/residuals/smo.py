@@ -866,6 +866,91 @@ class SlidingModeReconstructor(ResidualGenerator):
                 d["SV"], d["Smu"] = np.zeros((0, 0)), np.zeros(0)
         self._dims = (n1, p1, self.secondary["A"].shape[0], self.secondary["C"].shape[0])
 
+    # ------------------------------------------------------------------ persistence
+    _MATS = ("A", "B", "C", "Gl", "Gn")
+
+    def to_dict(self) -> dict:
+        """The runtime (plain gains and matrices) as a JSON-serialisable dict.
+
+        The design-time ``details`` (canonical forms, LMI solutions) are not included; ``info``
+        is kept with arrays converted to lists. :meth:`from_dict` rebuilds an identical runtime.
+        """
+        def obs(d):
+            out = {k: np.asarray(d[k]).tolist() for k in self._MATS}
+            out["shapes"] = {k: list(np.asarray(d[k]).shape) for k in self._MATS}
+            out.update(rho=float(d["rho"]), delta=float(d["delta"]))
+            return out
+
+        def plain(v):
+            if isinstance(v, dict):
+                return {str(k): plain(x) for k, x in v.items()}
+            if isinstance(v, np.ndarray):
+                if v.dtype.kind == "c":
+                    return {"real": v.real.tolist(), "imag": v.imag.tolist()}
+                return v.tolist()
+            if isinstance(v, (np.floating, np.integer, np.bool_)):
+                return v.item()
+            return v
+
+        return {
+            "kind": "fdikit.SlidingModeReconstructor", "version": 1, "cascade": self.cascade,
+            "primary": obs(self.primary), "secondary": obs(self.secondary),
+            "Tv": self.Tv.tolist(), "Tv_shape": list(self.Tv.shape), "Zsel": self.Zsel.tolist(),
+            "Af": self.Af.tolist(), "Af_shape": list(self.Af.shape), "Wf": self.Wf.tolist(),
+            "r": self.r, "dt": self.dt, "u_names": self.u_names, "y_names": self.y_names,
+            "output_names": self.output_names, "scheme": self.scheme, "info": plain(self.info),
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict) -> SlidingModeReconstructor:
+        """Rebuild a runtime saved by :meth:`to_dict`.
+
+        Examples
+        --------
+        >>> import json
+        >>> from fdikit.plants import aircraft
+        >>> from fdikit.residuals.smo import SlidingModeReconstructor, design_reconstructor
+        >>> rec = design_reconstructor(aircraft.model(), hinf_check=False)
+        >>> back = SlidingModeReconstructor.from_dict(json.loads(json.dumps(rec.to_dict())))
+        >>> bool((back.Wf == rec.Wf).all()), back.output_names
+        (True, ['fhat:actuator:rudder_cmd'])
+        """
+        if d.get("kind") != "fdikit.SlidingModeReconstructor":
+            raise ModelError(f"not a saved SlidingModeReconstructor (kind = {d.get('kind')!r})")
+
+        def obs(o):
+            out = {k: np.asarray(o[k], float).reshape(o["shapes"][k]) for k in cls._MATS}
+            out.update(rho=o["rho"], delta=o["delta"])
+            return out
+
+        return cls(
+            cascade=bool(d["cascade"]), primary=obs(d["primary"]), secondary=obs(d["secondary"]),
+            Tv=np.asarray(d["Tv"], float).reshape(d["Tv_shape"]),
+            Zsel=np.asarray(d["Zsel"], dtype=np.int64),
+            Af=np.asarray(d["Af"], float).reshape(d["Af_shape"]),
+            Wf=np.asarray(d["Wf"], float).reshape(len(d["output_names"]), -1), r=int(d["r"]),
+            dt=float(d["dt"]), u_names=list(d["u_names"]), y_names=list(d["y_names"]),
+            output_names=list(d["output_names"]), info=dict(d.get("info", {})), scheme=d["scheme"])
+
+    def error_transfer(self):
+        """``G(s)`` of paper 3 eq. (40): disturbance ``xi`` -> reconstruction error ``f^ - f``.
+
+        Returns
+        -------
+        control.StateSpace
+            Inputs ``xi:<k>``, outputs ``fhat_err:<fault>`` in the model's fault coordinates
+            (needs the design-time ``details``, i.e. a runtime made by :func:`design_reconstructor`).
+        """
+        import control
+
+        if "G" not in self.details:
+            raise ModelError("error_transfer needs the design details (not kept by to_dict/from_dict)")
+        AG, BG, CG, DG = self.details["G"]
+        T2 = self.details["lemma1"].T2
+        return control.ss(AG, BG, T2.T @ CG, T2.T @ DG,
+                          inputs=[f"xi:{k}" for k in range(BG.shape[1])],
+                          outputs=[f"fhat_err:{n.removeprefix('fhat:')}" for n in self.output_names])
+
     # ------------------------------------------------------------------ state
     def reset(self, runs: int = 1) -> None:
         """Zero observer states for ``runs`` parallel runs."""
