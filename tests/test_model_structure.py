@@ -319,3 +319,26 @@ def test_relative_degree_special_cases():
     # two inputs seen through one output: rank T grows by at most 1 < rank M = 2 -> None
     rd = relative_degree(A, np.eye(2), [[1.0, 1.0]])
     assert rd.per_input == (1, 1) and rd.overall is None and not rd.is_one
+    # large ||A||: generic C B of full column rank is relative degree one whatever the time scale
+    rng = np.random.default_rng(8)
+    A6, B6, C6 = 1e4 * rng.standard_normal((6, 6)), rng.standard_normal((6, 2)), rng.standard_normal((3, 6))
+    rd = relative_degree(A6, B6, C6)
+    assert rd.per_input == (1, 1) and rd.overall == 1 and rd.is_one
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_relative_degree_siso_equals_pole_zero_excess_at_large_scale(seed):
+    # SISO: relative degree = deg(den) - deg(num); poles and zeros around 1e3 rad/s make the
+    # unscaled Markov parameters span ~ 1e3**n
+    rng = np.random.default_rng(400 + seed)
+    n = int(rng.integers(3, 8))
+    nz = int(rng.integers(0, n))
+    poles = -1e3 * (0.5 + rng.random(n))
+    zeros = 1e3 * rng.standard_normal(nz)
+    G = control.ss(control.tf(np.poly(zeros) * 7.0, np.poly(poles)))
+    T = rand_orth(rng, n) @ np.diag(np.exp(rng.standard_normal(n)))
+    A, B, C = np.linalg.solve(T, np.asarray(G.A) @ T), np.linalg.solve(T, np.asarray(G.B)), np.asarray(G.C) @ T
+    rd = relative_degree(A, B, C)
+    assert rd.per_input == (n - nz,) and rd.overall == n - nz
+    # invariant under time scaling
+    assert relative_degree(A / 1e3, B, C).overall == n - nz

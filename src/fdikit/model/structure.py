@@ -558,8 +558,14 @@ def _toeplitz(H: np.ndarray, k: int) -> np.ndarray:
 
 
 def relative_degree(A: Any, B: Any = None, C: Any = None, D: Any = None, *,
-                    tol: float | None = None) -> RelativeDegree:
+                    rtol: float | None = None) -> RelativeDegree:
     """Relative degree of each input column and overall relative degree of ``(A, M, C, D)``.
+
+    The Markov parameters are computed for the time-scaled system ``(A / a, M / a, C, D)`` with
+    ``a = ||A||_2``, i.e. ``H_i / a**i``: relative degrees are invariant under this scaling
+    (the block Toeplitz matrices change by a block-diagonal congruence), and the scaled
+    parameters are all of the size of ``||C|| ||M|| / a`` or ``||D||``, so one relative threshold
+    serves all of them (unscaled, ``H_(n+1)`` can be ``||A||**n`` times larger than ``C M``).
 
     Parameters
     ----------
@@ -568,10 +574,12 @@ def relative_degree(A: Any, B: Any = None, C: Any = None, D: Any = None, *,
         Input (or fault distribution ``M``) matrix.
     C : array_like (p, n)
     D : array_like (p, m), optional
-    tol : float, optional
-        Absolute tolerance for "nonzero" and rank decisions; default the fdikit rule applied to
-        each matrix with ``sigma_max`` the largest norm of ``M`` and the Markov parameters
-        involved.
+    rtol : float, optional
+        Relative threshold: a scaled Markov column is nonzero when its norm exceeds
+        ``rtol * max(||d_j||, ||C|| ||m_j|| / a)``, and singular values of ``M``, ``C M`` and the
+        scaled Toeplitz matrices below ``rtol`` times their reference norm are zero. Default:
+        the fdikit rule (``max(shape) * eps``) times ``n + 2`` for the accumulated rounding of the
+        matrix powers.
 
     Returns
     -------
@@ -589,22 +597,30 @@ def relative_degree(A: Any, B: Any = None, C: Any = None, D: Any = None, *,
     """
     A, B, C, D, _ = _system(A, B, C, D)
     n, m = B.shape
-    H = markov_parameters(A, B, C, D, k=n + 1)
-    scale = max(_norm2(B) * max(1.0, _norm2(C)), max((_norm2(h) for h in H), default=0.0))
     p = C.shape[0]
+    a = _norm2(A) or 1.0
+    Hs = markov_parameters(A / a, B / a, C, D, k=n + 1)  # Hs[i] = H_i / a**i
+    nC = _norm2(C)
+    fac = float(n + 2)
+
+    def thr(shape, ref):
+        return (rtol * ref) if rtol is not None else fac * default_tol(shape, ref)
+
     per: list[int | None] = []
     for j in range(m):
-        col = np.linalg.norm(H[:, :, j], axis=1)
-        t = tol if tol is not None else default_tol((p, 1), max(scale, 1e-300))
-        nz = np.nonzero(col > t)[0]
+        ref = max(float(np.linalg.norm(D[:, j])), nC * float(np.linalg.norm(B[:, j])) / a)
+        col = np.linalg.norm(Hs[:, :, j], axis=1)
+        nz = np.nonzero(col > thr((p, 1), ref))[0] if ref > 0 else np.zeros(0, int)
         per.append(int(nz[0]) if nz.size else None)
-    rank_M = rank(B, tol)
-    rank_CM = rank(C @ B, tol if tol is not None else default_tol((p, m), _norm2(C) * _norm2(B)))
+    nB = _norm2(B)
+    rank_M = rank(B, thr(B.shape, nB)) if nB > 0 else 0
+    rank_CM = rank(C @ B, thr((p, m), nC * nB)) if nC * nB > 0 else 0
+    scale = max(_norm2(D), nC * nB / a)
     ranks: list[int] = [0]
     overall = None
     for k in range(1, n + 3):
-        T = _toeplitz(H, k)
-        ranks.append(rank(T, tol if tol is not None else default_tol(T.shape, max(scale, 1e-300))))
+        T = _toeplitz(Hs, k)
+        ranks.append(rank(T, thr(T.shape, scale)) if scale > 0 else 0)
         if ranks[-1] - ranks[-2] == rank_M:
             overall = k - 1
             break
