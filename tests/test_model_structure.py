@@ -337,7 +337,8 @@ def test_relative_degree_siso_equals_pole_zero_excess_at_large_scale(seed):
     zeros = 1e3 * rng.standard_normal(nz)
     G = control.ss(control.tf(np.poly(zeros) * 7.0, np.poly(poles)))
     T = rand_orth(rng, n) @ np.diag(np.exp(rng.standard_normal(n)))
-    A, B, C = np.linalg.solve(T, np.asarray(G.A) @ T), np.linalg.solve(T, np.asarray(G.B)), np.asarray(G.C) @ T
+    A, B = np.linalg.solve(T, np.asarray(G.A) @ T), np.linalg.solve(T, np.asarray(G.B))
+    C = np.asarray(G.C) @ T
     rd = relative_degree(A, B, C)
     assert rd.per_input == (n - nz,) and rd.overall == n - nz
     # invariant under time scaling
