@@ -15,7 +15,9 @@ rank decisions on sub-blocks of one object (the observability staircase, the zer
 apply the rule once to the whole object (``[A; C]`` or the system matrix ``[[A, B], [C, D]]``),
 times ``min(rows, cols)`` for the accumulation of rounding errors over the successive
 decisions, and use that absolute tolerance for every sub-block, so that a tiny block is never
-promoted to full rank by its own small norm.
+promoted to full rank by its own small norm. :func:`unobservable_modes` then checks its answer
+with the PBH test (and escalates the tolerance up to ``sqrt(eps)`` when the check fails);
+:func:`relative_degree` applies the rule to time-scaled Markov parameters.
 """
 
 from __future__ import annotations
