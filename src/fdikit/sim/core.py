@@ -205,7 +205,12 @@ class _Source:
 
 
 class _NoiseStream:
-    """Standard normal draws (runs, k) per time index from one generator per run, in chunks."""
+    """Standard normal draws (runs, k) per time index from one generator per run, in chunks.
+
+    Each run's generator fills its own contiguous (chunk, k) block; the chunk is then transposed
+    once to time-major (chunk, k, runs) so that a time index is a contiguous block, returned as a
+    column-major (runs, k) view like the engine's state.
+    """
 
     def __init__(self, seed: int, ids: np.ndarray, stream: int, k: int, n_total: int):
         self.gens = [np.random.Generator(np.random.PCG64(
@@ -213,14 +218,16 @@ class _NoiseStream:
         self.k = k
         self.chunk = int(max(1, min(n_total, _CHUNK_BYTES // max(1, 8 * k * len(self.gens)))))
         self.buf = np.empty((len(self.gens), self.chunk, k))
+        self.tbuf = np.empty((self.chunk, k, len(self.gens)))
         self.pos = self.chunk
 
     def next(self) -> np.ndarray:
         if self.pos == self.chunk:
             for r, g in enumerate(self.gens):
                 g.standard_normal(out=self.buf[r])
+            np.copyto(self.tbuf, self.buf.transpose(1, 2, 0))
             self.pos = 0
-        z = self.buf[:, self.pos, :]
+        z = self.tbuf[self.pos].T
         self.pos += 1
         return z
 
