@@ -14,6 +14,14 @@ noise is added. A controller ``u = controller(t, y)`` runs at the measurement ra
 noisy, faulty measurements; its output is held, and actuator faults act between it and the
 plant.
 
+Process noise (see :class:`~fdikit.faults.Noise` for the exact discretisation): by default
+(``process_mode="derivative"``) a random signal held over each integration step is added to
+``x'`` -- RK4 treats it as a constant input over the step, linear models integrate it exactly
+through ``int_0^dt exp(A s) ds``; ``"psd"`` adds Euler--Maruyama increments ``sqrt(dt) L z``
+for a white-noise intensity ``Q = L L'``; ``"increment"`` adds ``L z`` after each step (the
+only mode of discrete-time models). Noise inputs (group ``w``) declared on a linear model are
+not driven: process noise enters every state directly.
+
 Determinism. Run ``i`` draws its noise from its own streams,
 ``Generator(PCG64(SeedSequence(seed, spawn_key=(i, 0))))`` for process noise and
 ``spawn_key=(i, 1)`` for measurement noise, in time chunks (the chunk length only bounds memory:
