@@ -363,3 +363,22 @@ def test_keep_and_outputs_select_what_is_stored():
     res = simulate(nl, Scenario(duration=0.5, dt=0.01, inputs=[0.1]), runs=2, outputs=["rate_m"], keep=("y",))
     assert res.x is None and res.u is None
     assert res.y.names == ["rate_m"] and res.y.values.shape == (2, 51, 1)
+
+
+def test_linear_batch_equals_runs_alone_bitwise():
+    A = np.array([[0.0, 1.0, 0.0], [-2.0, -0.3, 0.5], [0.0, 0.0, -1.0]])
+    B = np.array([[0.0], [1.0], [0.3]])
+    C = np.array([[1.0, 0.0, 0.0], [0.2, 0.0, 1.0]])
+    model = LinearFaultModel(A, B, C, faults=[("leak", [0.0, 1.0, 0.0], None)])
+    R = 6
+    rng = np.random.default_rng(2)
+    sc = Scenario(duration=1.0, dt=0.01, sample_time=0.02, inputs=rng.normal(size=(R, 101, 1)),
+                  faults=[Intermittent("leak", rng.normal(size=R), period=0.3, duty=0.5, start=0.2),
+                          Gain("sensor:y1", 1.1, start=0.5)],
+                  noise=Noise(process=[0.1, 0.2, 0.0], measurement_snr_db=15.0))
+    batch = simulate(model, sc, runs=R, seed=5, keep=("y", "x"))
+    for i in range(R):
+        alone = simulate(model, sc, run_ids=[i], seed=5, keep=("y", "x"))
+        np.testing.assert_array_equal(alone.y.values[0], batch.y.values[i])
+        np.testing.assert_array_equal(alone.x.values[0], batch.x.values[i])
+    assert batch.measurement_std.shape == (R, 2) and np.all(np.diff(batch.measurement_std[:, 0]) != 0)
