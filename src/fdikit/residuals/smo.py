@@ -1186,8 +1186,12 @@ def integrate_observers(rec: SlidingModeReconstructor, U: np.ndarray, Y: np.ndar
 
     The step is ``rec.dt``: explicit Euler for the linear part, implicit for the switched term.
     Implicit treatment of ``nu = -rho e / (||e|| + delta)`` keeps ``e_y`` on its discrete
-    sliding surface instead of oscillating across it (an explicit step at ``h = 1e-4`` with
-    ``rho = 100``, ``delta = 1e-5`` chatters with amplitude ``h rho ||Po^-1||``).
+    sliding surface instead of oscillating across it. An explicit step chatters with amplitude
+    about ``h rho ||Po^-1||`` (1e-2 for the aircraft at ``h = 1e-5``, ``rho = 100``,
+    ``Po ~ 0.1 I``, far above ``delta = 1e-5``); the chattering primary injection then drives the
+    secondary observer off its sliding surface. Measured on the aircraft (15 s, nominal plant):
+    RMS(f^ - f)/RMS(f) = 1.3e-5 (implicit, h = 1e-5), 1.1e-4 (implicit, h = 1e-4), 75
+    (``scheme="explicit"`` at h = 1e-5 and at 1e-4).
 
     Parameters
     ----------
