@@ -20,7 +20,7 @@ from fdikit.faults import (
     Stuck,
 )
 from fdikit.model import LinearFaultModel, NonlinearModel
-from fdikit.sim import SimulationError, simulate
+from fdikit.sim import SimulationError, sample_and_hold, simulate
 
 
 def random_discrete(seed=0, n=3, m=2, p=2, dt=0.1):
@@ -382,3 +382,19 @@ def test_linear_batch_equals_runs_alone_bitwise():
         np.testing.assert_array_equal(alone.y.values[0], batch.y.values[i])
         np.testing.assert_array_equal(alone.x.values[0], batch.x.values[i])
     assert batch.measurement_std.shape == (R, 2) and np.all(np.diff(batch.measurement_std[:, 0]) != 0)
+
+
+def test_sample_and_hold_matches_equation_31_and_signals_join():
+    """y_h(t) = y(t_k) on [t_k, t_k + ts): held coarse samples equal the fine samples at the
+    last sampling instant."""
+    model = LinearFaultModel([[-0.5]], [[1.0]], [[1.0]], inputs=["u"], outputs=["y"])
+    u = np.sin(np.arange(501) * 0.01)[:, None]
+    fine = simulate(model, Scenario(duration=5.0, dt=0.01, inputs=u))
+    coarse = simulate(model, Scenario(duration=5.0, dt=0.01, sample_time=0.1, inputs=u))
+    held = sample_and_hold(coarse.y, fine.y.t)
+    last = (np.arange(501) // 10) * 10  # index of the last sample at or before each fine time
+    np.testing.assert_array_equal(held.values[0, :, 0], fine.y.values[0, last, 0])
+    both = coarse.signals()
+    assert both.names == ["u", "y"] and both.values.shape == (1, 51, 2)
+    with pytest.raises(DataError, match="before the first sample"):
+        sample_and_hold(coarse.y, [-1.0])

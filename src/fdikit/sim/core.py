@@ -46,7 +46,7 @@ from ..faults.signals import parse_target
 from ..model.linear import LinearFaultModel
 from ..signals import Signals
 
-__all__ = ["METHODS", "SimResult", "SimulationError", "simulate"]
+__all__ = ["METHODS", "SimResult", "SimulationError", "sample_and_hold", "simulate"]
 
 #: Integration methods of nonlinear models.
 METHODS = ("rk4", "euler")
@@ -108,10 +108,51 @@ class SimResult:
     def runs(self) -> int:
         return self.y.runs
 
+    def signals(self) -> Signals:
+        """Commanded inputs and measurements joined, ``u`` channels first (what a residual
+        generator consumes). Needs ``"u"`` in ``keep``."""
+        if self.u is None:
+            raise DataError("inputs were not kept: simulate(..., keep=('y', 'u'))")
+        return self.u.concat_channels(self.y)
+
     def __repr__(self) -> str:
         kept = [k for k in _KEEP if getattr(self, k) is not None]
         return (f"SimResult(runs={self.runs}, samples={self.y.n_samples}, dt={self.dt:g} s, "
                 f"sample_time={self.sample_time:g} s, method={self.method!r}, kept={kept})")
+
+
+def sample_and_hold(signals: Signals, t: Any) -> Signals:
+    """Zero-order hold of sampled signals onto another time grid (paper luo-et-al, eq. (31)).
+
+    ``y_h(t) = y(t_k)`` for ``t_k <= t < t_(k+1)``.
+
+    Parameters
+    ----------
+    signals : Signals
+        Samples at times ``t_k``, values (runs, K, c).
+    t : array_like, shape (T,)
+        New times (s), none before the first sample.
+
+    Returns
+    -------
+    Signals
+        Values (runs, T, c).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from fdikit import Signals
+    >>> s = Signals([0.0, 0.1, 0.2], [[1.0], [2.0], [3.0]], ["y"])
+    >>> sample_and_hold(s, np.arange(6) * 0.05).values[0, :, 0].tolist()
+    [1.0, 1.0, 2.0, 2.0, 3.0, 3.0]
+    """
+    t = np.asarray(t, dtype=float).reshape(-1)
+    tk = signals.t
+    tol = 1e-9 * max(1.0, float(np.abs(tk).max()) if tk.size else 1.0)
+    if t.size and t.min() < tk[0] - tol:
+        raise DataError(f"sample_and_hold: time {t.min():g} s is before the first sample ({tk[0]:g} s)")
+    idx = np.clip(np.searchsorted(tk, t + tol, side="right") - 1, 0, tk.size - 1)
+    return Signals(t, signals.values[:, idx, :], signals.names, signals.units, check=False)
 
 
 # ====================================================================== helpers
