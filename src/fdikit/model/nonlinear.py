@@ -6,7 +6,8 @@ Conventions (shared by :mod:`fdikit.sim` and :func:`fdikit.model.linearize`):
   ``h`` returns ``(runs, p)``. Models are written once, vectorised over runs (a single
   evaluation is ``runs == 1``).
 * ``p`` is a mapping from parameter name to a float or to an array of shape ``(runs,)`` (one
-  value per run: Monte Carlo and parametric faults ``param:<name>`` use this).
+  value per run: Monte Carlo and parametric faults ``param:<name>`` use this); write models so
+  that both broadcast against ``x``, e.g. ``np.reshape(p["k"], (-1, 1)) * x``.
 * ``u`` holds the model's inputs in the order of ``inputs``; the input groups
   (controls, disturbances, faults, noise) name which of them are which.
 * Optional analytic Jacobians ``jac_x(t, x, u, p)`` -> ``(runs, n, n)`` etc.
@@ -61,7 +62,7 @@ class NonlinearModel:
     --------
     >>> import numpy as np
     >>> from fdikit.model import NonlinearModel
-    >>> m = NonlinearModel(lambda t, x, u, p: -p["k"] * x**3 + u,
+    >>> m = NonlinearModel(lambda t, x, u, p: -np.reshape(p["k"], (-1, 1)) * x**3 + u,
     ...                    lambda t, x, u, p: x, ["x"], ["u"], ["y"], {"k": 2.0})
     >>> m.f(0.0, np.array([[1.0]]), np.array([[0.5]]), m.params).tolist()
     [[-1.5]]
