@@ -242,6 +242,9 @@ def test_fault_classes_and_drawn_magnitudes(plant):
         if fc.symmetric:
             assert (m > 0).any() and (m < 0).any()
         assert np.allclose(res.params[fc.param], plant.params[fc.param] * (1 + m))
+    grid = simulate(plant, Scenario(fault="F4", t_end=0.5, grid_step=0.01, **QUIET), runs=200, seed=1)
+    sizes = np.round(np.abs(grid.magnitudes) * 100, 9)
+    assert set(sizes) == set(range(2, 11))  # ±2 %, ±3 %, ..., ±10 % as in Section VI
     with pytest.raises(DataError, match=r"outside fault class F3"):
         Scenario(fault="F3", magnitude=0.2)
     with pytest.raises(DataError, match="unknown fault 'F9'"):

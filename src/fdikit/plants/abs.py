@@ -72,7 +72,7 @@ batch of any size and in any process.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -96,9 +96,11 @@ __all__ = [
     "FaultClass",
     "Scenario",
     "demo_summary",
+    "fault_scenarios",
     "mu",
     "simulate",
     "slip",
+    "state_mean_square",
     "summarize",
 ]
 
@@ -149,8 +151,11 @@ PARAMS: dict[str, float] = {
     "K_f": 100.0,  # N·m/MPa, Table I (pressures in MPa)
     "omega_n": 7.07,  # rad/s, Table I
     # Table I prints 3.54e+2, which with omega_n = 7.07 puts a pole at -0.01 1/s (the torque
-    # would take minutes to build). The digits are those of 1/(2 sqrt 2) = 0.354, giving the
-    # round coefficients omega_n^2 = 50, 2 zeta omega_n = 5 of eq. (19)'s x4 equation.
+    # would take ~100 s to build). We keep the digits and drop the exponent: zeta = 3.54, i.e.
+    # omega_n^2 = 50 and 2 zeta omega_n = 50 in eq. (19)'s x4 equation (poles -1.0 and -49 1/s).
+    # The other reading, 0.354, gives a lightly damped 1.1 Hz torque and a slip limit cycle
+    # between 0 and 0.8 (no regulation near 0.2); 3.54 gives slip cycling 0.08-0.24 (mean 0.15)
+    # and the ABS engaging ~2 s after the brake is applied, the lag Section VI describes.
     "zeta": 3.54,
     # wheel and vehicle, eqs. (13)-(18)
     "I_w": 5.0,  # kg m^2, Table I
@@ -367,11 +372,19 @@ class FaultClass:
             raise DataError(f"magnitude {magnitude:g} outside fault class {self.name} "
                             f"({self.description}): allowed {rng}")
 
-    def draw(self, rng: np.random.Generator) -> float:
-        """One magnitude drawn uniformly inside the class (random sign when symmetric)."""
+    def draw(self, rng: np.random.Generator, step: float | None = None) -> float:
+        """One magnitude drawn uniformly inside the class (random sign when symmetric).
+
+        With ``step``, drawn uniformly from the grid ``lo, lo + step, ..., hi`` instead (the
+        paper's F3/F4 sizes ±2 %, ±3 %, ..., ±10 % are ``step=0.01``).
+        """
         if self.param is None:
             return 0.0
-        m = rng.uniform(self.lo, self.hi)
+        if step is None:
+            m = rng.uniform(self.lo, self.hi)
+        else:
+            n = int(np.floor((self.hi - self.lo) / step + 1e-9))
+            m = self.lo + step * rng.integers(0, n + 1)
         if self.symmetric and rng.random() < 0.5:
             m = -m
         return float(m)
@@ -416,6 +429,9 @@ class Scenario:
         Integration/controller step (1 ms = t_s) and diagnostic sample interval (10 ms), s.
     v_off : float
         Vehicle speed below which the ABS switches off and the wheel may lock, m/s.
+    grid_step : float or None
+        When magnitudes are drawn, draw them on a grid of this step inside the class
+        (0.01 gives the paper's ±2 %, ±3 %, ..., ±10 % for F3/F4); None: uniform.
     """
 
     fault: str = "F0"
@@ -428,6 +444,7 @@ class Scenario:
     dt: float = 1e-3
     sample_dt: float = 1e-2
     v_off: float = 2.0
+    grid_step: float | None = None
 
     def __post_init__(self):
         if self.fault not in FAULT_CLASSES:
@@ -791,8 +808,8 @@ def _magnitudes(sc: Scenario, seed: int, run_ids: np.ndarray) -> np.ndarray:
     fc = FAULT_CLASSES[sc.fault]
     if sc.magnitude is not None:
         return np.full(run_ids.size, float(sc.magnitude))
-    return np.array([fc.draw(np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(int(i), 1))))
-                     for i in run_ids])
+    return np.array([fc.draw(np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(int(i), 1))),
+                             sc.grid_step) for i in run_ids])
 
 
 def _nominal_pm(plant: ABSPlant, sc: Scenario) -> np.ndarray:
@@ -1012,8 +1029,3 @@ def fault_scenarios(snr_db: float | None = 23.0, **kw) -> dict[str, Scenario]:
     ['F0', 'F1.1', 'F1.2']
     """
     return {name: Scenario(fault=name, snr_db=snr_db, **kw) for name in FAULT_CLASSES}
-
-
-def as_arrays(names: Sequence[str], p: Mapping[str, Any], runs: int) -> np.ndarray:
-    """Parameters ``names`` from a mapping of floats / (runs,) arrays as a (runs, len(names)) array."""
-    return np.stack([np.broadcast_to(np.asarray(p[n], float), (runs,)) for n in names], axis=1)
