@@ -369,3 +369,23 @@ def test_demo_summary_is_one_short_stop():
     assert d["runs"] == 1 and d["stopped_fraction"] == 1.0
     # stop from 15 m/s: distance at least v0^2 / (2 g mu_max / 4)
     assert d["stopping_distance"] >= 15.0**2 / (2 * G * MU_MAX / 4)
+
+
+def test_generic_linearisation_of_the_plant(plant):
+    """fdikit.model.linearize on ABSPlant gives the closed-form linear entries of eq. (19)/(30)."""
+    from fdikit.model.linearize import linearize
+
+    p = plant.params
+    u0 = dict.fromkeys(absp.INPUTS, 0.0)
+    u0.update(F_p=7.0, u_in=0.5)
+    lm = linearize(plant, [60.0, 75.0, 1100.0, 0.0, 11.0, 14.0], u0, faults=["param:K_f"])
+    A = lm.A
+    assert A[0, 2] == pytest.approx(-1 / p["I_w"], rel=1e-6)
+    assert A[3, 2:5] == pytest.approx([-p["omega_n"] ** 2, -2 * p["zeta"] * p["omega_n"],
+                                       p["omega_n"] ** 2 * p["K_f"]], rel=1e-6)
+    assert A[5, 5] == pytest.approx(-1 / p["tau_m"], rel=1e-6)
+    # d(dx5/dt)/dP_s of the orifice: -beta/V C_in u_in A_0 sqrt(2/rho) / (2 sqrt(dP)) (dP in Pa)
+    dP = 3e6
+    d = -p["beta_s"] / p["V_s"] * p["C_in"] * 0.5 * p["A_0"] * np.sqrt(2 / p["rho"]) / (2 * np.sqrt(dP)) * 1e6
+    assert A[4, 4] == pytest.approx(d, rel=1e-5)
+    assert lm.B_of("f")[3, 0] == pytest.approx(p["omega_n"] ** 2 * 11.0, rel=1e-6)  # d/dK_f
