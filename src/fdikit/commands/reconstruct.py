@@ -18,8 +18,6 @@ import time
 import numpy as np
 
 from ..errors import DataError
-from ..plants import aircraft
-from ..residuals.smo import design_reconstructor, integrate_observers, simulate_plant
 
 __all__ = ["X0", "demo_summary", "register", "run_aircraft"]
 
@@ -61,6 +59,10 @@ def run_aircraft(*, t_final: float = 15.0, h: float = 1e-5, settle: float = 1.0,
     ('cascade', 3)
     """
     t0 = time.perf_counter()
+    # imported here so that `fdikit --help` does not load cvxpy and numba kernels
+    from ..plants import aircraft
+    from ..residuals.smo import design_reconstructor, integrate_observers, simulate_plant
+
     rec = design_reconstructor(aircraft.model(), dt=h, **design_kw)
     design_s = time.perf_counter() - t0
     t = np.arange(round(t_final / h) + 1) * h
