@@ -72,7 +72,10 @@ def wilson_interval(k, n, confidence: float = 0.95):
     den = 1.0 + z * z / n
     mid = (p + z * z / (2 * n)) / den
     half = z * np.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / den
-    return np.clip(mid - half, 0.0, 1.0), np.clip(mid + half, 0.0, 1.0)
+    # exact ends at k = 0 and k = n (the formula gives them up to rounding)
+    lo = np.where(k == 0, 0.0, np.clip(mid - half, 0.0, 1.0))
+    hi = np.where(k == n, 1.0, np.clip(mid + half, 0.0, 1.0))
+    return lo, hi
 
 
 def _names(names, what: str) -> list[str]:
@@ -165,8 +168,9 @@ class DMatrix:
             bad = ~((num == 0) | (num == 1))
             if np.any(bad):
                 i, j = map(int, np.argwhere(bad)[0])
-                raise ModelError(f"D-matrix entry ({self.faults[i]!r}, {self.tests[j]!r}) = {raw[i, j]!r} "
-                                 "is not binary (0 or 1); give detection probabilities as pd=")
+                raise ModelError(f"D-matrix entry ({self.faults[i]!r}, {self.tests[j]!r}) = "
+                                 f"{raw[i, j].item()!r} is not binary (0 or 1); "
+                                 "give detection probabilities as pd=")
             self.d = num == 1
         self.pd = _prob_array(1.0 if pd is None else pd, (nf, nt), "pd", self.faults, self.tests)
         self.pf = _prob_array(0.0 if pf is None else pf, (nf, nt), "pf", self.faults, self.tests)
