@@ -190,8 +190,10 @@ def simulate_single_track(theta: dict[str, float] | np.ndarray, U: np.ndarray, d
     >>> import numpy as np
     >>> U, d = np.full(2000, 20.0), np.full(2000, 0.002)
     >>> yaw, ay = simulate_single_track(np.array([1e5, 1e5, 0.0, 0.0, 0.0, 0.0, 0.0, 0.3]), U, d, 0.01)
-    >>> round(float(yaw[-1]), 4), round(20 * 0.002 / 2.65, 4)  # neutral steer: r = U delta / L
-    (0.0151, 0.0151)
+    >>> a, b = 0.42 * 2.65, 0.58 * 2.65                        # CG position of the default car
+    >>> K = 1656 / 2.65 * (b / 1e5 - a / 1e5)                  # understeer gradient, rad/(m/s^2)
+    >>> round(float(yaw[-1]), 5) == round(20 * 0.002 / (2.65 + K * 20**2), 5)  # r = U delta / (L + K U^2)
+    True
     """
     c = dict(RAV4)
     c.update(car or {})
