@@ -256,9 +256,10 @@ class _Source:
 class _NoiseStream:
     """Standard normal draws (runs, k) per time index from one generator per run, in chunks.
 
-    Each run's generator fills its own contiguous (chunk, k) block; the chunk is then transposed
-    once to time-major (chunk, k, runs) so that a time index is a contiguous block, returned as a
-    column-major (runs, k) view like the engine's state.
+    Each run's generator fills its own contiguous (chunk, k) block (``out=`` needs a contiguous
+    target); a time index is then gathered into a column-major (runs, k) array like the
+    engine's state (a gather per step is cheaper here than transposing whole chunks). The
+    returned array is reused at the next call.
     """
 
     def __init__(self, seed: int, ids: np.ndarray, stream: int, k: int, n_total: int):
@@ -267,18 +268,17 @@ class _NoiseStream:
         self.k = k
         self.chunk = int(max(1, min(n_total, _CHUNK_BYTES // max(1, 8 * k * len(self.gens)))))
         self.buf = np.empty((len(self.gens), self.chunk, k))
-        self.tbuf = np.empty((self.chunk, k, len(self.gens)))
+        self.z = np.empty((len(self.gens), k), order="F")
         self.pos = self.chunk
 
     def next(self) -> np.ndarray:
         if self.pos == self.chunk:
             for r, g in enumerate(self.gens):
                 g.standard_normal(out=self.buf[r])
-            np.copyto(self.tbuf, self.buf.transpose(1, 2, 0))
             self.pos = 0
-        z = self.tbuf[self.pos].T
+        np.copyto(self.z, self.buf[:, self.pos, :])
         self.pos += 1
-        return z
+        return self.z
 
 
 class _Scaler:
