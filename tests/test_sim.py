@@ -270,6 +270,10 @@ def test_measurement_noise_by_snr_has_the_requested_variance():
     n = e.shape[0] * e.shape[1]
     assert np.all(np.abs(got / want - 1) < 4 * np.sqrt(2 / n)), (got, want)
     assert abs(np.corrcoef(e.reshape(-1, 2).T)[0, 1]) < 4 / np.sqrt(n)
+    # runs draw independent streams: the noise of two runs is uncorrelated
+    m = e.shape[1]
+    for a, b in ((0, 1), (2, 9)):
+        assert abs(np.corrcoef(e[a, :, 0], e[b, :, 0])[0, 1]) < 4 / np.sqrt(m)
 
 
 @pytest.mark.parametrize("mode", ["derivative", "psd", "increment"])
