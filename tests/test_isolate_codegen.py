@@ -32,6 +32,9 @@ def trees():
     dm = DMatrix(list("abcde"), ["u", "v", "w", "x"], rng.random((5, 4)) < 0.5,
                  pd=rng.uniform(0.7, 1, (5, 4)), pf=rng.uniform(0, 0.2, (5, 4)))
     out.append(ao_star(dm, misdiagnosis_cost=20.0))
+    # degenerate: one fault; two faults that no test can separate (the root is a leaf)
+    out.append(ao_star(DMatrix(["only"], ["t"], [[1]])))
+    out.append(ao_star(DMatrix(["x", "y"], ["t1", "t2"], [[1, 0], [1, 0]])))
     return out
 
 
@@ -128,6 +131,14 @@ def test_c_header_lists_faults_tests_and_leaves():
     assert "  0: t 1" in head and "  1: t-2" in head
     assert "b | d" in head                               # the ambiguity group is one leaf
     assert '"c\\"q"' in src                              # escaped in the string table
+
+
+def test_degenerate_trees():
+    tree = TREES[-1]
+    assert tree.root.is_leaf and tree.depth == 0 and tree.go_path == []
+    assert compile_python(tree)({}) == ("x", "y")
+    assert to_listing(tree) == 'DISPLAY("x or y");'
+    assert tree.expected_cost == 0.0
 
 
 def test_listing_like_the_paper():

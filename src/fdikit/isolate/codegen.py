@@ -175,6 +175,8 @@ def to_c(tree: DiagnosticTree, func_name: str = "diagnose") -> str:
         emit(n.failed, ind + "    ")
         out.append(f"{ind}}}")
 
+    if tree.root.is_leaf:
+        out.append("    (void)outcomes;  /* a single leaf: no test is needed */")
     emit(tree.root, "    ")
     out.append("}")
     return "\n".join(out) + "\n"
