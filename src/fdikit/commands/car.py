@@ -2,7 +2,7 @@
 
 Actions (sub-subcommands):
 
-* ``fdikit car linearize [--speed 20] [--method residualize|balanced] [--json]``: linearise the
+* ``fdikit car linearize [--speed 20] [--method modal|residualize|balanced] [--json]``: linearise the
   nonlinear sedan about straight driving, report state/input/output names, eigenvalues of the
   full and reduced longitudinal and lateral models, the decoupling residue and the
   frequency-response error of the reduced models below 5 Hz;
@@ -30,9 +30,10 @@ def register(subparsers) -> argparse.ArgumentParser:
 
     s = actions.add_parser("linearize", help="linearise at straight driving, reduce, report")
     s.add_argument("--speed", type=float, default=20.0, help="operating speed, m/s (default 20)")
-    s.add_argument("--method", choices=["residualize", "balanced"], default="residualize",
-                   help="reduction: the paper's residualisation of the named fast states (default) or "
-                   "balanced residualisation")
+    s.add_argument("--method", choices=["modal", "residualize", "balanced"], default="modal",
+                   help="reduction: fast modes truncated with steady-state correction, in the named "
+                   "states (default); residualisation of the named fast states; or balanced "
+                   "residualisation")
     s.add_argument("--f-max", type=float, default=5.0, help="upper frequency of the error report, Hz")
     s.add_argument("--json", action="store_true", help="print one JSON object")
     s.set_defaults(func=_linearize)

@@ -12,9 +12,10 @@ from .linear import (
     CarLinearization,
     balanced_residualization,
     block,
+    channel_response_error,
     decoupling_residue,
-    frequency_response_error,
     linearize_car,
+    reduce_fast_modes_named,
     residualize_states,
 )
 from .model import (
@@ -34,11 +35,30 @@ from .model import (
 )
 
 __all__ = [
-    "ACTUATOR_FAULTS", "DEFAULT_PARAMS", "INPUTS", "LATERAL_INPUTS", "LATERAL_OUTPUTS", "LATERAL_REDUCED",
-    "LATERAL_STATES", "LONGITUDINAL_INPUTS", "LONGITUDINAL_OUTPUTS", "LONGITUDINAL_REDUCED",
-    "LONGITUDINAL_STATES", "OUTPUTS", "PARAM_DOC", "SENSOR_FAULTS", "CarLinearization", "PassengerCar",
-    "balanced_residualization", "block", "decoupling_residue", "demo_summary", "frequency_response_error",
-    "linearize_car", "residualize_states",
+    "ACTUATOR_FAULTS",
+    "DEFAULT_PARAMS",
+    "INPUTS",
+    "LATERAL_INPUTS",
+    "LATERAL_OUTPUTS",
+    "LATERAL_REDUCED",
+    "LATERAL_STATES",
+    "LONGITUDINAL_INPUTS",
+    "LONGITUDINAL_OUTPUTS",
+    "LONGITUDINAL_REDUCED",
+    "LONGITUDINAL_STATES",
+    "OUTPUTS",
+    "PARAM_DOC",
+    "SENSOR_FAULTS",
+    "CarLinearization",
+    "PassengerCar",
+    "balanced_residualization",
+    "block",
+    "channel_response_error",
+    "decoupling_residue",
+    "demo_summary",
+    "linearize_car",
+    "reduce_fast_modes_named",
+    "residualize_states",
 ]
 
 

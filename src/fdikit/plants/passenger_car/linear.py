@@ -17,7 +17,8 @@ from typing import Any
 import numpy as np
 
 from ...errors import ModelError
-from ...model.linear import GROUPS, LinearFaultModel
+from ...model.linear import LinearFaultModel
+from ...model.reduction import balanced_truncation, reduce_fast_modes, residualize
 from .model import (
     LATERAL_INPUTS,
     LATERAL_OUTPUTS,
@@ -37,9 +38,10 @@ __all__ = [
     "CarLinearization",
     "balanced_residualization",
     "block",
+    "channel_response_error",
     "decoupling_residue",
-    "frequency_response_error",
     "linearize_car",
+    "reduce_fast_modes_named",
     "residualize_states",
 ]
 
@@ -50,34 +52,8 @@ ACTUATOR_FAULTS = ["actuator:throttle", "actuator:brake", "actuator:steer"]
 
 # ---------------------------------------------------------------------------------- reduction
 def residualize_states(model: LinearFaultModel, keep: Sequence[str]) -> LinearFaultModel:
-    """Dynamic truncation with steady-state correction: residualise every state not in ``keep``.
-
-    With ``x = (x1, x2)`` (kept, removed), setting ``x2' = 0`` gives (singular perturbation,
-    Kokotovic, Khalil & O'Reilly 1986, ch. 2)::
-
-        A_r = A11 - A12 A22^-1 A21      B_r = B1 - A12 A22^-1 B2
-        C_r = C1 - C2 A22^-1 A21        D_r = D - C2 A22^-1 B2
-
-    for every input group (controls, disturbances, faults, noise), so the DC gain of every
-    channel is kept exactly.
-
-    Parameters
-    ----------
-    model : LinearFaultModel
-        Continuous-time model.
-    keep : sequence of str
-        Names of the states to keep (in this order).
-
-    Returns
-    -------
-    LinearFaultModel
-        Same inputs, outputs and faults; states ``keep``.
-
-    Raises
-    ------
-    ModelError
-        Unknown state names, a discrete model, or a singular ``A22`` (a removed state with an
-        integrator cannot be residualised).
+    """Residualise every state not in ``keep`` (:func:`fdikit.model.residualize`), kept states in
+    the order of ``keep``.
 
     Examples
     --------
@@ -86,49 +62,72 @@ def residualize_states(model: LinearFaultModel, keep: Sequence[str]) -> LinearFa
     >>> r.A.tolist(), r.B.tolist()
     ([[-1.0]], [[1.0]])
     """
-    if model.dt is not None:
-        raise ModelError("residualize_states needs a continuous-time model")
+    keep = list(keep)
+    model.state_index(keep)  # unknown names raise
+    drop = [s for s in model.states if s not in keep]
+    red = residualize(model, drop)
+    if red.states != keep:
+        idx = red.state_index(keep)
+        P = np.eye(len(keep))[idx]
+        red = red.similarity_transform(P, states=keep)
+    return red
+
+
+def reduce_fast_modes_named(model: LinearFaultModel, keep: Sequence[str]) -> LinearFaultModel:
+    """Keep the ``len(keep)`` slowest modes (:func:`fdikit.model.reduce_fast_modes`: modal
+    truncation with steady-state correction of the fast modes, exact DC gain and exact slow
+    eigenvalues) and express the reduced state in named physical coordinates.
+
+    On the slow invariant subspace ``x = V m`` (``A V = V A_m``, ``C V = C_m``; ``V`` solved by
+    least squares, unique when ``(C_m, A_m)`` is observable), the kept states' values are
+    ``xi = S V m`` with ``S`` selecting ``keep``; when ``M = S V`` is invertible the reduced model
+    is transformed to ``xi``: ``(M A_m M^-1, M B_m, C_m M^-1, D_m)``. The input-output behaviour is
+    that of :func:`fdikit.model.reduce_fast_modes`; the states read "the named states of the
+    car when its fast modes have settled".
+
+    Raises
+    ------
+    ModelError
+        When the named states do not parameterise the slow subspace (``M`` singular) or the slow
+        subspace cannot be recovered.
+
+    Examples
+    --------
+    >>> m = LinearFaultModel([[-1.0, 1.0], [0.0, -100.0]], [[0.0], [100.0]], [[1.0, 0.0]])
+    >>> r = reduce_fast_modes_named(m, ["x0"])
+    >>> r.states, np.round(r.A, 9).tolist()
+    (['x0'], [[-1.0]])
+    """
     keep = list(keep)
     ik = model.state_index(keep)
-    ir = [i for i in range(model.n_states) if i not in ik]
-    A = model.A
-    A22 = A[np.ix_(ir, ir)]
-    if ir:
-        cond = np.linalg.cond(A22)
-        if not np.isfinite(cond) or cond > 1e14:
-            raise ModelError(f"cannot residualise {[model.states[i] for i in ir]}: their block A22 is "
-                             f"singular (condition number {cond:.3g})")
-    A12 = A[np.ix_(ik, ir)]
-    C2 = model.C[:, ir]
-    # X = A22^-1 [A21, B2 of every group]
-    groups = {g: (model.B_of(g), model.D_of(g)) for g in GROUPS}
-    rhs = np.hstack([A[np.ix_(ir, ik)]] + [groups[g][0][ir] for g in GROUPS]) if ir else None
-    if ir:
-        X = np.linalg.solve(A22, rhs)
-    k = len(ik)
-    Ar = A[np.ix_(ik, ik)] - (A12 @ X[:, :k] if ir else 0.0)
-    Cr = model.C[:, ik] - (C2 @ X[:, :k] if ir else 0.0)
-    new_groups = {}
-    col = k
-    for g in GROUPS:
-        B, D = groups[g]
-        w = B.shape[1]
-        if ir:
-            Xg = X[:, col:col + w]
-            new_groups[g] = (B[ik] - A12 @ Xg, D - C2 @ Xg)
-        else:
-            new_groups[g] = (B[ik], D)
-        col += w
-    return model.with_matrices(Ar, Cr, new_groups, states=keep)
+    k = len(keep)
+    red = reduce_fast_modes(model, k)
+    A, C = model.A, model.C
+    Am, Cm = red.A, red.C
+    n = model.n_states
+    # unknown V (n x k), column-major vec: (I kron A - Am^T kron I) vec V = 0 ; (I kron C) vec V = vec Cm
+    K1 = np.kron(np.eye(k), A) - np.kron(Am.T, np.eye(n))
+    K2 = np.kron(np.eye(k), C)
+    scale = np.abs(A).max() or 1.0
+    lhs = np.vstack([K1 / scale, K2])
+    rhs = np.concatenate([np.zeros(n * k), Cm.reshape(-1, order="F")])
+    v, *_ = np.linalg.lstsq(lhs, rhs, rcond=None)
+    V = v.reshape(n, k, order="F")
+    res = np.abs(A @ V - V @ Am).max() / (scale * max(np.abs(V).max(), 1e-300))
+    if not np.isfinite(res) or res > 1e-6:
+        raise ModelError(f"slow invariant subspace not recovered (relative residual {res:.3g}); "
+                         "is (C, A) of the reduced model observable?")
+    M = V[ik]
+    cond = np.linalg.cond(M)
+    if not np.isfinite(cond) or cond > 1e10:
+        raise ModelError(f"the states {keep} do not parameterise the {k} slowest modes "
+                         f"(condition number {cond:.3g})")
+    return red.similarity_transform(M, states=keep)
 
 
 def balanced_residualization(model: LinearFaultModel, order: int) -> LinearFaultModel:
-    """Balanced truncation with matched DC gain (balanced residualisation) to ``order`` states.
-
-    :func:`control.balred` with ``method="matchdc"`` (SLICOT AB09ND, balancing-free square-root
-    singular perturbation approximation) on the transfer from ALL input groups (controls,
-    disturbances, faults, noise) to the outputs, so that every group keeps its DC gain. States
-    of the result are named ``z0..``.
+    """Balanced residualisation (:func:`fdikit.model.balanced_truncation` with ``method="matchdc"``,
+    Gramians of all input groups), states ``b0..``.
 
     Examples
     --------
@@ -137,29 +136,11 @@ def balanced_residualization(model: LinearFaultModel, order: int) -> LinearFault
     >>> round(float((r.D - r.C @ np.linalg.solve(r.A, r.B))[0, 0]), 9)  # DC gain 1 + 1/50
     1.02
     """
-    import control as ct
-
-    if model.dt is not None:
-        raise ModelError("balanced_residualization needs a continuous-time model")
-    if not 0 < order <= model.n_states:
-        raise ModelError(f"order must be in 1..{model.n_states}, got {order}")
-    eig = np.linalg.eigvals(model.A)
-    if np.max(eig.real) >= 0:
-        raise ModelError(f"balanced reduction needs a stable model; largest real part of an eigenvalue "
-                         f"is {np.max(eig.real):.3g}")
-    sizes = [model.B_of(g).shape[1] for g in GROUPS]
-    Bs = np.hstack([model.B_of(g) for g in GROUPS])
-    Ds = np.hstack([model.D_of(g) for g in GROUPS])
-    red = ct.balred(ct.ss(model.A, Bs, model.C, Ds), order, method="matchdc")
-    new_groups, c = {}, 0
-    for g, w in zip(GROUPS, sizes, strict=True):
-        new_groups[g] = (np.asarray(red.B)[:, c:c + w], np.asarray(red.D)[:, c:c + w])
-        c += w
-    return model.with_matrices(np.asarray(red.A), np.asarray(red.C), new_groups,
-                               states=[f"z{i}" for i in range(order)])
+    red, _hsv = balanced_truncation(model, order, method="matchdc")
+    return red
 
 
-def frequency_response_error(full: LinearFaultModel, reduced: LinearFaultModel, *, f_max: float = 5.0,
+def channel_response_error(full: LinearFaultModel, reduced: LinearFaultModel, *, f_max: float = 5.0,
                              n_freq: int = 200, inputs: Sequence[str] | None = None,
                              floor: float = 1e-3) -> dict[str, Any]:
     """Relative frequency-response error of a reduced model, channel by channel, up to ``f_max``.
@@ -182,7 +163,7 @@ def frequency_response_error(full: LinearFaultModel, reduced: LinearFaultModel, 
     Examples
     --------
     >>> m = LinearFaultModel([[-1.0, 1.0], [0.0, -100.0]], [[0.0], [100.0]], [[1.0, 0.0]])
-    >>> e = frequency_response_error(m, residualize_states(m, ["x0"]), f_max=0.1)
+    >>> e = channel_response_error(m, residualize_states(m, ["x0"]), f_max=0.1)
     >>> e["dc_abs"] < 1e-12, round(e["max"], 3)
     (True, 0.006)
     """
@@ -276,7 +257,7 @@ class CarLinearization:
     decoupling : dict
         :func:`decoupling_residue` of ``full``.
     fr_error : dict
-        :func:`frequency_response_error` of each reduced block.
+        :func:`channel_response_error` of each reduced block.
     method : str
         Reduction method used.
     """
@@ -291,7 +272,7 @@ class CarLinearization:
     lateral_reduced: LinearFaultModel
     decoupling: dict[str, float]
     fr_error: dict[str, dict[str, Any]] = field(default_factory=dict)
-    method: str = "residualize"
+    method: str = "modal"
 
     def summary(self) -> dict[str, Any]:
         """JSON-able summary: names, eigenvalues of full and reduced blocks, decoupling, errors."""
@@ -318,7 +299,7 @@ class CarLinearization:
         return out
 
 
-def linearize_car(speed: float = 20.0, *, car: PassengerCar | None = None, method: str = "residualize",
+def linearize_car(speed: float = 20.0, *, car: PassengerCar | None = None, method: str = "modal",
                   f_max: float = 5.0) -> CarLinearization:
     """Linearise the car about straight driving on a flat road at ``speed`` and reduce it.
 
@@ -328,11 +309,14 @@ def linearize_car(speed: float = 20.0, *, car: PassengerCar | None = None, metho
         Operating speed (m/s); the paper uses 20 and 24.
     car : PassengerCar, optional
         The nonlinear model (default parameters if omitted).
-    method : {"residualize", "balanced"}
-        ``"residualize"``: the paper's dynamic truncation with steady-state correction of the
-        named fast states (wheel spin ``w_f, w_r``; wheel hop ``ds_f, ds_r, dd_f, dd_r``), keeping
-        :data:`LONGITUDINAL_REDUCED` and :data:`LATERAL_REDUCED`. ``"balanced"``: balanced
-        residualisation to 10 and 6 states (states ``z0..``; DC kept, more accurate).
+    method : {"modal", "residualize", "balanced"}
+        ``"modal"`` (default): dynamic truncation with steady-state correction of the fast MODES
+        (the 10 / 6 slowest modes kept exactly, the others residualised), expressed in the named
+        states :data:`LONGITUDINAL_REDUCED` / :data:`LATERAL_REDUCED` of the slow subspace
+        (:func:`reduce_fast_modes_named`). ``"residualize"``: residualisation of the named fast
+        states themselves (wheel spin ``w_f, w_r``; wheel-hop rates ``ds_f, ds_r, dd_f, dd_r``).
+        ``"balanced"``: balanced residualisation to 10 and 6 states (states ``b0..``).
+        All three keep the DC gain exactly.
     f_max : float
         Upper frequency (Hz) of the reported frequency-response error.
 
@@ -358,15 +342,18 @@ def linearize_car(speed: float = 20.0, *, car: PassengerCar | None = None, metho
                 name=f"car longitudinal @ {speed:g} m/s")
     lat = block(full, LATERAL_STATES, LATERAL_INPUTS, LATERAL_OUTPUTS, (), lat_faults,
                 name=f"car lateral @ {speed:g} m/s")
-    if method == "residualize":
+    if method == "modal":
+        lon_r = reduce_fast_modes_named(lon, LONGITUDINAL_REDUCED)
+        lat_r = reduce_fast_modes_named(lat, LATERAL_REDUCED)
+    elif method == "residualize":
         lon_r = residualize_states(lon, LONGITUDINAL_REDUCED)
         lat_r = residualize_states(lat, LATERAL_REDUCED)
     elif method == "balanced":
         lon_r = balanced_residualization(lon, len(LONGITUDINAL_REDUCED))
         lat_r = balanced_residualization(lat, len(LATERAL_REDUCED))
     else:
-        raise ModelError(f"unknown reduction method {method!r}; use 'residualize' or 'balanced'")
-    fr = {"longitudinal": frequency_response_error(lon, lon_r, f_max=f_max),
-          "lateral": frequency_response_error(lat, lat_r, f_max=f_max)}
+        raise ModelError(f"unknown reduction method {method!r}; use 'modal', 'residualize' or 'balanced'")
+    fr = {"longitudinal": channel_response_error(lon, lon_r, f_max=f_max),
+          "lateral": channel_response_error(lat, lat_r, f_max=f_max)}
     return CarLinearization(float(speed), x0, u0, full, lon, lat, lon_r, lat_r, decoupling_residue(full), fr,
                             method)
