@@ -93,6 +93,27 @@ def main():
                                "all_equal": all(res16[h]["equal"] == 5 for h in HEURISTICS),
                                "max_abs_cost_difference": worst16}
 
+    print("Random unreliable 10 x 8 problems (Pd in [0.8, 1], Pf in [0, 0.1], M = 10 and 100), 6 seeds")
+    unrel = {"aostar_s": [], "exhaustive_s": [], "equal": 0, "n": 0}
+    for s in range(6):
+        rng = np.random.default_rng(500 + s)
+        dm = DMatrix([f"F{i}" for i in range(10)], [f"t{j}" for j in range(8)], rng.random((10, 8)) < 0.5,
+                     pd=rng.uniform(0.8, 1.0, (10, 8)), pf=rng.uniform(0.0, 0.1, (10, 8)))
+        p, c = rng.dirichlet(np.ones(10)), rng.uniform(0.5, 3.0, 8)
+        for M in (10.0, 100.0):
+            tree, ta = timed(ao_star, dm, p, c, misdiagnosis_cost=M)
+            ref, te = timed(exhaustive, dm, p, c, misdiagnosis_cost=M)
+            unrel["aostar_s"].append(ta)
+            unrel["exhaustive_s"].append(te)
+            unrel["n"] += 1
+            err = abs(tree.expected_cost - ref.expected_cost)
+            unrel["equal"] += err <= 1e-10 * max(1.0, ref.expected_cost)
+    print(f"  AO* (bayes bound) median {np.median(unrel['aostar_s']) * 1e3:.1f} ms, exhaustive median "
+          f"{np.median(unrel['exhaustive_s']) * 1e3:.1f} ms, equal {unrel['equal']}/{unrel['n']}")
+    summary["random_unreliable_10x8"] = {"aostar_median_s": float(np.median(unrel["aostar_s"])),
+                                         "exhaustive_median_s": float(np.median(unrel["exhaustive_s"])),
+                                         "all_equal": unrel["equal"] == unrel["n"]}
+
     rows = [TABLE_IV_FAULTS.index(f) for f in ["F0", "F1.2", "F2.2", "F3", "F4", "F5"]]
     cols = [TABLE_IV_TESTS.index(t) for t in ["G_P1", "G_O1", "G_O2", "G_O_T2", "S_Kf"]]
     abs6 = DMatrix(["F0", "F1.2", "F2.2", "F3", "F4", "F5"], ["G_P1", "G_O1", "G_O2", "G_O_T2", "S_Kf"],

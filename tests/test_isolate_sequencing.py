@@ -242,7 +242,7 @@ def test_unreliable_ao_star_equals_exhaustive(seed):
                  pd=rng.uniform(0.6, 1.0, (nf, nt)), pf=rng.uniform(0.0, 0.3, (nf, nt)))
     p, c, M = rng.dirichlet(np.ones(nf)), rng.uniform(0.5, 3, nt), float(rng.uniform(2, 60))
     ref = exhaustive(dm, p, c, misdiagnosis_cost=M)
-    for h in ("mincost", "zero"):
+    for h in ("bayes", "mincost", "zero"):
         tree = ao_star(dm, p, c, misdiagnosis_cost=M, heuristic=h)
         assert tree.expected_cost == pytest.approx(ref.expected_cost, rel=1e-10)
         assert tree.evaluate()["objective"] == pytest.approx(tree.expected_cost, rel=1e-10)
@@ -287,8 +287,10 @@ def test_bad_inputs():
         ao_star(HAND, HAND_PRIOR, [1, -1, 1])
     with pytest.raises(DataError, match=r"cost names \['t9'\] are not tests"):
         exhaustive(HAND, HAND_PRIOR, {"t1": 1, "t2": 1, "t9": 1})
-    with pytest.raises(DataError, match="heuristic must be one of"):
+    with pytest.raises(DataError, match="heuristic for perfect tests must be 'auto' or one of"):
         ao_star(HAND, heuristic="greedy")
+    with pytest.raises(DataError, match="heuristic for unreliable tests"):
+        ao_star(DMatrix(["a", "b"], ["t"], [[1], [0]], pd=0.9), misdiagnosis_cost=5.0, heuristic="huffman")
     unrel = DMatrix(["a", "b"], ["t"], [[1], [0]], pd=0.9)
     with pytest.raises(DataError, match="needs misdiagnosis_cost"):
         ao_star(unrel)

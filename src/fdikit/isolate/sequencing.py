@@ -40,9 +40,18 @@ fault state. Because certainty is never reached, stopping is an option at every 
 then declares the maximum-posterior class (faults with identical ``q`` rows) and pays a
 misdiagnosis cost ``M`` times the posterior probability of being wrong. The objective is the
 expected test cost plus ``M`` times the probability of misdiagnosis (the POMDP view of paper
-luo-et-al, Section VII, with a terminal cost). Each test is applied at most once on a path. The
-admissible heuristic is ``h = min(stop(x), c_min(x) p(x))`` (either stop now or pay for one more
-test). With ``Pd = 1`` and ``Pf = 0`` and a large ``M`` the result equals the perfect-test tree.
+luo-et-al, Section VII, with a terminal cost). Each test is applied at most once on a path.
+Heuristics (all admissible): either stop now (exact cost ``stop(x)``) or apply at least one more
+test, which costs at least ``c_min(x) p(x)`` and still leaves at least the Bayes error that
+would remain if *every* unused test were applied (more test outcomes never increase the error of
+the maximum-posterior decision), so
+
+    h(x) = min( stop(x), c_min(x) p(x) + M * E_all(x) )                  (``heuristic="bayes"``)
+
+where ``E_all`` sums ``p - max class mass`` over the ``2^r`` outcome vectors of the ``r`` unused
+tests (used when ``r <= 14``, else ``E_all = 0``); ``"mincost"`` drops the ``E_all`` term and
+``"zero"`` uses ``h = 0``. With ``Pd = 1``, ``Pf = 0`` and a large ``M`` the result equals the
+perfect-test tree.
 
 **Exhaustive reference.** :func:`exhaustive` solves the same recursion by brute-force dynamic
 programming over *all* subsets of faults (perfect tests) or all (applied tests, outcomes) states
@@ -63,7 +72,8 @@ from .dmatrix import DMatrix
 
 __all__ = ["DiagnosticTree", "TreeNode", "ao_star", "exhaustive", "huffman_cost"]
 
-_HEURISTICS = ("huffman", "entropy", "mincost", "zero")
+_HEURISTICS = {"perfect": ("huffman", "entropy", "mincost", "zero"),
+               "unreliable": ("bayes", "mincost", "zero")}
 
 
 # ---------------------------------------------------------------------------------------------- inputs
@@ -595,12 +605,23 @@ class _Unreliable:
         for i in range(nf):
             groups.setdefault(self.q[i].tobytes(), []).append(i)
         self.groups = list(groups.values())
+        self.G = np.zeros((nf, len(self.groups)))
+        for k, g in enumerate(self.groups):
+            self.G[g, k] = 1.0
+
+    def bayes_error_all(self, b: np.ndarray, tests: list[int]) -> float:
+        """Probability of misdiagnosis (joint, not normalised) if all ``tests`` were applied to ``b``:
+        sum over the 2^r outcome vectors of (mass - largest class mass)."""
+        L = b[None, :]
+        for j in tests:
+            L = np.concatenate([L * (1.0 - self.q[:, j]), L * self.q[:, j]])
+        return max(0.0, float(L.sum() - (L @ self.G).max(axis=1).sum()))
 
     def stop(self, b: np.ndarray) -> tuple[float, list[int]]:
         """Misdiagnosis cost of stopping with joint belief ``b`` and the declared (MAP) class."""
-        masses = [float(b[g].sum()) for g in self.groups]
+        masses = b @ self.G
         k = int(np.argmax(masses))
-        return self.M * (float(b.sum()) - masses[k]), self.groups[k]
+        return self.M * max(0.0, float(b.sum()) - float(masses[k])), self.groups[k]
 
     def children(self, key, b, j):
         used, fail = key
@@ -631,14 +652,9 @@ def _ao_unreliable(dm, p, c, M, heuristic):
 
     def informative(key, b):
         used = key[0]
-        out = []
-        for j in range(U.nt):
-            if used >> j & 1:
-                continue
-            pf = float(b @ U.q[:, j])
-            if pf > 0.0 and float(b.sum()) - pf > 0.0:
-                out.append(j)
-        return out
+        pfail = b @ U.q                      # probability of a fail outcome of each test
+        ppass = b @ (1.0 - U.q)
+        return [j for j in range(U.nt) if not used >> j & 1 and pfail[j] > 0.0 and ppass[j] > 0.0]
 
     def get(key, b):
         n = nodes.get(key)
@@ -650,8 +666,12 @@ def _ao_unreliable(dm, p, c, M, heuristic):
                 h = stop
             elif heuristic == "zero":
                 h = 0.0
-            else:   # stop now, or pay at least the cheapest remaining informative test
-                h = min(stop, min(c[j] for j in tests) * pb)
+            else:   # stop now, or pay at least the cheapest remaining informative test (+ Bayes error)
+                h = min(c[j] for j in tests) * pb
+                unused = [j for j in range(U.nt) if not key[0] >> j & 1]
+                if heuristic == "bayes" and len(unused) <= 14:
+                    h += M * U.bayes_error_all(b, unused)
+                h = min(stop, h)
             n = _OrNode(key, pb, h, -bin(key[0]).count("1"))   # more tests applied = deeper = first
             n.stop = stop
             if not tests or stop == 0.0:
@@ -722,7 +742,7 @@ def _exhaustive_unreliable(dm, p, c, M):
 
 # ---------------------------------------------------------------------------------------------- public
 def ao_star(dm: DMatrix, prior=None, cost=None, *, tests_model: str = "auto",
-            misdiagnosis_cost: float | None = None, heuristic: str = "huffman") -> DiagnosticTree:
+            misdiagnosis_cost: float | None = None, heuristic: str = "auto") -> DiagnosticTree:
     """Optimal diagnostic tree by AO* search on the AND/OR graph (Pattipati & Alexandridis 1990).
 
     Parameters
@@ -739,9 +759,10 @@ def ao_star(dm: DMatrix, prior=None, cost=None, *, tests_model: str = "auto",
         and Bayes-updated beliefs; ``"auto"`` picks ``"perfect"`` when ``dm.is_perfect``.
     misdiagnosis_cost : float, optional
         Cost (in test-cost units) of declaring the wrong fault class; required for unreliable tests.
-    heuristic : {"huffman", "entropy", "mincost", "zero"}
-        Admissible lower bound used by the search (module docstring). Unreliable tests use
-        ``min(stop, c_min p(x))`` unless ``"zero"``.
+    heuristic : {"auto", "huffman", "entropy", "mincost", "zero", "bayes"}
+        Admissible lower bound used by the search (module docstring): ``"huffman"``, ``"entropy"``,
+        ``"mincost"``, ``"zero"`` for perfect tests; ``"bayes"``, ``"mincost"``, ``"zero"`` for
+        unreliable tests. ``"auto"``: ``"huffman"`` (perfect) or ``"bayes"`` (unreliable).
 
     Returns
     -------
@@ -756,10 +777,13 @@ def ao_star(dm: DMatrix, prior=None, cost=None, *, tests_model: str = "auto",
     >>> round(tree.expected_cost, 12), tree.go_path
     (1.9, ['t1'])
     """
-    if heuristic not in _HEURISTICS:
-        raise DataError(f"heuristic must be one of {_HEURISTICS}, got {heuristic!r}")
     p, c = _check_prior(dm, prior), _check_cost(dm, cost)
     mode, M = _mode(dm, tests_model, misdiagnosis_cost)
+    if heuristic == "auto":
+        heuristic = "huffman" if mode == "perfect" else "bayes"
+    if heuristic not in _HEURISTICS[mode]:
+        raise DataError(f"heuristic for {mode} tests must be 'auto' or one of {_HEURISTICS[mode]}, "
+                        f"got {heuristic!r}")
     if mode == "perfect":
         J, root, stats = _ao_perfect(dm, p, c, heuristic)
     else:
