@@ -296,3 +296,32 @@ def test_bad_inputs():
         ao_star(unrel)
     with pytest.raises(DataError, match="tests_model must be"):
         ao_star(unrel, tests_model="noisy")
+
+
+def test_learned_dmatrix_end_to_end():
+    # outcomes simulated from a known firing-probability matrix; the learned binary matrix equals the
+    # true one (entries far from the 0.5 level), so the perfect-test tree is the same; the unreliable
+    # tree from the learned Pd/Pf has an objective within Monte Carlo error of the true model's.
+    rng = np.random.default_rng(11)
+    faults, tests = ["F0", "F1", "F2", "F3"], ["a", "b", "c"]
+    q = np.array([[0.01, 0.02, 0.0], [0.97, 0.02, 0.9], [0.95, 0.99, 0.05], [0.03, 0.9, 0.95]])
+    outcomes = {f: rng.random((4000, 3)) < q[i] for i, f in enumerate(faults)}
+    learned = DMatrix.from_outcomes(outcomes, tests, pf_source="class")
+    true = DMatrix(faults, tests, q > 0.5, pd=q, pf=q)
+    assert (learned.d == true.d).all()
+    assert np.abs(learned.fail_probability() - q).max() < 0.02
+    prior = [0.7, 0.1, 0.1, 0.1]
+    t_learned = ao_star(learned, prior, tests_model="perfect")
+    t_true = ao_star(true, prior, tests_model="perfect")
+    assert t_learned.to_dict()["tree"] == t_true.to_dict()["tree"]
+    u_learned = ao_star(learned, prior, misdiagnosis_cost=50.0)
+    u_true = ao_star(true, prior, misdiagnosis_cost=50.0)
+    strip = {"probability"}
+
+    def shape(node):
+        return {k: (shape(v) if isinstance(v, dict) else v) for k, v in node.items() if k not in strip}
+
+    assert shape(u_learned.to_dict()["tree"]) == shape(u_true.to_dict()["tree"])
+    # objective = test cost (~1.8) + 50 x misdiagnosis probability (~0.03): entries learned to about
+    # +-0.003 move it by well under 0.2
+    assert abs(u_learned.expected_cost - u_true.expected_cost) < 0.2
