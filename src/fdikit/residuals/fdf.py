@@ -1,0 +1,905 @@
+"""Fault detection filters: exact unknown input observer and optimal stochastic fault detection filter.
+
+A fault detection filter watches one *target* fault and blocks *nuisance* faults (other faults,
+and the linearisation error of a nonlinear plant modelled as a fault; paper 1, Sections II and
+IV-A). Two designs are offered, both in discrete time at the sample rate of the monitor:
+
+* :func:`design_uio` - the exact unknown input observer of Chen, Patton & Zhang (1996), for a
+  nuisance distribution ``E`` with ``rank(C E) = rank(E)`` and ``(C, A1)`` detectable. The
+  nuisance-to-residual transfer is zero (to rounding).
+* :func:`design_optimal_fdf` - the optimal stochastic fault detection filter of Chen, Mingori &
+  Speyer (Automatica 39 (2003) 377-390), here in its steady-state *discrete-time* form: a
+  Kalman-type filter whose process-noise model carries the nuisance directions with the large
+  intensity ``Q2 / gamma`` and whose residual is the projected output error ``r = H (y - C x_hat)``,
+  ``H`` annihilating the output directions of the nuisance. As ``gamma -> 0`` the nuisance
+  subspace becomes unobservable from ``r`` (the UIO's geometric structure) and its eigenvalues go
+  to ``z = 0`` (the discrete image of ``-infinity``); short of the limit these fast, weakly
+  observable modes are removed by model reduction (paper 1, Section IV-C,
+  :func:`reduce_filter`).
+
+Fault directions (:func:`fault_directions`): every declared fault ``(b, d)`` of the *discrete*
+model becomes a set of state-space directions. With ``d = 0`` (actuator fault without
+feedthrough, additive state fault) it is ``b``. With ``d != 0`` (sensor fault, or a fault with
+feedthrough) pick ``f_d`` with ``C f_d = d`` and change variables ``x_bar = x + f_d mu``; then
+``y = C x_bar`` and ``x_bar[k+1] = A x_bar + f_d mu[k+1] + (b - A f_d) mu[k]``, so the fault acts
+as a state fault along ``[f_d, b - A f_d]`` (for a sensor fault ``b = 0``: ``[f_j, A f_j]``,
+signs being irrelevant to the span). ``f_d = C^+ d`` is the minimum-norm solution: any other
+solution differs by an element of ``ker C``, which adds an unmeasured component that the
+filter must also block (the ``A f_d`` term drags it through the dynamics); the minimum-norm
+choice is unique, lies in the measured subspace ``range(C^T)`` and keeps the nuisance set as
+small as the measurement allows.
+
+Every design is a plain-matrix :class:`FilterDesign` (the *implementation form*)
+
+    xi[k+1] = A xi[k] + Bu u[k] + By y[k]
+    r[k]    = C xi[k] + Du u[k] + Dy y[k]
+
+run by :class:`FaultDetectionFilter` (batch ``run`` and streaming ``step``, bitwise equal);
+:func:`internal_form` composes any design with any :class:`~fdikit.model.linear.LinearFaultModel`
+into the transfer from every input group (controls, disturbances, faults, noise) to ``r``; the
+design's ``info`` records the conditions checked, ranks, ``gamma``, eigenvalues and reduction.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import scipy.linalg as sla
+
+from ..errors import ConditionError, ModelError
+from ..model.linear import GROUPS, LinearFaultModel
+from ..model.structure import default_tol, rank, unobservable_modes
+from ..monitor.core import ResidualGenerator
+from ..signals import Signals
+
+__all__ = [
+    "FaultDetectionFilter",
+    "FilterDesign",
+    "conditioned_invariant_subspace",
+    "design_filter_set",
+    "design_optimal_fdf",
+    "design_uio",
+    "fault_detection_filter",
+    "fault_directions",
+    "filter_frequency_response",
+    "internal_form",
+    "reduce_filter",
+]
+
+_EPS = np.finfo(float).eps
+
+
+# ---------------------------------------------------------------------------------- design object
+@dataclass
+class FilterDesign:
+    """Implementation form of a discrete linear residual generator (plain matrices).
+
+    ``xi[k+1] = A xi + Bu u + By y``, ``r = C xi + Du u + Dy y``.
+
+    Attributes
+    ----------
+    A : ndarray (nf, nf)
+    Bu : ndarray (nf, m)
+        Gain on the controls ``u`` (channels ``u_names``).
+    By : ndarray (nf, p)
+        Gain on the measurements ``y`` (channels ``y_names``).
+    C : ndarray (q, nf)
+    Du : ndarray (q, m)
+    Dy : ndarray (q, p)
+    dt : float
+        Sample time (s).
+    u_names, y_names : list of str
+    residual_names : list of str
+        ``q`` residual channel names.
+    info : dict
+        Method, target and nuisance, conditions checked with their ranks, ``gamma``, filter
+        eigenvalues, reduction order (see the design functions).
+    """
+
+    A: np.ndarray
+    Bu: np.ndarray
+    By: np.ndarray
+    C: np.ndarray
+    Du: np.ndarray
+    Dy: np.ndarray
+    dt: float
+    u_names: list[str]
+    y_names: list[str]
+    residual_names: list[str]
+    info: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def order(self) -> int:
+        """Number of filter states ``nf``."""
+        return self.A.shape[0]
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain lists and floats (JSON-ready) of the matrices and names (``info`` omitted)."""
+        out: dict[str, Any] = {k: getattr(self, k).tolist() for k in ("A", "Bu", "By", "C", "Du", "Dy")}
+        out.update(dt=self.dt, u_names=self.u_names, y_names=self.y_names,
+                   residual_names=self.residual_names)
+        return out
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> FilterDesign:
+        """Inverse of :meth:`to_dict`."""
+        mats = {k: np.asarray(d[k], float) for k in ("A", "Bu", "By", "C", "Du", "Dy")}
+        nf, q = len(d["A"]), len(d["residual_names"])
+        m, p = len(d["u_names"]), len(d["y_names"])
+        for k, shp in {"A": (nf, nf), "Bu": (nf, m), "By": (nf, p), "C": (q, nf), "Du": (q, m),
+                       "Dy": (q, p)}.items():
+            mats[k] = mats[k].reshape(shp)
+        return cls(**mats, dt=float(d["dt"]), u_names=list(d["u_names"]), y_names=list(d["y_names"]),
+                   residual_names=list(d["residual_names"]))
+
+
+# ---------------------------------------------------------------------------------- helpers
+def _discrete(model: LinearFaultModel, dt: float | None) -> LinearFaultModel:
+    if not isinstance(model, LinearFaultModel):
+        raise ModelError(f"a LinearFaultModel is needed, got {type(model).__name__}")
+    if model.is_discrete:
+        if dt is not None and abs(dt - model.dt) > 1e-12 * max(1.0, model.dt):
+            raise ModelError(f"model is discrete with dt = {model.dt}, cannot design for dt = {dt}")
+        return model
+    if dt is None:
+        raise ModelError("a continuous model needs the sample time dt of the filter")
+    return model.discretize(dt)
+
+
+def _orth(M: np.ndarray, tol: float | None = None) -> np.ndarray:
+    """Orthonormal basis (n, r) of range(M) with the fdikit rank rule."""
+    n = M.shape[0]
+    if M.size == 0:
+        return np.zeros((n, 0))
+    U, s, _ = np.linalg.svd(M, full_matrices=False)
+    if tol is None:
+        tol = default_tol(M.shape, s[0] if s.size else 0.0)
+    return U[:, : int(np.sum(s > tol))]
+
+
+def _complement_rows(Y: np.ndarray, p: int) -> np.ndarray:
+    """Orthonormal rows (p - r, p) spanning the orthogonal complement of range(Y)."""
+    if Y.shape[1] == 0:
+        return np.eye(p)
+    U, _, _ = np.linalg.svd(Y, full_matrices=True)
+    return U[:, Y.shape[1]:].T.copy()
+
+
+def fault_directions(model: LinearFaultModel, faults: str | Sequence[Any], *, dt: float | None = None,
+                     ) -> np.ndarray:
+    """State-space directions of named faults of a (discretised) model.
+
+    Parameters
+    ----------
+    model : LinearFaultModel
+        Discrete, or continuous with ``dt`` (discretised by ZOH first: the directions are those
+        of the sampled model, which is what the filter sees).
+    faults : str or sequence
+        Fault names declared on the model, or ``(label, M)`` with ``M`` (n, k) explicit
+        directions in the discrete model's state space.
+    dt : float, optional
+        Sample time (s) for a continuous model.
+
+    Returns
+    -------
+    ndarray (n, k)
+        For each fault ``(b, d)``: ``b`` if ``d = 0``; otherwise ``[f_d, b - A f_d]`` with
+        ``f_d = C^+ d`` (the minimum-norm solution of ``C f_d = d``; a sensor fault on output
+        ``j`` gives ``[f_j, -A f_j]``). Numerically zero columns are dropped.
+
+    Raises
+    ------
+    ConditionError
+        ``"sensor direction"`` when ``d`` is not in the range of ``C`` (no ``f_d`` exists).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from fdikit.model import LinearFaultModel
+    >>> m = LinearFaultModel([[0.9, 0.1], [0.0, 0.8]], [[0.0], [1.0]], [[1.0, 0.0]], dt=0.1,
+    ...                      faults=["actuator:u0", "sensor:y0"])
+    >>> fault_directions(m, "actuator:u0").ravel().tolist()
+    [0.0, 1.0]
+    >>> fault_directions(m, "sensor:y0").round(12).tolist()   # [f_j, -A f_j], C f_j = 1
+    [[1.0, -0.9], [0.0, 0.0]]
+    """
+    md = _discrete(model, dt)
+    A, C = md.A, md.C
+    n = md.n_states
+    if isinstance(faults, str):
+        faults = [faults]
+    cols: list[np.ndarray] = []
+    Cp = np.linalg.pinv(C)
+    for spec in faults:
+        if isinstance(spec, str):
+            b, d = md.fault_direction(spec)
+            if np.linalg.norm(d) == 0:
+                cols.append(b[:, None])
+                continue
+            f = Cp @ d
+            res = np.linalg.norm(C @ f - d)
+            if res > 1e3 * _EPS * max(1.0, np.linalg.norm(d)) * max(1.0, np.linalg.norm(C, 2)) * n:
+                raise ConditionError(
+                    "sensor direction",
+                    f"fault {spec!r}: its output direction d = {np.round(d, 6).tolist()} is not in the "
+                    f"range of C (residual |C f - d| = {res:.3e}); it cannot be turned into state "
+                    "directions", {"fault": spec, "residual": float(res)})
+            cols.append(np.column_stack([f, b - A @ f]))
+        else:
+            try:
+                label, M = spec
+            except (TypeError, ValueError):
+                raise ModelError(f"fault spec {spec!r} must be a fault name or (label, directions)") from None
+            M = np.asarray(M, float)
+            M = M.reshape(n, -1) if M.ndim < 2 else M
+            if M.shape[0] != n or not np.all(np.isfinite(M)):
+                raise ModelError(f"directions {label!r} must be finite with {n} rows, got shape {M.shape}")
+            cols.append(M)
+    F = np.hstack(cols) if cols else np.zeros((n, 0))
+    if F.size:
+        scale = max(1.0, float(np.max(np.abs(F))))
+        F = F[:, np.linalg.norm(F, axis=0) > 1e3 * _EPS * scale]
+    return F
+
+
+def conditioned_invariant_subspace(A: Any, C: Any, F: Any, *, tol: float | None = None) -> np.ndarray:
+    """Smallest ``(C, A)``-invariant subspace containing ``range(F)``; orthonormal basis (n, r).
+
+    The recursion ``S_0 = range(F)``, ``S_{k+1} = range(F) + A (S_k ∩ ker C)`` (Basile &
+    Marro) stops after at most ``n`` steps. ``C S*`` are the output directions through which
+    faults along ``F`` reach the output error of any observer: for columns with independent
+    ``C A^delta_i f_i`` it is ``span{C A^delta_i f_i}``, the ``C F_hat`` of Chen & Speyer.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> A = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [0.0, 0.0, 0.0]])
+    >>> S = conditioned_invariant_subspace(A, [[1.0, 0.0, 0.0]], [[0.0], [0.0], [1.0]])
+    >>> S.shape[1]   # e3 -> A e3 = e2 -> A e2 = e1 (measured): three directions
+    3
+    """
+    A = np.asarray(A, float)
+    C = np.atleast_2d(np.asarray(C, float))
+    F = np.asarray(F, float).reshape(A.shape[0], -1)
+    n = A.shape[0]
+    scale = max(1.0, np.linalg.norm(A, 2), np.linalg.norm(C, 2))
+    tol = (n * 1e3 * _EPS * scale) if tol is None else tol
+    F0 = _orth(F, tol * max(1.0, float(np.linalg.norm(F, 2))) if F.size else tol)
+    S = F0
+    for _ in range(n + 1):
+        if S.shape[1] == 0:
+            return S
+        # S ∩ ker C = S N with N the null space of C S
+        _, s, Vt = np.linalg.svd(C @ S, full_matrices=True)
+        r = int(np.sum(s > tol))
+        N = S @ Vt[r:].T
+        Snew = _orth(np.hstack([F0, A @ N]), tol)
+        if Snew.shape[1] == S.shape[1]:
+            return Snew
+        S = Snew
+    return S  # pragma: no cover - dimension grows at most n times
+
+
+def _target_nuisance(md: LinearFaultModel, target: Any, nuisance: Any):
+    target = [target] if isinstance(target, str) else list(target)
+    nuisance = [nuisance] if isinstance(nuisance, str) else list(nuisance or [])
+    if not target:
+        raise ModelError("a fault detection filter needs a target fault")
+    F1 = fault_directions(md, target)
+    F2 = fault_directions(md, nuisance) if nuisance else np.zeros((md.n_states, 0))
+    label = lambda s: s if isinstance(s, str) else str(s[0])  # noqa: E731
+    return [label(s) for s in target], [label(s) for s in nuisance], F1, F2
+
+
+def _markov_visible(Af: np.ndarray, B: np.ndarray, Cf: np.ndarray, D: np.ndarray, steps: int) -> float:
+    """Largest |Markov parameter| of (Af, B, Cf, D) over ``steps`` samples."""
+    best = float(np.max(np.abs(D))) if D.size else 0.0
+    X = B.copy()
+    for _ in range(steps):
+        if X.size == 0:
+            break
+        best = max(best, float(np.max(np.abs(Cf @ X))))
+        X = Af @ X
+    return best
+
+
+def _fault_transfer_columns(md: LinearFaultModel, names: list[str]) -> tuple[np.ndarray, np.ndarray]:
+    """(B, D) columns of named model faults (zeros for explicit directions)."""
+    Bs, Ds = [], []
+    for s in names:
+        if s in md.fault_names:
+            b, d = md.fault_direction(s)
+            Bs.append(b)
+            Ds.append(d)
+    n, p = md.n_states, md.n_outputs
+    return (np.column_stack(Bs) if Bs else np.zeros((n, 0)), np.column_stack(Ds) if Ds else np.zeros((p, 0)))
+
+
+def _check_target_visible(design: FilterDesign, md: LinearFaultModel, target: list[str],
+                          F1: np.ndarray) -> float:
+    """Target must reach the residual: largest Markov parameter of the target transfer."""
+    Bt, Dt = _fault_transfer_columns(md, target)
+    if Bt.shape[1] == 0:  # explicit directions only
+        Bt, Dt = F1, np.zeros((md.n_outputs, F1.shape[1]))
+    Af = np.block([[md.A, np.zeros((md.n_states, design.order))], [design.By @ md.C, design.A]])
+    B = np.vstack([Bt, design.By @ Dt])
+    Cf = np.hstack([design.Dy @ md.C, design.C])
+    vis = _markov_visible(Af, B, Cf, design.Dy @ Dt, Af.shape[0] + 1)
+    scale = max(1.0, float(np.max(np.abs(B))) if B.size else 1.0) * max(1.0, float(np.abs(Cf).max()))
+    if vis <= 1e6 * _EPS * scale:
+        raise ConditionError(
+            "target visibility",
+            f"target {target} does not reach the residual (largest Markov parameter {vis:.3e}); "
+            "it lies in the nuisance's detection space (the faults are not output separable)",
+            {"largest_markov_parameter": vis})
+    return vis
+
+
+# ---------------------------------------------------------------------------------- exact UIO
+def _stabilising_gain(A1: np.ndarray, C: np.ndarray, poles: Any, Q: Any, R: Any) -> tuple[np.ndarray, str]:
+    n, p = A1.shape[0], C.shape[0]
+    if poles is not None:
+        from scipy.signal import place_poles
+
+        poles = np.asarray(poles)
+        if poles.size != n:
+            raise ModelError(f"need {n} poles for the UIO, got {poles.size}")
+        return place_poles(A1.T, C.T, poles).gain_matrix.T, "poles"
+    Qm = np.eye(n) if Q is None else np.atleast_2d(np.asarray(Q, float))
+    Rm = np.eye(p) if R is None else np.atleast_2d(np.asarray(R, float))
+    if Qm.shape != (n, n) or Rm.shape != (p, p):
+        raise ModelError(f"Q must be {(n, n)} and R {(p, p)}, got {Qm.shape} and {Rm.shape}")
+    P = sla.solve_discrete_are(A1.T, C.T, Qm, Rm)
+    # predictor gain of the dual LQ problem: A1 - K1 C Schur stable
+    return A1 @ P @ C.T @ np.linalg.inv(C @ P @ C.T + Rm), "riccati"
+
+
+def design_uio(
+    model: LinearFaultModel,
+    target: Any,
+    nuisance: Any,
+    *,
+    dt: float | None = None,
+    poles: Any = None,
+    Q: Any = None,
+    R: Any = None,
+    name: str | None = None,
+) -> FilterDesign:
+    """Exact unknown input observer (Chen, Patton & Zhang 1996) decoupling the nuisance faults.
+
+    With nuisance directions ``E`` (:func:`fault_directions`), ``H = E (C E)^+``, ``T = I - H C``,
+    ``A1 = T A``, ``F = A1 - K1 C`` and ``K = K1 + F H``, the discrete observer is::
+
+        z[k+1] = F z + (T B - K D) u + K y,    x_hat = z + H (y - D u),    r = y - D u - C x_hat
+
+    and its error ``e = x - x_hat`` obeys ``e[k+1] = F e + T E mu2`` with ``T E = 0``: the nuisance
+    never reaches ``r = C e``.
+
+    Parameters
+    ----------
+    model : LinearFaultModel
+        Discrete, or continuous with ``dt`` (ZOH).
+    target : str or sequence
+        Target fault(s) (names declared on the model).
+    nuisance : str or sequence
+        Nuisance faults: names, or ``(label, directions (n, k))`` in the discrete state space.
+    dt : float, optional
+        Sample time (s).
+    poles : array_like (n,), optional
+        Discrete eigenvalues of ``F`` (pole placement on ``(A1, C)``; needs ``(C, A1)`` observable).
+        Default: ``K1`` from the discrete Riccati equation on ``(A1, C)`` with weights ``Q``
+        (default I) and ``R`` (default I), which only needs detectability.
+
+    Returns
+    -------
+    FilterDesign
+        ``p`` residuals ``"<name>:<output>"``; ``info`` has ``rank_CE``, ``rank_E``,
+        ``unobservable_modes`` of ``(C, A1)``, ``eigenvalues`` and ``spectral_radius`` of ``F``,
+        ``H``, ``T``, ``K1``.
+
+    Raises
+    ------
+    ConditionError
+        ``"rank(CE) = rank(E)"`` with both ranks; ``"detectability of (C, A1)"`` with the
+        unstable unobservable modes; ``"target visibility"`` when the target is decoupled too.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from fdikit.model import LinearFaultModel
+    >>> m = LinearFaultModel(np.diag([0.9, 0.8, 0.7]), np.eye(3)[:, :2], np.eye(3)[:2], dt=0.1,
+    ...                      faults=["actuator:u0", "actuator:u1"])
+    >>> d = design_uio(m, "actuator:u0", ["actuator:u1"])
+    >>> d.info["rank_CE"], d.info["rank_E"]
+    (1, 1)
+    """
+    md = _discrete(model, dt)
+    tnames, nnames, F1, E = _target_nuisance(md, target, nuisance)
+    A, B, C, D = md.A, md.B, md.C, md.D
+    n, p = md.n_states, md.n_outputs
+    rE, rCE = rank(E), rank(C @ E)
+    info: dict[str, Any] = {"method": "uio", "target": tnames, "nuisance": nnames, "rank_E": rE,
+                            "rank_CE": rCE, "conditions": {}}
+    if rCE != rE:
+        raise ConditionError("rank(CE) = rank(E)",
+                             f"the nuisance directions E ({n} x {E.shape[1]}) have rank {rE} but C E has "
+                             f"rank {rCE}: no exact unknown input observer exists (use the optimal "
+                             "stochastic filter)", {"rank_E": rE, "rank_CE": rCE})
+    info["conditions"]["rank(CE) = rank(E)"] = f"{rCE} = {rE}"
+    H = E @ np.linalg.pinv(C @ E) if E.shape[1] else np.zeros((n, p))
+    T = np.eye(n) - H @ C
+    A1 = T @ A
+    um = unobservable_modes(A1, C)
+    bad = um[np.abs(um) >= 1 - 100 * _EPS * max(1.0, np.linalg.norm(A1, 2))]
+    if bad.size:
+        raise ConditionError("detectability of (C, A1)",
+                             f"A1 = (I - E (CE)^+ C) A has {bad.size} unobservable mode(s) on or outside "
+                             f"the unit circle: {np.round(bad, 6).tolist()}",
+                             {"unstable_unobservable_modes": bad.tolist(), "unobservable_modes": um.tolist()})
+    info["conditions"]["detectability of (C, A1)"] = f"unobservable modes {np.round(um, 6).tolist()}"
+    K1, how = _stabilising_gain(A1, C, poles, Q, R)
+    F = A1 - K1 @ C  # Chen, Patton & Zhang (1996): F = A - HCA - K1 C
+    K = K1 + F @ H  # K2 = F H makes the error independent of x
+    eig = np.linalg.eigvals(F)
+    rho = float(np.max(np.abs(eig))) if n else 0.0
+    if rho >= 1:
+        raise ConditionError("stability", f"UIO matrix F has spectral radius {rho:.6g} >= 1",
+                             {"eigenvalues": eig.tolist()})
+    I_CH = np.eye(p) - C @ H
+    nm = name or f"uio[{','.join(tnames)}]"
+    design = FilterDesign(
+        A=F, Bu=T @ B - K @ D, By=K, C=-C, Du=-I_CH @ D, Dy=I_CH, dt=float(md.dt),
+        u_names=list(md.inputs), y_names=list(md.outputs),
+        residual_names=[f"{nm}:{y}" for y in md.outputs], info=info)
+    info.update(gain_method=how, eigenvalues=eig, spectral_radius=rho, unobservable_modes=um,
+                H=H, T=T, K1=K1, order=n, reduction=None)
+    info["target_markov_max"] = _check_target_visible(design, md, tnames, F1)
+    return design
+
+
+# ---------------------------------------------------------------------------------- optimal stochastic FDF
+def design_optimal_fdf(
+    model: LinearFaultModel,
+    target: Any,
+    nuisance: Any,
+    *,
+    gamma: float = 1e-6,
+    dt: float | None = None,
+    Q2: Any = None,
+    Qw: Any = None,
+    V: Any = None,
+    reduce: str | None = "residualize",
+    order: int | None = None,
+    fast_modulus: float = 0.05,
+    name: str | None = None,
+) -> FilterDesign:
+    """Optimal stochastic fault detection filter (Chen, Mingori & Speyer 2003), steady state, discrete.
+
+    1. Nuisance directions ``F2`` and target directions ``F1`` (:func:`fault_directions`).
+    2. Output directions of the nuisance ``C S2*`` with ``S2*`` the smallest ``(C, A)``-invariant
+       subspace containing ``F2`` (:func:`conditioned_invariant_subspace`; ``C F_hat_2`` of the
+       paper); ``H = I - C S2* (C S2*)^+`` annihilates them. The residual is ``r = Hr (y - C x_hat
+       - D u)`` with ``Hr`` (p - s, p) orthonormal rows, ``Hr^T Hr = H`` (so ``|r| = |H (y - ...)|``).
+    3. Steady-state discrete Riccati equation (predictor form)::
+
+           P = A P A' - A P C' (C P C' + V)^-1 C P A' + Qw + F2 Q2 F2' / gamma
+           L = A P C' (C P C' + V)^-1,     x_hat[k+1] = A x_hat + B u + L (y - C x_hat - D u)
+
+       the nuisance weighted by ``1/gamma``: as ``gamma -> 0``, ``(A - L C) S2* -> ... `` the
+       nuisance subspace becomes unobservable from ``r`` with eigenvalues -> 0 (the UIO
+       structure; in continuous time they go to ``-infinity``), and the nuisance transmission
+       vanishes like ``gamma``. Discrete time is used because the monitor runs at a fixed sample
+       rate; a continuous model is discretised by ZOH first. (The paper's target-fault weighting
+       in the Riccati equation is not used: the target enters only through the projector check.)
+    4. Model reduction (paper 1, Section IV-C): the fast (``|z| <= fast_modulus``), weakly
+       observable filter modes approximating the nuisance subspace are removed by
+       :func:`reduce_filter` (``reduce="residualize"``: steady-state correction, exact DC gain;
+       ``"truncate"``; ``None``: keep the full filter).
+
+    Parameters
+    ----------
+    model : LinearFaultModel
+    target, nuisance : str or sequence
+        Fault names (or ``(label, directions)`` for nuisances given as explicit directions).
+    gamma : float
+        Nuisance weighting (> 0); smaller blocks harder.
+    dt : float, optional
+        Sample time (s) for a continuous model.
+    Q2 : array_like (k2, k2), optional
+        Nuisance intensity shape (default I).
+    Qw : array_like (n, n), optional
+        Process-noise covariance (default ``Bw Bw'`` of the model plus ``1e-6 I``).
+    V : array_like (p, p), optional
+        Measurement-noise covariance (default ``Dw Dw'`` plus ``1e-6 I``, or I without noise group).
+    reduce : {"residualize", "truncate", None}
+    order : int, optional
+        Reduced order; default: drop the modes with ``|z| <= fast_modulus``.
+    fast_modulus : float
+        Modulus below which a discrete mode counts as fast (0.05: faster than ``dt / 3``).
+
+    Returns
+    -------
+    FilterDesign
+        ``info`` has ``gamma``, ``rank_E``/``rank_CE`` of the nuisance (whether an exact UIO
+        would exist), ``nuisance_output_rank``, ``H``, ``L``, ``P``, ``eigenvalues`` of the full
+        filter, ``full`` (the unreduced :class:`FilterDesign`), ``order`` and ``reduction``.
+
+    Raises
+    ------
+    ConditionError
+        ``"residual dimension"`` when the nuisance output directions fill the output space;
+        ``"target visibility"`` when the target does not reach the residual; ``"riccati"`` when
+        the Riccati equation has no stabilising solution.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from fdikit.model import LinearFaultModel
+    >>> A = [[0.9, 0.1, 0.0], [0.0, 0.8, 0.1], [0.05, 0.0, 0.7]]
+    >>> m = LinearFaultModel(A, [[0.0], [0.0], [1.0]], np.eye(3)[:2], dt=0.01,
+    ...                      faults=["actuator:u0", ("leak", [1.0, 0.0, 0.0], None)])
+    >>> d = design_optimal_fdf(m, "actuator:u0", ["leak"], gamma=1e-6, reduce=None)
+    >>> d.residual_names, d.info["nuisance_output_rank"]
+    (['fdf[actuator:u0]:0'], 1)
+    """
+    if not (gamma > 0 and np.isfinite(gamma)):
+        raise ModelError(f"gamma must be a positive number, got {gamma}")
+    md = _discrete(model, dt)
+    tnames, nnames, F1, F2 = _target_nuisance(md, target, nuisance)
+    A, B, C, D = md.A, md.B, md.C, md.D
+    n, p = md.n_states, md.n_outputs
+    S2 = conditioned_invariant_subspace(A, C, F2)
+    Y2 = _orth(C @ S2)  # nuisance output directions
+    s = Y2.shape[1]
+    if s >= p:
+        raise ConditionError("residual dimension",
+                             f"the nuisance output directions span all {p} outputs (rank C S2* = {s}); "
+                             "the projected residual H (y - C x_hat) would be identically zero",
+                             {"nuisance_output_rank": s, "outputs": p})
+    Hr = _complement_rows(Y2, p)
+    H = Hr.T @ Hr
+    k2 = F2.shape[1]
+    Q2m = np.eye(k2) if Q2 is None else np.atleast_2d(np.asarray(Q2, float))
+    Bw, Dw = md.B_of("w"), md.D_of("w")
+    Qwm = Bw @ Bw.T + 1e-6 * np.eye(n) if Qw is None else np.atleast_2d(np.asarray(Qw, float))
+    if V is None:
+        Vm = Dw @ Dw.T + 1e-6 * np.eye(p) if Dw.size and np.any(Dw) else np.eye(p)
+    else:
+        Vm = np.atleast_2d(np.asarray(V, float))
+    if Q2m.shape != (k2, k2) or Qwm.shape != (n, n) or Vm.shape != (p, p):
+        raise ModelError(f"Q2 must be {(k2, k2)}, Qw {(n, n)} and V {(p, p)}; got {Q2m.shape}, "
+                         f"{Qwm.shape}, {Vm.shape}")
+    Qtot = Qwm + F2 @ Q2m @ F2.T / gamma  # nuisance weighted by 1/gamma (paper 4, Riccati eq.)
+    Qtot = 0.5 * (Qtot + Qtot.T)
+    try:
+        P = sla.solve_discrete_are(A.T, C.T, Qtot, Vm)
+    except (np.linalg.LinAlgError, ValueError) as exc:
+        raise ConditionError("riccati", f"the filter Riccati equation has no stabilising solution "
+                             f"(gamma = {gamma:g}): {exc}", {"gamma": gamma}) from None
+    P = 0.5 * (P + P.T)
+    L = A @ P @ C.T @ np.linalg.inv(C @ P @ C.T + Vm)
+    Af = A - L @ C
+    eig = np.linalg.eigvals(Af)
+    rho = float(np.max(np.abs(eig))) if n else 0.0
+    if not rho < 1:
+        raise ConditionError("stability", f"filter A - L C has spectral radius {rho:.6g} >= 1 "
+                             f"(gamma = {gamma:g})", {"eigenvalues": eig.tolist()})
+    nm = name or f"fdf[{','.join(tnames)}]"
+    full = FilterDesign(
+        A=Af, Bu=B - L @ D, By=L, C=-Hr @ C, Du=-Hr @ D, Dy=Hr.copy(), dt=float(md.dt),
+        u_names=list(md.inputs), y_names=list(md.outputs),
+        residual_names=[f"{nm}:{i}" for i in range(p - s)])
+    rE, rCE = rank(F2), rank(C @ F2)
+    info: dict[str, Any] = {
+        "method": "optimal_fdf", "target": tnames, "nuisance": nnames, "gamma": float(gamma),
+        "discrete": True, "rank_E": rE, "rank_CE": rCE, "exact_uio_rank_condition": rE == rCE,
+        "nuisance_subspace_dim": S2.shape[1], "nuisance_output_rank": s,
+        "target_output_rank": rank(C @ conditioned_invariant_subspace(A, C, F1)),
+        "H": H, "Hr": Hr, "L": L, "P": P, "eigenvalues": eig, "spectral_radius": rho,
+        "conditions": {"residual dimension": f"{p} outputs - {s} nuisance output directions = {p - s}"},
+    }
+    full.info = dict(info, order=n, reduction=None)
+    info["target_markov_max"] = _check_target_visible(full, md, tnames, F1)
+    info["conditions"]["target visibility"] = f"largest Markov parameter {info['target_markov_max']:.3e}"
+    full.info["target_markov_max"] = info["target_markov_max"]
+    if reduce is None:
+        return full
+    red = reduce_filter(full, order, fast_modulus=fast_modulus, method=reduce)
+    red.info = dict(info, full=full, **red.info)
+    return red
+
+
+# ---------------------------------------------------------------------------------- reduction
+def reduce_filter(design: FilterDesign, order: int | None = None, *, fast_modulus: float = 0.05,
+                  method: str = "residualize") -> FilterDesign:
+    """Remove the fast modes of a discrete filter (paper 1, Section IV-C), keeping plain matrices.
+
+    Ordered real Schur form of ``A`` with the ``order`` slowest modes (largest ``|z|``) leading,
+    block-diagonalisation by a Sylvester equation, then for the fast block ``xi2``:
+    ``"residualize"`` sets it to its quasi-steady state ``xi2 = (I - A22)^-1 B2 v`` (the discrete
+    dynamic truncation with steady-state correction: exact DC gain), ``"truncate"`` drops it.
+
+    Parameters
+    ----------
+    design : FilterDesign
+    order : int, optional
+        Number of modes kept; default: all modes with ``|z| > fast_modulus``.
+    fast_modulus : float
+        Threshold on ``|z|`` used when ``order`` is None.
+    method : {"residualize", "truncate"}
+
+    Returns
+    -------
+    FilterDesign
+        ``info``: ``order``, ``reduction`` (method), ``dropped_eigenvalues`` and
+        ``dropped_observability`` (the norm of the output matrix of each dropped block relative
+        to the whole: small for the weakly observable nuisance modes).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> d = FilterDesign(np.diag([0.9, 0.01]), np.zeros((2, 0)), np.array([[0.1], [1.0]]),
+    ...                  np.array([[1.0, 1.0]]), np.zeros((1, 0)), np.zeros((1, 1)), 0.01, [], ["y"], ["r"])
+    >>> r = reduce_filter(d)
+    >>> r.order, round(float(r.Dy[0, 0]), 6)     # fast mode -> feedthrough 1/(1 - 0.01)
+    (1, 1.010101)
+    """
+    if method not in ("residualize", "truncate"):
+        raise ModelError(f"method must be 'residualize' or 'truncate', got {method!r}")
+    A = design.A
+    n = A.shape[0]
+    ev = np.linalg.eigvals(A)
+    mags = np.sort(np.abs(ev))[::-1]  # slow (large |z|) first
+    if order is None:
+        order = int(np.sum(np.abs(ev) > fast_modulus))
+    if not 0 <= order <= n:
+        raise ModelError(f"reduce_filter: order must be in [0, {n}], got {order}")
+    Bv = np.hstack([design.Bu, design.By])
+    Dv = np.hstack([design.Du, design.Dy])
+    m = design.Bu.shape[1]
+    if order == n:
+        out = FilterDesign(A.copy(), design.Bu.copy(), design.By.copy(), design.C.copy(), design.Du.copy(),
+                           design.Dy.copy(), design.dt, list(design.u_names), list(design.y_names),
+                           list(design.residual_names))
+        out.info = {"order": n, "reduction": method, "dropped_eigenvalues": np.zeros(0, complex),
+                    "dropped_observability": 0.0}
+        return out
+    if order > 0:
+        lo, hi = mags[order], mags[order - 1]
+        if not hi > lo * (1 + 1e-9) + 1e-300:
+            raise ModelError(f"reduce_filter: order {order} splits modes of equal modulus |z| = {hi:.6g}")
+        thr = 0.5 * (lo + hi)
+        T, Z, _ = sla.schur(A, output="real", sort=lambda re, im: np.hypot(re, im) > thr)
+        k = order
+        X = sla.solve_sylvester(T[:k, :k], -T[k:, k:], -T[:k, k:])
+        Bz = Z.T @ Bv
+        Bz[:k] -= X @ Bz[k:]
+        Cz = design.C @ Z
+        Cz[:, k:] += Cz[:, :k] @ X
+        A11, A22 = T[:k, :k], T[k:, k:]
+    else:
+        A11, A22, Bz, Cz, k = np.zeros((0, 0)), A, Bv, design.C, 0
+    B1, B2, C1, C2 = Bz[:k], Bz[k:], Cz[:, :k], Cz[:, k:]
+    if method == "residualize":
+        Dr = Dv + C2 @ np.linalg.solve(np.eye(n - k) - A22, B2)
+    else:
+        Dr = Dv.copy()
+    cnorm = float(np.linalg.norm(Cz, 2))
+    out = FilterDesign(A11.copy(), B1[:, :m].copy(), B1[:, m:].copy(), C1.copy(), Dr[:, :m].copy(),
+                       Dr[:, m:].copy(), design.dt, list(design.u_names), list(design.y_names),
+                       list(design.residual_names))
+    out.info = {"order": k, "reduction": method, "dropped_eigenvalues": np.linalg.eigvals(A22),
+                "dropped_observability": float(np.linalg.norm(C2, 2)) / cnorm if cnorm else 0.0}
+    return out
+
+
+# ---------------------------------------------------------------------------------- front ends
+def fault_detection_filter(model: LinearFaultModel, target: Any, nuisance: Any = (), *,
+                           method: str = "auto", **kwargs: Any) -> FilterDesign:
+    """Design a filter sensitive to ``target`` and blind to ``nuisance``.
+
+    ``method="uio"``: :func:`design_uio`; ``"optimal"``: :func:`design_optimal_fdf`; ``"auto"``:
+    the exact UIO when ``rank(C E) = rank(E)`` holds (and the design succeeds), else the optimal
+    stochastic filter. Keyword arguments go to the chosen design function (``dt``, ``gamma``,
+    ``poles``, ...).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from fdikit.model import LinearFaultModel
+    >>> m = LinearFaultModel(np.diag([0.9, 0.8, 0.7]), np.eye(3)[:, :2], np.eye(3)[:2], dt=0.1,
+    ...                      faults=["actuator:u0", "actuator:u1"])
+    >>> fault_detection_filter(m, "actuator:u0", ["actuator:u1"]).info["method"]
+    'uio'
+    """
+    uio_kw = {k: v for k, v in kwargs.items() if k in ("dt", "poles", "Q", "R", "name")}
+    opt_kw = {k: v for k, v in kwargs.items() if k not in ("poles", "Q", "R")}
+    if method == "uio":
+        return design_uio(model, target, nuisance, **uio_kw)
+    if method == "optimal":
+        return design_optimal_fdf(model, target, nuisance, **opt_kw)
+    if method != "auto":
+        raise ModelError(f"method must be 'auto', 'uio' or 'optimal', got {method!r}")
+    try:
+        return design_uio(model, target, nuisance, **uio_kw)
+    except ConditionError as exc:
+        if exc.condition not in ("rank(CE) = rank(E)", "detectability of (C, A1)"):
+            raise
+        d = design_optimal_fdf(model, target, nuisance, **opt_kw)
+        d.info["uio_failed"] = str(exc)
+        return d
+
+
+def design_filter_set(model: LinearFaultModel, targets: Sequence[str], nuisance: Any = (), *,
+                      method: str = "auto", name: str = "set", **kwargs: Any) -> dict[str, FilterDesign]:
+    """One filter per target, the other targets (and ``nuisance``) as nuisances.
+
+    Parameters
+    ----------
+    model : LinearFaultModel
+    targets : sequence of str
+        Faults of the set (e.g. paper 1, Section IV-B: two faults per set).
+    nuisance : sequence
+        Nuisances common to every filter (e.g. the nonlinearity direction).
+    method, kwargs
+        As :func:`fault_detection_filter`.
+    name : str
+        Prefix of the residual names: ``"<name>/<target>:<i>"``.
+
+    Returns
+    -------
+    dict
+        ``{target: FilterDesign}``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from fdikit.model import LinearFaultModel
+    >>> m = LinearFaultModel(np.diag([0.9, 0.8, 0.7]), np.eye(3)[:, :2], np.eye(3)[:2], dt=0.1,
+    ...                      faults=["actuator:u0", "actuator:u1"])
+    >>> sorted(design_filter_set(m, ["actuator:u0", "actuator:u1"]))
+    ['actuator:u0', 'actuator:u1']
+    """
+    targets = list(targets)
+    common = [nuisance] if isinstance(nuisance, str) else list(nuisance or [])
+    out = {}
+    for t in targets:
+        others = [s for s in targets if s != t] + common
+        out[t] = fault_detection_filter(model, t, others, method=method, name=f"{name}/{t}", **kwargs)
+    return out
+
+
+# ---------------------------------------------------------------------------------- runtime
+class FaultDetectionFilter(ResidualGenerator):
+    """Runtime of a :class:`FilterDesign`: batch ``run`` and streaming ``reset``/``step``.
+
+    Both paths perform the same floating-point operations in the same order (the same matrix
+    products on ``(runs, .)`` blocks, sample by sample), so their outputs are bitwise equal.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> d = FilterDesign(np.array([[0.5]]), np.zeros((1, 0)), np.array([[1.0]]), np.array([[1.0]]),
+    ...                  np.zeros((1, 0)), np.array([[-1.0]]), 0.1, [], ["y"], ["r"])
+    >>> f = FaultDetectionFilter(d)
+    >>> f.reset(1)
+    >>> [float(f.step(np.zeros(0), [1.0])[0, 0]) for _ in range(3)]
+    [-1.0, 0.0, 0.5]
+    """
+
+    def __init__(self, design: FilterDesign, x0: Any = None):
+        self.design = design
+        self.u_names = list(design.u_names)
+        self.y_names = list(design.y_names)
+        self.output_names = list(design.residual_names)
+        nf = design.order
+        self.x0 = np.zeros(nf) if x0 is None else np.asarray(x0, float).reshape(nf)
+        self._At, self._Ct = np.ascontiguousarray(design.A.T), np.ascontiguousarray(design.C.T)
+        self._Bvt = np.ascontiguousarray(np.hstack([design.Bu, design.By]).T)
+        self._Dvt = np.ascontiguousarray(np.hstack([design.Du, design.Dy]).T)
+        self.reset(1)
+
+    def reset(self, runs: int = 1) -> None:
+        self._xi = np.tile(self.x0, (runs, 1))
+
+    def _advance(self, v: np.ndarray) -> np.ndarray:
+        xi = self._xi
+        r = xi @ self._Ct + v @ self._Dvt
+        self._xi = xi @ self._At + v @ self._Bvt
+        return r
+
+    def _step(self, u: np.ndarray, y: np.ndarray) -> np.ndarray:
+        if u.shape[0] != self._xi.shape[0]:
+            raise ModelError(f"sample has {u.shape[0]} runs but the filter was reset for "
+                             f"{self._xi.shape[0]}")
+        return self._advance(np.ascontiguousarray(np.hstack([u, y])))
+
+    def run(self, signals: Signals) -> Signals:
+        """Residuals over a record (all runs at once; time recursion sample by sample)."""
+        u, y = self._inputs(signals)
+        if signals.n_samples > 1:
+            dts = np.diff(signals.t)
+            if np.max(np.abs(dts - self.design.dt)) > 1e-6 * self.design.dt:
+                raise ModelError(f"signals are sampled at {signals.dt:g} s but the filter was designed "
+                                 f"for dt = {self.design.dt:g} s")
+        self.reset(signals.runs)
+        # (T, runs, m) contiguous so that each sample is the same (runs, m) block as in step()
+        v = np.ascontiguousarray(np.concatenate([u, y], axis=2).transpose(1, 0, 2))
+        out = np.empty((signals.n_samples, signals.runs, len(self.output_names)))
+        for k in range(signals.n_samples):
+            out[k] = self._advance(v[k])
+        return Signals(signals.t, out.transpose(1, 0, 2), self.output_names, check=False)
+
+
+# ---------------------------------------------------------------------------------- internal form
+def internal_form(design: FilterDesign, model: LinearFaultModel) -> LinearFaultModel:
+    """Transfer from every input group of ``model`` to the residual, by composing plant and filter.
+
+    Plant ``x[k+1] = A x + sum_g B_g v_g``, ``y = C x + sum_g D_g v_g`` (discretised at the
+    design's ``dt`` when continuous) in series with the filter; composite state ``[x; xi]``::
+
+        [x; xi][k+1] = [[A, 0], [By C, Af]] [x; xi] + [B_g; By D_g (+ Bu)] v_g
+        r            = [Dy C, Cf] [x; xi] + (Dy D_g (+ Du)) v_g
+
+    (``Bu``, ``Du`` only for the controls). Returns a :class:`LinearFaultModel` with the model's
+    input groups and the residual channels as outputs.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from fdikit.model import LinearFaultModel, dc_gain
+    >>> m = LinearFaultModel(np.diag([0.9, 0.8, 0.7]), np.eye(3)[:, :2], np.eye(3)[:2], dt=0.1,
+    ...                      faults=["actuator:u0", "actuator:u1"])
+    >>> G = dc_gain(internal_form(design_uio(m, "actuator:u0", ["actuator:u1"]), m), "f")
+    >>> bool(np.abs(G[:, 1]).max() < 1e-12), bool(np.abs(G[:, 0]).max() > 0.1)
+    (True, True)
+    """
+    md = _discrete(model, design.dt)
+    if md.outputs != design.y_names or md.inputs != design.u_names:
+        raise ModelError(f"model channels (inputs {md.inputs}, outputs {md.outputs}) differ from the "
+                         f"design's ({design.u_names}, {design.y_names})")
+    n, nf = md.n_states, design.order
+    A = np.block([[md.A, np.zeros((n, nf))], [design.By @ md.C, design.A]])
+    C = np.hstack([design.Dy @ md.C, design.C])
+    groups = {}
+    for g in GROUPS:
+        Bg, Dg = md.B_of(g), md.D_of(g)
+        Bo, Do = design.By @ Dg, design.Dy @ Dg
+        if g == "u":
+            Bo, Do = Bo + design.Bu, Do + design.Du
+        groups[g] = (np.vstack([Bg, Bo]), Do)
+    states = [*md.states, *(f"xi{i}" for i in range(nf))]
+    return md.with_matrices(A, C, groups, states=states, outputs=design.residual_names)
+
+
+def filter_frequency_response(design: FilterDesign, freqs_hz: Any) -> tuple[np.ndarray, np.ndarray]:
+    """Frequency responses ``G_ru`` (F, q, m) and ``G_ry`` (F, q, p) of the filter alone.
+
+    ``G(e^{j 2 pi f dt}) = D + C (zI - A)^-1 B``; with a plant response ``G_yg`` the residual's
+    response to group ``g`` is ``G_ry G_yg (+ G_ru for the controls)``, an independent check of
+    :func:`internal_form`.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> d = FilterDesign(np.array([[0.5]]), np.zeros((1, 0)), np.array([[1.0]]), np.array([[1.0]]),
+    ...                  np.zeros((1, 0)), np.array([[-1.0]]), 0.1, [], ["y"], ["r"])
+    >>> Gu, Gy = filter_frequency_response(d, [0.0])
+    >>> Gy[0].real.tolist()            # -1 + 1 / (1 - 0.5)
+    [[1.0]]
+    """
+    f = np.atleast_1d(np.asarray(freqs_hz, float))
+    z = np.exp(2j * np.pi * f * design.dt)
+    nf = design.order
+    out = []
+    for Bm, Dm in ((design.Bu, design.Du), (design.By, design.Dy)):
+        if nf:
+            M = z[:, None, None] * np.eye(nf) - design.A
+            X = np.linalg.solve(M, np.broadcast_to(Bm.astype(complex), (f.size, *Bm.shape)))
+            out.append(design.C @ X + Dm)
+        else:
+            out.append(np.broadcast_to(Dm.astype(complex), (f.size, *Dm.shape)).copy())
+    return out[0], out[1]
