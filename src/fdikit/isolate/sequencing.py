@@ -25,7 +25,8 @@ the path costs at least ``c_min(x)``, the cheapest test that splits ``x``. Hence
 
     h(x) = c_min(x) * Huffman(x)  <=  h*(x)                           (``heuristic="huffman"``)
 
-is admissible; it is Pattipati & Alexandridis's information-theoretic bound in the equal-cost case.
+is admissible (the Huffman-code bound in the spirit of Pattipati & Alexandridis's heuristic
+evaluation functions; with equal costs it is their information-theoretic bound).
 ``"entropy"`` uses the weaker ``c_min(x) * p(x) * H(x)`` (Shannon entropy in bits, ``H <= Huffman``),
 ``"mincost"`` uses ``c_min(x) * p(x)`` (at least one test is needed) and ``"zero"`` turns AO* into
 uniform-cost dynamic programming. All four give the same optimal cost; they differ in how many
@@ -186,7 +187,6 @@ class TreeNode:
     group: tuple[str, ...] | None = None
     passed: TreeNode | None = None
     failed: TreeNode | None = None
-    cost_to_go: float = 0.0
 
     @property
     def is_leaf(self) -> bool:
@@ -442,7 +442,7 @@ class _Perfect:
                 out.append(self.prob(m))
         return out
 
-    def node(self, x: int, cost_to_go: float, best: Callable[[int], int | None]) -> TreeNode:
+    def node(self, x: int, best: Callable[[int], int | None]) -> TreeNode:
         """Build the tree below ``x`` following ``best(x)`` (test index or None at a leaf)."""
         names = [self.dm.faults[i] for i in self.bits(x)]
         px = self.prob(x)
@@ -450,10 +450,10 @@ class _Perfect:
                 for f in names}
         j = best(x)
         if j is None:
-            return TreeNode(None, tuple(names), px, post, group=tuple(names), cost_to_go=0.0)
-        n = TreeNode(self.dm.tests[j], tuple(names), px, post, cost_to_go=cost_to_go)
-        n.passed = self.node(x & ~self.fail[j], 0.0, best)
-        n.failed = self.node(x & self.fail[j], 0.0, best)
+            return TreeNode(None, tuple(names), px, post, group=tuple(names))
+        n = TreeNode(self.dm.tests[j], tuple(names), px, post)
+        n.passed = self.node(x & ~self.fail[j], best)
+        n.failed = self.node(x & self.fail[j], best)
         return n
 
 
@@ -560,7 +560,7 @@ def _ao_perfect(dm, p, c, heuristic):
     full = (1 << P.nf) - 1
     root = get(full)
     expansions = _aostar_loop(root, expand, revise)
-    tree_root = P.node(full, root.f, lambda x: nodes[x].best)
+    tree_root = P.node(full, lambda x: nodes[x].best)
     return root.f, tree_root, {"nodes": len(nodes), "expanded": expansions,
                                "wall_seconds": time.perf_counter() - t0}
 
@@ -589,7 +589,7 @@ def _exhaustive_perfect(dm, p, c):
         if arg >= 0:
             J[x], best[x] = val, arg
     full = size - 1
-    root = P.node(full, float(J[full]), lambda x: None if best[x] < 0 else int(best[x]))
+    root = P.node(full, lambda x: None if best[x] < 0 else int(best[x]))
     return float(J[full]), root, {"nodes": size - 1, "expanded": size - 1,
                                   "wall_seconds": time.perf_counter() - t0}
 
