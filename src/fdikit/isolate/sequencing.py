@@ -174,7 +174,8 @@ class TreeNode:
     """A node of a diagnostic tree.
 
     ``test`` is the test applied here (``None`` at a leaf). ``faults`` are the fault states still
-    possible (non-zero posterior); ``probability`` is the probability of reaching the node;
+    possible (perfect tests: consistent with the outcomes so far; unreliable tests: non-zero
+    posterior); ``probability`` is the probability of reaching the node;
     ``posterior`` maps fault -> posterior probability at the node. A leaf's ``group`` is the diagnosis:
     the ambiguity group (perfect tests) or the maximum-posterior class (unreliable tests).
     ``passed`` / ``failed`` are the successors for outcome G / NG.
