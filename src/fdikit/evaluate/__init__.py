@@ -1,1 +1,21 @@
-"""fdikit.evaluate."""
+"""Monte Carlo evaluation campaigns and FDI metrics (Pd, Pf, sensitivity, specificity)."""
+
+from .campaign import (
+    PAPER_TABLE_III,
+    PAPER_TABLE_IV,
+    PAPER_TABLE_V,
+    CampaignResult,
+    TestBank,
+    TestSpec,
+    abs_residuals,
+    design_tests,
+    diagnose_ml,
+    gp1_grid,
+    min_magnitudes,
+    paper_tests,
+    run_campaign,
+)
+
+__all__ = ["PAPER_TABLE_III", "PAPER_TABLE_IV", "PAPER_TABLE_V", "CampaignResult", "TestBank", "TestSpec",
+           "abs_residuals", "design_tests", "diagnose_ml", "gp1_grid", "min_magnitudes", "paper_tests",
+           "run_campaign"]

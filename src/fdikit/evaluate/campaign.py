@@ -1,0 +1,584 @@
+"""Monte Carlo evaluation of the ABS test design (paper luo-et-al, Sections V-C and VII).
+
+The five GLRT-based tests of the paper, each a chain residual -> moving-window GLRT (eq. (24))
+-> hold rule over ``Z`` samples (eq. (34)) [-> time gate (eq. (35))]:
+
+=========  ========  =====================================================================
+test        residual  what it is
+=========  ========  =====================================================================
+G_P1        r1        parity residual (25); W = 50, Z = 40 (Table III)
+G_O1        r3        observer residual on the wheel speed; W = 10, Z = 5
+G_O2        r4        observer residual on the vehicle speed; W = 10, Z = 5
+G_O_T1      r3        G_O1 gated at T: fires only if the alarm was off up to T and on after
+G_O_T2      r4        G_O2 gated at T
+=========  ========  =====================================================================
+
+Design (no hand-tuned constants): mu0 and sigma^2 of each residual are the mean and variance of
+nominal Monte Carlo residuals; each threshold comes from
+:func:`fdikit.detect.design_threshold` for a target per-run false-alarm probability ``pfa`` on
+``design_runs`` nominal runs (a separate seed stream from the evaluation). A gated test reuses
+the threshold of its ungated twin (gating can only remove alarms, so its Pf is no larger).
+
+Gate time: ``T`` defaults to the brake application time of the scenario (0.5 s). In this plant a
+wheel-speed-sensor fault (F1) shows in r3/r4 from the first sample (the observer sees slip on a
+rolling car), whereas R_w, K_f, I_w and tau_m faults act through the brake torque and appear
+only once the driver brakes; the paper's gate at the ABS engagement (~7 s there) plays the same
+role of telling sensor from parametric faults by *when* a residual departs.
+
+Evaluation: for each fault class, ``runs`` fresh runs; a test's outcome in a run is 1 when its
+alarm fired anywhere in the 12.5 s record; Pd/Pf and the binary D-matrix come from
+:meth:`fdikit.isolate.DMatrix.from_outcomes`. The decision logic available now (the optimal
+diagnostic tree and the SVM tests S_Kf/S_Iw come with the isolation issue) is the maximum-
+likelihood fault given the five outcomes, with the learned (Pd, Pf) as independent test
+reliabilities and equal prior probabilities of the classes. Sensitivity is the fraction of
+faulty runs diagnosed correctly (``sensitivity``: up to the ambiguity groups of the learned
+D-matrix; ``sensitivity_exact``: the class itself), specificity the fraction of nominal runs
+diagnosed "F0" (paper, Section VII).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ..detect import GLRT, Hold, TimeGated, design_threshold
+from ..errors import DataError
+from ..signals import Signals
+
+__all__ = [
+    "PAPER_TABLE_III",
+    "PAPER_TABLE_IV",
+    "PAPER_TABLE_V",
+    "CampaignResult",
+    "TestBank",
+    "TestSpec",
+    "abs_residuals",
+    "design_tests",
+    "diagnose_ml",
+    "gp1_grid",
+    "min_magnitudes",
+    "paper_tests",
+    "run_campaign",
+]
+
+#: Table III of the paper: test -> (mu0, sigma^2, W, Z, threshold) (first G_P1 row, W = 50).
+PAPER_TABLE_III = {
+    "G_P1": (0.097, 1.26e3, 50, 40, 0.3),
+    "G_O1": (-1.07e-4, 4.5e-3, 10, 5, 8.0),
+    "G_O2": (-1.92e-4, 4.0e-3, 10, 5, 2000.0),
+}
+#: Table IV of the paper (columns G_P1, G_O1, G_O2, G_O_T1, G_O_T2).
+PAPER_TABLE_IV = {
+    "F0": (0, 0, 0, 0, 0), "F1.1": (0, 1, 1, 0, 1), "F1.2": (1, 1, 1, 0, 1), "F2.1": (0, 1, 1, 0, 0),
+    "F2.2": (1, 1, 1, 0, 0), "F3": (0, 1, 1, 1, 0), "F4": (0, 1, 1, 1, 0), "F5": (0, 1, 0, 0, 0),
+}
+#: Table V: SNR (dB) -> (sensitivity, specificity) in %.
+PAPER_TABLE_V = {17.0: (99.92, 99.76), 20.0: (99.96, 99.84), 23.0: (99.98, 99.99)}
+
+_RESIDUALS = ("r1", "r3", "r4")
+
+
+@dataclass(frozen=True)
+class TestSpec:
+    """One GLRT test: residual channel, window ``W``, hold ``Z`` and optional gate time ``T`` (s)."""
+
+    name: str
+    residual: str
+    W: int
+    Z: int
+    gate: float | None = None
+
+    def __post_init__(self):
+        if int(self.W) != self.W or self.W < 1:
+            raise DataError(f"test {self.name}: GLRT window W must be an integer >= 1, got {self.W}")
+        if int(self.Z) != self.Z or self.Z < 1:
+            raise DataError(f"test {self.name}: hold Z must be an integer >= 1, got {self.Z}")
+
+
+def paper_tests(W: int | None = None, *, gate: float = 0.5) -> list[TestSpec]:
+    """The five tests of the paper with Table III's windows (all windows ``W`` when given).
+
+    Examples
+    --------
+    >>> [t.name for t in paper_tests()]
+    ['G_P1', 'G_O1', 'G_O2', 'G_O_T1', 'G_O_T2']
+    >>> paper_tests(40)[1].W
+    40
+    """
+    w1, w2 = (50, 10) if W is None else (W, W)
+    return [TestSpec("G_P1", "r1", w1, 40), TestSpec("G_O1", "r3", w2, 5), TestSpec("G_O2", "r4", w2, 5),
+            TestSpec("G_O_T1", "r3", w2, 5, gate), TestSpec("G_O_T2", "r4", w2, 5, gate)]
+
+
+def min_magnitudes() -> dict[str, float | None]:
+    """The smallest fault of each class (Table II), as used for Table V.
+
+    For the symmetric classes F3/F4 the minimum size is ±2 %; this returns +2 % and
+    :func:`run_campaign` gives half of the runs -2 %.
+
+    Examples
+    --------
+    >>> min_magnitudes()["F2.2"]
+    -0.2
+    """
+    from ..plants.abs import FAULT_CLASSES
+
+    out: dict[str, float | None] = {}
+    for name, fc in FAULT_CLASSES.items():
+        if fc.param is None:
+            out[name] = None
+        elif fc.symmetric:
+            out[name] = fc.lo
+        else:
+            out[name] = fc.hi if fc.hi < 0 else fc.lo  # smallest |change|
+    return out
+
+
+def abs_residuals(sig: Signals, generators: Sequence[Any] | None = None) -> Signals:
+    """Residuals r1 (causal parity, eq. (25)) and r3, r4 (observer, eq. (33)) of ABS records.
+
+    Parameters
+    ----------
+    sig : Signals
+        Measurements ``omega_w``, ``omega_v`` and inputs ``P_m``, ``u_in``, ``u_out`` (runs, T, 5).
+    generators : sequence, optional
+        ``(ParityR1, ABSObserver)`` instances to reuse.
+
+    Returns
+    -------
+    Signals
+        Channels ``r1`` (rad/s^2), ``r3``, ``r4`` (rad/s).
+    """
+    from ..residuals.abs_residuals import ABSObserver, ParityR1
+
+    if generators is None:
+        generators = (ParityR1(sig.dt), ABSObserver(sig.dt))
+    out = generators[0].run(sig)
+    for g in generators[1:]:
+        out = out.concat_channels(g.run(sig))
+    return out
+
+
+@dataclass
+class TestBank:
+    """Designed tests: residual calibration (mu0, sigma^2) and thresholds; runs them on records.
+
+    Attributes
+    ----------
+    specs : list of TestSpec
+    mu0, sigma2 : dict residual -> float
+    thresholds : dict test -> float
+    design : dict test -> dict (achieved_pfa on the design runs, runs, Z, pfa)
+    """
+
+    specs: list[TestSpec]
+    mu0: dict[str, float]
+    sigma2: dict[str, float]
+    thresholds: dict[str, float]
+    design: dict[str, dict] = field(default_factory=dict)
+
+    @property
+    def names(self) -> list[str]:
+        return [s.name for s in self.specs]
+
+    def statistic(self, res: Signals, spec: TestSpec) -> Signals:
+        """GLRT statistic of ``spec`` on residual signals (channel ``"<r>:glrt"``)."""
+        g = GLRT([spec.residual], self.mu0[spec.residual], self.sigma2[spec.residual], spec.W)
+        return g.run(res)
+
+    def alarms(self, res: Signals) -> tuple[np.ndarray, np.ndarray]:
+        """Outcome and first alarm time of every test.
+
+        Returns
+        -------
+        fired : ndarray of bool (runs, n_tests)
+            Alarm anywhere in the record.
+        first : ndarray (runs, n_tests)
+            Time of the first alarm (s from the start of the record), NaN if none.
+        """
+        fired = np.zeros((res.runs, len(self.specs)), bool)
+        first = np.full((res.runs, len(self.specs)), np.nan)
+        cache: dict[tuple, Signals] = {}
+        for j, s in enumerate(self.specs):
+            key = (s.residual, s.W, s.Z, self.thresholds[s.name])
+            if key not in cache:
+                st = self.statistic(res, s)
+                cache[key] = Hold(st.names, self.thresholds[s.name], s.Z, absolute=False).run(st)
+            al = cache[key]
+            if s.gate is not None:
+                al = TimeGated(al.names, 0.5, s.gate).run(al)
+            a = al.values[:, :, 0] > 0.5
+            fired[:, j] = a.any(axis=1)
+            idx = a.argmax(axis=1)
+            first[:, j] = np.where(fired[:, j], res.t[idx] - res.t[0], np.nan)
+        return fired, first
+
+    def to_dict(self) -> dict:
+        return {"tests": [s.__dict__ for s in self.specs], "mu0": self.mu0, "sigma2": self.sigma2,
+                "thresholds": self.thresholds,
+                "design": {k: {kk: vv for kk, vv in v.items() if kk != "critical_values"}
+                           for k, v in self.design.items()}}
+
+
+def _progress(enabled: bool, total: int, what: str):
+    from contextlib import nullcontext
+
+    if not enabled:
+        return nullcontext(), None
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
+
+    prog = Progress(TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),
+                    TextColumn("runs"), TimeElapsedColumn(), TimeRemainingColumn(), transient=False)
+    return prog, (what, total)
+
+
+def _simulate_residuals(fault: str, magnitude, runs: int, seed: int, snr_db, batch: int, generators,
+                        on_batch=None, first_run: int = 0):
+    """Yield residual Signals batch by batch for one class (magnitude None: drawn per run)."""
+    from ..plants.abs import FAULT_CLASSES, Scenario, simulate
+
+    fc = FAULT_CLASSES[fault]
+    done = 0
+    while done < runs:
+        n = min(batch, runs - done)
+        if magnitude is not None and fc.symmetric:
+            # minimum size +-m: first half of the runs +m, second half -m (global run index)
+            ids = np.arange(first_run + done, first_run + done + n)
+            neg = ids >= first_run + runs // 2
+            parts = []
+            for sign, mask in ((1.0, ~neg), (-1.0, neg)):
+                if mask.any():
+                    sc = Scenario(fault=fault, magnitude=sign * abs(magnitude), snr_db=snr_db)
+                    res = simulate(None, sc, runs=int(mask.sum()), seed=seed, first_run=int(ids[mask][0]))
+                    parts.append(res.y.concat_channels(res.u))
+            sig = parts[0] if len(parts) == 1 else Signals(
+                parts[0].t, np.concatenate([p.values for p in parts]), parts[0].names, check=False)
+        else:
+            sc = Scenario(fault=fault, magnitude=magnitude, snr_db=snr_db,
+                          grid_step=0.01 if fc.symmetric else None)
+            res = simulate(None, sc, runs=n, seed=seed, first_run=first_run + done)
+            sig = res.y.concat_channels(res.u)
+        r = abs_residuals(sig, generators)
+        done += n
+        if on_batch is not None:
+            on_batch(n)
+        yield r
+
+
+def design_tests(specs: Sequence[TestSpec] | None = None, *, design_runs: int = 2000, snr_db=23.0,
+                 seed: int = 0, pfa: float = 1e-3, margin: float = 0.1, batch: int = 1000, skip: int = 0,
+                 progress=None) -> TestBank:
+    """Calibrate mu0/sigma^2 and design every threshold from nominal runs.
+
+    Parameters
+    ----------
+    specs : sequence of TestSpec
+        Default :func:`paper_tests`.
+    design_runs : int
+        Nominal (F0) runs used for the design (seed stream ``seed + 1_000_003``, disjoint from
+        the evaluation).
+    pfa : float
+        Target per-run false-alarm probability of each test (see
+        :func:`fdikit.detect.design_threshold`).
+    margin : float
+        Relative safety margin on each threshold.
+    skip : int
+        Samples left out at the start of each run when calibrating mu0/sigma^2.
+
+    Returns
+    -------
+    TestBank
+
+    Examples
+    --------
+    >>> bank = design_tests(design_runs=20, pfa=0.1)
+    >>> sorted(bank.thresholds) == sorted(t.name for t in paper_tests())
+    True
+    """
+    from ..residuals.abs_residuals import ABSObserver, ParityR1
+
+    specs = list(paper_tests() if specs is None else specs)
+    if design_runs < 2:
+        raise DataError(f"need at least 2 nominal design runs, got {design_runs}")
+    gens = (ParityR1(0.01), ABSObserver(0.01))
+    chunks = []
+    cb = (lambda n: progress(n)) if progress is not None else None
+    for r in _simulate_residuals("F0", None, design_runs, seed + 1_000_003, snr_db, batch, gens, cb):
+        chunks.append(r.values)
+    vals = np.concatenate(chunks)
+    res = Signals(r.t, vals, r.names, check=False)
+    flat = vals[:, skip:].reshape(-1, vals.shape[2])
+    mu0 = {n: float(flat[:, i].mean()) for i, n in enumerate(res.names)}
+    sigma2 = {n: float(flat[:, i].var(ddof=1)) for i, n in enumerate(res.names)}
+    bank = TestBank(specs, mu0, sigma2, {})
+    for s in specs:
+        base = next((b for b in specs if b.gate is None and (b.residual, b.W, b.Z) == (s.residual, s.W, s.Z)),
+                    None)
+        if s.gate is not None and base is not None and base.name in bank.thresholds:
+            bank.thresholds[s.name] = bank.thresholds[base.name]
+            bank.design[s.name] = dict(bank.design[base.name], shared_with=base.name)
+            continue
+        g = bank.statistic(res, s).values[:, :, 0]
+        d = design_threshold(g, pfa, Z=s.Z, margin=margin)
+        bank.thresholds[s.name] = float(d.threshold)
+        bank.design[s.name] = {"achieved_pfa": d.achieved_pfa, "runs": d.runs, "Z": d.Z, "pfa": pfa,
+                               "max_nominal_critical_value": float(d.critical_values.max())}
+    return bank
+
+
+def diagnose_ml(fired: np.ndarray, fail_prob: np.ndarray,
+                classes: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
+    """Maximum-likelihood class of each run from binary test outcomes and test reliabilities.
+
+    ``log P(o | i) = sum_j o_j log p_ij + (1 - o_j) log(1 - p_ij)`` with ``p_ij`` the probability
+    that test ``j`` fires under class ``i`` (clipped to [1e-6, 1 - 1e-6]); equal priors.
+
+    Parameters
+    ----------
+    fired : bool array (runs, n_tests)
+    fail_prob : array (n_classes, n_tests)
+    classes : sequence of str
+
+    Returns
+    -------
+    best : ndarray of int (runs,)
+        Index of the most likely class (first on ties).
+    tie : ndarray of bool (runs, n_classes)
+        Classes whose likelihood equals the best (to 1e-9).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> p = np.array([[0.01, 0.01], [0.99, 0.01], [0.99, 0.99]])
+    >>> best, _ = diagnose_ml(np.array([[0, 0], [1, 0], [1, 1]], bool), p, ["F0", "A", "B"])
+    >>> best.tolist()
+    [0, 1, 2]
+    """
+    o = np.asarray(fired, float)
+    p = np.clip(np.asarray(fail_prob, float), 1e-6, 1 - 1e-6)
+    if o.ndim != 2 or p.ndim != 2 or o.shape[1] != p.shape[1] or p.shape[0] != len(classes):
+        raise DataError(f"outcomes {o.shape} and reliabilities {p.shape} do not match {len(classes)} classes")
+    ll = o @ np.log(p).T + (1 - o) @ np.log1p(-p).T
+    best = ll.argmax(axis=1)
+    tie = ll >= ll.max(axis=1, keepdims=True) - 1e-9
+    return best, tie
+
+
+@dataclass
+class CampaignResult:
+    """What :func:`run_campaign` measured (``to_dict`` gives the JSON form)."""
+
+    snr_db: float | None
+    runs: dict[str, int]
+    bank: TestBank
+    pd: dict[str, dict[str, float]]
+    pf: dict[str, float]
+    dmatrix: Any
+    sensitivity: float
+    sensitivity_exact: float
+    specificity: float
+    detection_rate: float
+    confusion: dict[str, dict[str, int]]
+    detection_times: dict[str, np.ndarray]
+    pd_within: dict[str, dict[str, float]]
+    wall_seconds: float
+    magnitudes: str
+
+    def to_dict(self) -> dict:
+        hist_edges = np.arange(0.0, 12.75, 0.25)
+        hist = {}
+        for k, v in self.detection_times.items():
+            c, _ = np.histogram(v[np.isfinite(v)], bins=hist_edges)
+            hist[k] = c.tolist()
+        dm = self.dmatrix
+        return {
+            "snr_db": self.snr_db, "magnitudes": self.magnitudes, "runs": self.runs,
+            "tests": self.bank.to_dict(),
+            "pd": self.pd, "pf": self.pf, "pd_within_7s": self.pd_within,
+            "dmatrix": {"faults": dm.faults, "tests": dm.tests, "d": dm.d.astype(int).tolist(),
+                        "pd": np.round(dm.pd, 5).tolist(), "ambiguity_groups": dm.ambiguity_groups(),
+                        "isolable": bool(dm.is_isolable)},
+            "paper_table_iv": {k: list(v) for k, v in PAPER_TABLE_IV.items()},
+            "sensitivity": self.sensitivity, "sensitivity_exact": self.sensitivity_exact,
+            "specificity": self.specificity, "detection_rate": self.detection_rate,
+            "paper_table_v": {str(k): v for k, v in PAPER_TABLE_V.items()},
+            "confusion": self.confusion,
+            "detection_time_histogram": {"edges": hist_edges.tolist(), "counts": hist},
+            "wall_seconds": self.wall_seconds,
+        }
+
+
+def run_campaign(runs: int = 200, *, nominal_runs: int | None = None, design_runs: int | None = None,
+                 snr_db: float | None = 23.0, seed: int = 0, W: int | None = None, gate: float = 0.5,
+                 magnitudes: str = "draw", pfa: float = 1e-3, margin: float = 0.1, batch: int = 1000,
+                 t_detect: float = 7.0, progress: bool = False,
+                 bank: TestBank | None = None) -> CampaignResult:
+    """Monte Carlo campaign over the fault universe: Pd/Pf, D-matrix, sensitivity, specificity.
+
+    Parameters
+    ----------
+    runs : int
+        Runs per fault class (5000 in the paper).
+    nominal_runs : int, optional
+        Nominal evaluation runs (default ``2 * runs``; 10000 in the paper).
+    design_runs : int, optional
+        Nominal runs for the threshold design (default ``nominal_runs``), an independent stream.
+    snr_db : float or None
+        Process-noise SNR (23, 20, 17 dB).
+    W : int, optional
+        One GLRT window for every test (Table V uses 40); default Table III's windows.
+    gate : float
+        Gate time T of G_O_T1/G_O_T2, s from the start of the record.
+    magnitudes : {"draw", "min"}
+        ``"draw"``: magnitudes drawn per run inside each class (F3/F4 on the paper's 1 % grid);
+        ``"min"``: the smallest fault of each class (Table V).
+    pfa, margin : float
+        Threshold design (:func:`design_tests`).
+    t_detect : float
+        Horizon for "Pd within t_detect seconds" (7 s in the paper).
+    progress : bool
+        Show a rich progress bar.
+    bank : TestBank, optional
+        Already designed tests (skips the design).
+
+    Returns
+    -------
+    CampaignResult
+
+    Examples
+    --------
+    >>> out = run_campaign(runs=4, nominal_runs=4, design_runs=10, pfa=0.1)
+    >>> sorted(out.pf) == sorted(t.name for t in paper_tests())
+    True
+    """
+    from ..isolate import DMatrix
+    from ..plants.abs import FAULT_CLASSES
+    from ..residuals.abs_residuals import ABSObserver, ParityR1
+
+    if runs < 1:
+        raise DataError(f"runs per class must be >= 1, got {runs}")
+    if magnitudes not in ("draw", "min"):
+        raise DataError(f"magnitudes must be 'draw' or 'min', got {magnitudes!r}")
+    nominal_runs = 2 * runs if nominal_runs is None else int(nominal_runs)
+    design_runs = nominal_runs if design_runs is None else int(design_runs)
+    t0 = time.perf_counter()
+    counts = {c: (nominal_runs if c == "F0" else runs) for c in FAULT_CLASSES}
+    total = sum(counts.values()) + (0 if bank is not None else design_runs)
+    prog, task_info = _progress(progress, total, "ABS campaign")
+    mags = min_magnitudes() if magnitudes == "min" else dict.fromkeys(FAULT_CLASSES)
+    fired: dict[str, np.ndarray] = {}
+    first: dict[str, np.ndarray] = {}
+    with prog:
+        if task_info is not None:
+            task = prog.add_task(f"{task_info[0]} ({snr_db} dB)", total=task_info[1])
+
+            def adv(n):
+                prog.advance(task, n)
+        else:
+            adv = None
+        if bank is None:
+            bank = design_tests(paper_tests(W, gate=gate), design_runs=design_runs, snr_db=snr_db, seed=seed,
+                                pfa=pfa, margin=margin, batch=batch, progress=adv)
+        gens = (ParityR1(0.01), ABSObserver(0.01))
+        for ci, c in enumerate(FAULT_CLASSES):
+            fs, ts = [], []
+            for r in _simulate_residuals(c, mags[c], counts[c], seed + 7919 * ci, snr_db, batch, gens, adv):
+                a, b = bank.alarms(r)
+                fs.append(a)
+                ts.append(b)
+            fired[c] = np.concatenate(fs)
+            first[c] = np.concatenate(ts)
+    names = bank.names
+    dm = DMatrix.from_outcomes(fired, names, nominal="F0")
+    classes = list(FAULT_CLASSES)
+    # reliabilities: the learned firing fraction of every (class, test) pair, false alarms included
+    pfail = np.asarray(dm.pd, float)
+    groups = {c: {c} for c in classes}
+    for g in dm.ambiguity_groups():
+        for c in g:
+            groups[c] = set(g)
+    confusion: dict[str, dict[str, int]] = {}
+    correct = correct_exact = n_fault = detected = 0
+    specificity = float("nan")
+    for c in classes:
+        best, tie = diagnose_ml(fired[c], pfail, classes)
+        lab = np.array(classes)[best]
+        confusion[c] = {k: int(v) for k, v in zip(*np.unique(lab, return_counts=True))}
+        if c == "F0":
+            specificity = float(np.mean(lab == "F0"))
+            continue
+        # correct up to the ambiguity group, and never when "F0" (missed detection) is a candidate
+        i0 = classes.index("F0")
+        ok_group = np.array([set(np.array(classes)[t]) <= groups[c] and not t[i0] for t in tie])
+        correct += int(ok_group.sum())
+        correct_exact += int(np.sum((lab == c) & (tie.sum(axis=1) == 1)))
+        detected += int(np.sum(lab != "F0"))
+        n_fault += lab.size
+    pd = {c: {n: float(fired[c][:, j].mean()) for j, n in enumerate(names)} for c in classes if c != "F0"}
+    pf = {n: float(fired["F0"][:, j].mean()) for j, n in enumerate(names)}
+    j1 = names.index("G_P1") if "G_P1" in names else 0
+    times = {c: first[c][:, j1] for c in ("F1.2", "F2.2")}
+    within = {c: {n: float(np.mean(first[c][:, j] <= t_detect)) for j, n in enumerate(names)}
+              for c in classes if c != "F0"}
+    return CampaignResult(
+        snr_db=snr_db, runs=counts, bank=bank, pd=pd, pf=pf, dmatrix=dm,
+        sensitivity=correct / n_fault, sensitivity_exact=correct_exact / n_fault, specificity=specificity,
+        detection_rate=detected / n_fault, confusion=confusion, detection_times=times, pd_within=within,
+        wall_seconds=time.perf_counter() - t0, magnitudes=magnitudes)
+
+
+def gp1_grid(snrs: Sequence[float] = (17.0, 20.0, 23.0), windows: Sequence[int] = (30, 40, 50), *,
+             runs: int = 200, design_runs: int = 400, seed: int = 0, pfa: float = 1e-3, margin: float = 0.1,
+             t_detect: float = 7.0, batch: int = 1000, progress: bool = False) -> dict:
+    """Pd of G_P1 within ``t_detect`` for F1.2 and F2.2 against noise level and window (Fig. 15).
+
+    The threshold is designed afresh for every (SNR, W) from ``design_runs`` nominal runs.
+
+    Returns
+    -------
+    dict
+        ``snr_db``, ``W``, ``pd`` {fault: [[Pd per W] per SNR]}, ``pf`` [[per W] per SNR],
+        ``thresholds``.
+
+    Examples
+    --------
+    >>> g = gp1_grid((23.0,), (50,), runs=3, design_runs=5, pfa=0.2)
+    >>> sorted(g["pd"])
+    ['F1.2', 'F2.2']
+    """
+    from ..residuals.abs_residuals import ABSObserver, ParityR1
+
+    out = {"snr_db": list(snrs), "W": list(windows), "pd": {"F1.2": [], "F2.2": []}, "pf": [],
+           "thresholds": []}
+    prog, info = _progress(progress, len(snrs) * (design_runs + 3 * runs), "G_P1 grid")
+    with prog:
+        adv = None
+        if info is not None:
+            task = prog.add_task(info[0], total=info[1])
+
+            def adv(n):
+                prog.advance(task, n)
+        gens = (ParityR1(0.01), ABSObserver(0.01))
+        for snr in snrs:
+            specs = [TestSpec(f"G_P1_W{w}", "r1", w, 40) for w in windows]
+            bank = design_tests(specs, design_runs=design_runs, snr_db=snr, seed=seed, pfa=pfa, margin=margin,
+                                batch=batch, progress=adv)
+            out["thresholds"].append([bank.thresholds[s.name] for s in specs])
+            for ci, c in enumerate(("F0", "F1.2", "F2.2")):
+                stream = _simulate_residuals(c, None, runs, seed + 104729 * (ci + 1), snr, batch, gens, adv)
+                ts = [bank.alarms(r)[1] for r in stream]
+                t = np.concatenate(ts)
+                row = np.mean(t <= t_detect, axis=0) if c != "F0" else np.mean(np.isfinite(t), axis=0)
+                (out["pf"] if c == "F0" else out["pd"][c]).append(row.tolist())
+    return out
