@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from fdikit.errors import DataError
-from fdikit.isolate import DMatrix, ao_star, exhaustive, huffman_cost
+from fdikit.isolate import DiagnosticTree, DMatrix, ao_star, exhaustive, huffman_cost
 
 HEURISTICS = ["huffman", "entropy", "mincost", "zero"]
 
@@ -325,3 +325,67 @@ def test_learned_dmatrix_end_to_end():
     # objective = test cost (~1.8) + 50 x misdiagnosis probability (~0.03): entries learned to about
     # +-0.003 move it by well under 0.2
     assert abs(u_learned.expected_cost - u_true.expected_cost) < 0.2
+
+
+def _leaf(f):
+    return {"leaf": [f]}
+
+
+def _test(t, on_pass, on_fail):
+    return {"test": t, "pass": on_pass, "fail": on_fail}
+
+
+def test_paper_fig14_tree_loaded_and_evaluated():
+    # The tree of paper luo-et-al Fig. 14 / the IF-THEN-ELSE listing, with leaves named from Table IV
+    # (the listing's R_w / sensor labels under G_O_T2 are swapped with respect to Table IV, where
+    # G_O_T2 fires for the R_w faults F1.x). By hand its depths are F0 1, F3 3, F4 3, F1.x 4, F5 4,
+    # F2.x 5: with P(F0) = 0.93 and 0.01 per fault, J = 0.93 + 0.01 * 28 = 1.21, equal to the AO* optimum.
+    tests = ["G_P1", "G_O1", "G_O2", "G_O_T1", "G_O_T2", "S_Kf", "S_Iw"]
+    faults = ["F0", "F1.1", "F1.2", "F2.1", "F2.2", "F3", "F4", "F5"]
+    d = [[0, 0, 0, 0, 0, 0, 0], [0, 1, 1, 0, 1, 0, 0], [1, 1, 1, 0, 1, 0, 0], [0, 1, 1, 0, 0, 0, 0],
+         [1, 1, 1, 0, 0, 0, 0], [0, 1, 1, 1, 0, 1, 0], [0, 1, 1, 1, 0, 0, 1], [0, 1, 0, 0, 0, 0, 0]]
+    dm = DMatrix(faults, tests, d)
+    prior = [0.93] + [0.01] * 7
+    fig14 = _test("G_O1", _leaf("F0"),
+                  _test("G_O_T1",
+                        _test("G_O_T2",
+                              _test("G_O2", _leaf("F5"), _test("G_P1", _leaf("F2.1"), _leaf("F2.2"))),
+                              _test("G_P1", _leaf("F1.1"), _leaf("F1.2"))),
+                        _test("S_Kf", _leaf("F4"), _leaf("F3"))))
+    data = {"dmatrix": dm.to_dict(), "prior": prior, "cost": [1.0] * 7, "tests_model": "perfect",
+            "tree": fig14}
+    paper = DiagnosticTree.from_dict(data)
+    assert paper.expected_cost == pytest.approx(1.21, abs=1e-12)
+    assert paper.expected_cost == pytest.approx(ao_star(dm, prior).expected_cost, abs=1e-12)
+    assert paper.go_path == ["G_O1"]
+    assert paper.redundant_tests == ["S_Iw"]
+    assert paper.depth == 5
+    for f in faults:                              # every fault reaches its own leaf
+        assert paper.diagnose(dm.row(f)) == (f,)
+    # a wrong leaf is detected by simulating the faults through the loaded tree
+    bad = dict(data, tree=_test("G_O1", _leaf("F0"), _test("S_Kf", _leaf("F4"), _leaf("F3"))))
+    loaded = DiagnosticTree.from_dict(bad)
+    assert loaded.diagnose(dm.row("F5")) == ("F4",)
+    assert loaded.evaluate()["misdiagnosis_probability"] > 0
+    with pytest.raises(DataError, match="test 'G_O9', which is not in the D-matrix"):
+        DiagnosticTree.from_dict(dict(data, tree=_test("G_O9", _leaf("F0"), _leaf("F1.1"))))
+    with pytest.raises(DataError, match="test 'G_O1' is applied twice"):
+        DiagnosticTree.from_dict(dict(data, tree=_test("G_O1", _leaf("F0"),
+                                                       _test("G_O1", _leaf("F0"), _leaf("F1.1")))))
+
+
+def test_tree_json_roundtrip():
+    import json
+
+    cases = [ao_star(HAND, HAND_PRIOR)]
+    rng = np.random.default_rng(3)
+    dm = DMatrix(list("abcde"), ["u", "v", "w", "x"], rng.random((5, 4)) < 0.5,
+                 pd=rng.uniform(0.7, 1, (5, 4)), pf=rng.uniform(0, 0.2, (5, 4)))
+    cases.append(ao_star(dm, misdiagnosis_cost=20.0))
+    for tree in cases:
+        again = DiagnosticTree.from_dict(json.loads(json.dumps(tree.to_dict())))
+        assert again.to_text().splitlines()[1:] == tree.to_text().splitlines()[1:]
+        assert again.expected_cost == pytest.approx(tree.expected_cost, rel=1e-12)
+        assert again.tests_model == tree.tests_model
+        for o in itertools.product((0, 1), repeat=len(tree.dmatrix.tests)):
+            assert again.diagnose(o) == tree.diagnose(o)

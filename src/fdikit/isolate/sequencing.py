@@ -394,7 +394,18 @@ class DiagnosticTree:
         return self.to_text()
 
     def to_dict(self) -> dict:
-        """JSON-ready nested dictionary of the tree and its summary."""
+        """JSON-ready nested dictionary: the tree, its summary, and everything :meth:`from_dict`
+        needs to rebuild it (D-matrix, prior, costs, tests model, misdiagnosis cost).
+
+        Examples
+        --------
+        >>> import json
+        >>> dm = DMatrix(["F0", "F1", "F2"], ["t1", "t2"], [[0, 0], [1, 0], [1, 1]])
+        >>> tree = ao_star(dm, prior=[0.5, 0.25, 0.25])
+        >>> again = DiagnosticTree.from_dict(json.loads(json.dumps(tree.to_dict())))
+        >>> again.to_text() == tree.to_text()
+        True
+        """
         def node(n):
             if n.is_leaf:
                 return {"leaf": list(n.group), "probability": n.probability}
@@ -403,7 +414,61 @@ class DiagnosticTree:
 
         return {"expected_cost": self.expected_cost, "depth": self.depth, "go_path": self.go_path,
                 "tests_used": self.tests_used, "redundant_tests": self.redundant_tests,
-                "tests_model": self.tests_model, "stats": dict(self.stats), "tree": node(self.root)}
+                "tests_model": self.tests_model, "misdiagnosis_cost": self.misdiagnosis_cost,
+                "prior": self.prior.tolist(), "cost": self.cost.tolist(),
+                "dmatrix": self.dmatrix.to_dict(), "stats": dict(self.stats), "tree": node(self.root)}
+
+    @classmethod
+    def from_dict(cls, data: Mapping) -> DiagnosticTree:
+        """Rebuild a tree saved with :meth:`to_dict` (e.g. as JSON): node probabilities and
+        posteriors are recomputed from the D-matrix and the prior, so a hand-edited or foreign tree
+        (such as the paper's Fig. 14) can be loaded and evaluated too.
+
+        Raises
+        ------
+        DataError
+            On an unknown test or fault name, or a test repeated on a path.
+        """
+        dm = DMatrix.from_dict(data["dmatrix"])
+        p, c = _check_prior(dm, data["prior"]), _check_cost(dm, data["cost"])
+        mode, M = _mode(dm, data.get("tests_model", "auto"), data.get("misdiagnosis_cost"))
+        q = dm.d.astype(float) if mode == "perfect" else dm.fail_probability()
+
+        def build(d, r, alive, used):
+            pr = float(r.sum())
+            names = tuple(f for f, keep in zip(dm.faults, alive) if keep)
+            if pr > 0:
+                post = {f: float(r[i] / pr) for i, f in enumerate(dm.faults) if alive[i]}
+            else:
+                post = {f: 1.0 / len(names) for f in names} if names else {}
+            if "leaf" in d:
+                group = tuple(str(f) for f in d["leaf"])
+                for f in group:
+                    dm.index(f)           # clear error on an unknown fault name
+                return TreeNode(None, names, pr, post, group=group)
+            t = str(d["test"])
+            if t not in dm.tests:
+                raise DataError(f"the tree applies test {t!r}, which is not in the D-matrix {dm.tests}")
+            if t in used:
+                raise DataError(f"test {t!r} is applied twice on one path")
+            j = dm.tests.index(t)
+            n = TreeNode(t, names, pr, post)
+            rp, rf = r * (1.0 - q[:, j]), r * q[:, j]     # Bayes: joint probabilities after the outcome
+            if mode == "perfect":     # the faults consistent with the outcome
+                ap, af = alive & ~dm.d[:, j], alive & dm.d[:, j]
+            else:
+                ap, af = rp > 0, rf > 0
+            n.passed = build(d["pass"], rp, ap, used | {t})
+            n.failed = build(d["fail"], rf, af, used | {t})
+            return n
+
+        p0 = p.astype(float)
+        root = build(data["tree"], p0, np.ones(len(p0), bool) if mode == "perfect" else p0 > 0, frozenset())
+        stats = dict(data.get("stats", {}))
+        stats.setdefault("method", "loaded")
+        tree = cls(root, dm, p, c, mode, M, float("nan"), stats)
+        tree.expected_cost = tree.evaluate()["objective"]     # recomputed, never trusted from the file
+        return tree
 
 
 # ---------------------------------------------------------------------------------------------- perfect
