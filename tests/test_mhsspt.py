@@ -111,3 +111,27 @@ def test_bad_input():
     v[0, 7] = np.inf
     with pytest.raises(DataError, match="'r' is not finite at sample 7"):
         test.run(Signals(np.arange(10.0), v, ["r"], check=False))
+
+
+def test_calibration_recovers_ranges_and_isolates():
+    from fdikit.detect import calibrate_densities
+
+    rng = np.random.default_rng(5)
+    # two features; fault A moves feature 0 by 0.5 per unit magnitude, fault B moves feature 1
+    nominal = rng.normal(0.0, 0.2, (2000, 2))
+    mags = [1.0, 2.0, 3.0, 4.0]
+    feats = {"A": {m: rng.normal([0.5 * m, 0.0], 0.2, (500, 2)) for m in mags},
+             "B": {m: rng.normal([0.0, 0.5 * m], 0.2, (500, 2)) for m in mags}}
+    cal = calibrate_densities(nominal, feats)
+    a_large = cal.densities["A:large"]
+    np.testing.assert_allclose(a_large.low, [1.5, 0.0], atol=0.05)  # feature means at magnitudes 3 and 4
+    np.testing.assert_allclose(a_large.high, [2.0, 0.0], atol=0.05)
+    np.testing.assert_allclose(a_large.std, 0.2, rtol=0.05)
+    assert cal.ranges["A:small"] == (1.0, 2.0) and cal.ranges["A:large"] == (3.0, 4.0)
+    # an MHSSPT built from it isolates a fresh fault B of magnitude 3.5 after 100 healthy samples
+    test = MHSSPT(["f0", "f1"], cal.densities, p=1e-3, groups=cal.groups)
+    x = np.vstack([rng.normal(0, 0.2, (100, 2)), rng.normal([0.0, 1.75], 0.2, (100, 2))])
+    out = test.run(Signals(np.arange(200.0), x, ["f0", "f1"]))
+    assert out["P:B"][0, -1] > 0.99 and out["P:A"][0, -1] < 0.01 and out["P:none"][0, 99] > 0.9
+    with pytest.raises(DataError, match="need features at >= 2 magnitudes"):
+        calibrate_densities(nominal, {"A": {1.0: feats["A"][1.0]}})
