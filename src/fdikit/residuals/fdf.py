@@ -561,6 +561,13 @@ def design_optimal_fdf(
                              {"nuisance_output_rank": s, "outputs": p})
     Hr = _complement_rows(Y2, p)
     H = Hr.T @ Hr
+    # output separability: the target must add output directions to the nuisance's
+    s12 = rank(C @ conditioned_invariant_subspace(A, C, np.hstack([F2, F1])))
+    if s12 <= s:
+        raise ConditionError("target visibility",
+                             f"target {tnames} adds no output direction to the nuisance's (rank C S* = {s} "
+                             f"with and without it): target and nuisance are not output separable",
+                             {"nuisance_output_rank": s, "joint_output_rank": s12})
     k2 = F2.shape[1]
     Q2m = np.eye(k2) if Q2 is None else np.atleast_2d(np.asarray(Q2, float))
     Bw, Dw = md.B_of("w"), md.D_of("w")
@@ -599,7 +606,8 @@ def design_optimal_fdf(
         "nuisance_subspace_dim": S2.shape[1], "nuisance_output_rank": s,
         "target_output_rank": rank(C @ conditioned_invariant_subspace(A, C, F1)),
         "H": H, "Hr": Hr, "L": L, "P": P, "eigenvalues": eig, "spectral_radius": rho,
-        "conditions": {"residual dimension": f"{p} outputs - {s} nuisance output directions = {p - s}"},
+        "conditions": {"residual dimension": f"{p} outputs - {s} nuisance output directions = {p - s}",
+                       "output separability": f"rank C S*(F1, F2) = {s12} > rank C S*(F2) = {s}"},
     }
     full.info = dict(info, order=n, reduction=None)
     info["target_markov_max"] = _check_target_visible(full, md, tnames, F1)
