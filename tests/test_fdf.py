@@ -280,9 +280,17 @@ def test_reduced_filter_keeps_dc_gain_and_blocking():
     m = _sensor_nuisance_system()
     d = design_optimal_fdf(m, "actuator:u0", ["sensor:y0"], gamma=1e-8)
     full = d.info["full"]
-    assert d.order < full.order == m.n_states
-    assert np.all(np.abs(d.info["dropped_eigenvalues"]) <= 0.05)
-    assert d.info["order"] == d.order
+    assert full.order == m.n_states
+    # dropped: the fast nuisance mode (|z| ~ 0) and a weakly observable complex pair
+    dz, dobs = d.info["dropped_eigenvalues"], d.info["dropped_observability"]
+    assert d.order == d.info["order"] == 2 and dz.size == 3
+    assert np.sum(np.abs(dz) <= 0.05) == 1
+    assert np.all(dobs < 1e-4) and np.all(d.info["kept_observability"] > 1e-2)
+    # independent check of weak observability: for each dropped mode z the PBH matrix
+    # [z I - A; C] is nearly rank deficient (its smallest singular value is tiny)
+    for z in dz:
+        sv = np.linalg.svd(np.vstack([z * np.eye(5) - full.A, full.C]), compute_uv=False)
+        assert sv[-1] < 1e-4 * np.linalg.norm(full.C, 2)
     # residualisation keeps the filter's DC gain exactly (u, y -> r)
     Gu_f, Gy_f = filter_frequency_response(full, [0.0])
     Gu_r, Gy_r = filter_frequency_response(d, [0.0])

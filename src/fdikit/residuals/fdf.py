@@ -66,6 +66,7 @@ __all__ = [
     "fault_directions",
     "filter_frequency_response",
     "internal_form",
+    "modal_observability",
     "reduce_filter",
 ]
 
@@ -474,6 +475,7 @@ def design_optimal_fdf(
     reduce: str | None = "residualize",
     order: int | None = None,
     fast_modulus: float = 0.05,
+    weak_observability: float = 1e-4,
     name: str | None = None,
 ) -> FilterDesign:
     """Optimal stochastic fault detection filter (Chen, Mingori & Speyer 2003), steady state, discrete.
@@ -494,8 +496,9 @@ def design_optimal_fdf(
        vanishes like ``gamma``. Discrete time is used because the monitor runs at a fixed sample
        rate; a continuous model is discretised by ZOH first. (The paper's target-fault weighting
        in the Riccati equation is not used: the target enters only through the projector check.)
-    4. Model reduction (paper 1, Section IV-C): the fast (``|z| <= fast_modulus``), weakly
-       observable filter modes approximating the nuisance subspace are removed by
+    4. Model reduction (paper 1, Section IV-C): the fast (``|z| <= fast_modulus``) and the weakly
+       observable (relative modal observability from ``r`` below ``weak_observability``)
+       filter modes, which approximate the nuisance subspace, are removed by
        :func:`reduce_filter` (``reduce="residualize"``: steady-state correction, exact DC gain;
        ``"truncate"``; ``None``: keep the full filter).
 
@@ -516,9 +519,12 @@ def design_optimal_fdf(
         Measurement-noise covariance (default ``Dw Dw'`` plus ``1e-6 I``, or I without noise group).
     reduce : {"residualize", "truncate", None}
     order : int, optional
-        Reduced order; default: drop the modes with ``|z| <= fast_modulus``.
+        Reduced order (the ``order`` most observable modes are kept); default: drop the modes
+        with ``|z| <= fast_modulus`` or observability below ``weak_observability``.
     fast_modulus : float
         Modulus below which a discrete mode counts as fast (0.05: faster than ``dt / 3``).
+    weak_observability : float
+        Relative modal observability (:func:`modal_observability`) below which a mode is dropped.
 
     Returns
     -------
@@ -615,36 +621,80 @@ def design_optimal_fdf(
     full.info["target_markov_max"] = info["target_markov_max"]
     if reduce is None:
         return full
-    red = reduce_filter(full, order, fast_modulus=fast_modulus, method=reduce)
+    red = reduce_filter(full, order, fast_modulus=fast_modulus, weak_observability=weak_observability,
+                        method=reduce)
     red.info = dict(info, full=full, **red.info)
     return red
 
 
 # ---------------------------------------------------------------------------------- reduction
-def reduce_filter(design: FilterDesign, order: int | None = None, *, fast_modulus: float = 0.05,
-                  method: str = "residualize") -> FilterDesign:
-    """Remove the fast modes of a discrete filter (paper 1, Section IV-C), keeping plain matrices.
+def modal_observability(design: FilterDesign) -> tuple[np.ndarray, np.ndarray]:
+    """Eigenvalues of the filter and how observable each mode is from the residual.
 
-    Ordered real Schur form of ``A`` with the ``order`` slowest modes (largest ``|z|``) leading,
-    block-diagonalisation by a Sylvester equation, then for the fast block ``xi2``:
-    ``"residualize"`` sets it to its quasi-steady state ``xi2 = (I - A22)^-1 B2 v`` (the discrete
-    dynamic truncation with steady-state correction: exact DC gain), ``"truncate"`` drops it.
+    For each eigenvalue ``z_i`` of ``A`` with unit right eigenvector ``v_i`` the measure is
+    ``|C v_i| / |C|_2`` (0: unobservable; near 0: weakly observable). In the limit
+    ``gamma -> 0`` the modes spanning the nuisance subspace become unobservable from ``r``.
+
+    Returns
+    -------
+    eigenvalues : ndarray complex (nf,)
+    observability : ndarray (nf,)
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> d = FilterDesign(np.diag([0.9, 0.5]), np.zeros((2, 0)), np.ones((2, 1)), np.array([[1.0, 1e-6]]),
+    ...                  np.zeros((1, 0)), np.zeros((1, 1)), 0.01, [], ["y"], ["r"])
+    >>> z, o = modal_observability(d)
+    >>> z.real.tolist(), np.round(o, 9).tolist()
+    ([0.9, 0.5], [1.0, 1e-06])
+    """
+    w, V = np.linalg.eig(design.A)
+    V = V / np.linalg.norm(V, axis=0)
+    cn = float(np.linalg.norm(design.C, 2)) if design.C.size else 0.0
+    obs = np.linalg.norm(design.C @ V, axis=0) / cn if cn else np.zeros(w.size)
+    return w, obs
+
+
+def reduce_filter(design: FilterDesign, order: int | None = None, *, fast_modulus: float = 0.05,
+                  weak_observability: float = 1e-4, method: str = "residualize") -> FilterDesign:
+    """Remove the fast and weakly observable modes of a discrete filter (paper 1, Section IV-C).
+
+    Near the limit ``gamma -> 0`` the optimal filter has fast modes (``|z|`` near 0) and weakly
+    observable modes approximating the nuisance's detection space. The modes to drop are
+
+    * ``order`` given: all but the ``order`` most observable modes
+      (:func:`modal_observability`);
+    * otherwise: the modes with ``|z| <= fast_modulus`` or relative observability below
+      ``weak_observability``.
+
+    The kept modes are moved to the leading block of an ordered real Schur form of ``A``, the
+    two blocks are decoupled by a Sylvester equation, and the dropped block ``xi2`` is either
+    set to its quasi-steady state ``xi2 = (I - A22)^-1 B2 v`` (``"residualize"``: the discrete
+    dynamic truncation with steady-state correction, exact DC gain) or dropped (``"truncate"``).
 
     Parameters
     ----------
     design : FilterDesign
     order : int, optional
-        Number of modes kept; default: all modes with ``|z| > fast_modulus``.
+        Number of modes kept.
     fast_modulus : float
-        Threshold on ``|z|`` used when ``order`` is None.
+        ``|z|`` at or below which a mode is fast (0.05: time constant shorter than ``dt / 3``).
+    weak_observability : float
+        Relative modal observability below which a mode is dropped.
     method : {"residualize", "truncate"}
 
     Returns
     -------
     FilterDesign
-        ``info``: ``order``, ``reduction`` (method), ``dropped_eigenvalues`` and
-        ``dropped_observability`` (the norm of the output matrix of each dropped block relative
-        to the whole: small for the weakly observable nuisance modes).
+        ``info``: ``order``, ``reduction`` (method), ``dropped_eigenvalues``,
+        ``dropped_observability`` (their modal observability) and ``kept_observability``.
+
+    Raises
+    ------
+    ModelError
+        Bad order or method; a split that separates modes with the same eigenvalue or
+        observability (complex pairs are kept or dropped together).
 
     Examples
     --------
@@ -659,48 +709,61 @@ def reduce_filter(design: FilterDesign, order: int | None = None, *, fast_modulu
         raise ModelError(f"method must be 'residualize' or 'truncate', got {method!r}")
     A = design.A
     n = A.shape[0]
-    ev = np.linalg.eigvals(A)
-    mags = np.sort(np.abs(ev))[::-1]  # slow (large |z|) first
+    w, obs = modal_observability(design)
     if order is None:
-        order = int(np.sum(np.abs(ev) > fast_modulus))
-    if not 0 <= order <= n:
-        raise ModelError(f"reduce_filter: order must be in [0, {n}], got {order}")
+        keep = (np.abs(w) > fast_modulus) & (obs >= weak_observability)
+    else:
+        order = int(order)
+        if not 0 <= order <= n:
+            raise ModelError(f"reduce_filter: order must be in [0, {n}], got {order}")
+        idx = np.argsort(-obs, kind="stable")
+        keep = np.zeros(n, bool)
+        keep[idx[:order]] = True
+        if 0 < order < n and obs[idx[order - 1]] <= obs[idx[order]] * (1 + 1e-9):
+            raise ModelError(f"reduce_filter: order {order} splits modes of equal observability "
+                             f"{obs[idx[order]]:.6g} (a complex pair?); choose order {order - 1} or "
+                             f"{order + 1}")
+    # complex pairs must be kept or dropped together
+    for i in range(n):
+        j = int(np.argmin(np.abs(w - np.conj(w[i]))))
+        if keep[i] != keep[j]:
+            raise ModelError(f"reduce_filter: the split separates the complex pair {w[i]:.6g}")
+    k = int(np.sum(keep))
     Bv = np.hstack([design.Bu, design.By])
     Dv = np.hstack([design.Du, design.Dy])
     m = design.Bu.shape[1]
-    if order == n:
-        out = FilterDesign(A.copy(), design.Bu.copy(), design.By.copy(), design.C.copy(), design.Du.copy(),
-                           design.Dy.copy(), design.dt, list(design.u_names), list(design.y_names),
-                           list(design.residual_names))
-        out.info = {"order": n, "reduction": method, "dropped_eigenvalues": np.zeros(0, complex),
-                    "dropped_observability": 0.0}
-        return out
-    if order > 0:
-        lo, hi = mags[order], mags[order - 1]
-        if not hi > lo * (1 + 1e-9) + 1e-300:
-            raise ModelError(f"reduce_filter: order {order} splits modes of equal modulus |z| = {hi:.6g}")
-        thr = 0.5 * (lo + hi)
-        T, Z, _ = sla.schur(A, output="real", sort=lambda re, im: np.hypot(re, im) > thr)
-        k = order
+    if 0 < k < n:
+        kept_z, drop_z = w[keep], w[~keep]
+        gap = float(np.min(np.abs(kept_z[:, None] - drop_z[None, :])))
+        if gap <= 1e-8 * max(1.0, float(np.max(np.abs(w)))):
+            raise ModelError(f"reduce_filter: a kept and a dropped mode share the eigenvalue "
+                             f"(gap {gap:.3e}); they cannot be separated")
+
+        def _is_kept(re: float, im: float) -> bool:
+            return bool(keep[int(np.argmin(np.abs(w - complex(re, im))))])
+
+        T, Z, sdim = sla.schur(A, output="real", sort=_is_kept)
+        if sdim != k:  # pragma: no cover - guarded by the gap test
+            raise ModelError(f"reduce_filter: Schur reordering selected {sdim} modes, expected {k}")
         X = sla.solve_sylvester(T[:k, :k], -T[k:, k:], -T[:k, k:])
         Bz = Z.T @ Bv
         Bz[:k] -= X @ Bz[k:]
         Cz = design.C @ Z
         Cz[:, k:] += Cz[:, :k] @ X
         A11, A22 = T[:k, :k], T[k:, k:]
+    elif k == n:
+        A11, A22, Bz, Cz = A, np.zeros((0, 0)), Bv, design.C
     else:
-        A11, A22, Bz, Cz, k = np.zeros((0, 0)), A, Bv, design.C, 0
+        A11, A22, Bz, Cz = np.zeros((0, 0)), A, Bv, design.C
     B1, B2, C1, C2 = Bz[:k], Bz[k:], Cz[:, :k], Cz[:, k:]
-    if method == "residualize":
+    Dr = Dv.copy()
+    if method == "residualize" and k < n:
         Dr = Dv + C2 @ np.linalg.solve(np.eye(n - k) - A22, B2)
-    else:
-        Dr = Dv.copy()
-    cnorm = float(np.linalg.norm(Cz, 2))
-    out = FilterDesign(A11.copy(), B1[:, :m].copy(), B1[:, m:].copy(), C1.copy(), Dr[:, :m].copy(),
+    out = FilterDesign(np.array(A11), B1[:, :m].copy(), B1[:, m:].copy(), C1.copy(), Dr[:, :m].copy(),
                        Dr[:, m:].copy(), design.dt, list(design.u_names), list(design.y_names),
                        list(design.residual_names))
-    out.info = {"order": k, "reduction": method, "dropped_eigenvalues": np.linalg.eigvals(A22),
-                "dropped_observability": float(np.linalg.norm(C2, 2)) / cnorm if cnorm else 0.0}
+    out.info = {"order": k, "reduction": method, "dropped_eigenvalues": w[~keep],
+                "dropped_observability": obs[~keep], "kept_observability": obs[keep]}
     return out
 
 
