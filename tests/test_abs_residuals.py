@@ -1,0 +1,224 @@
+"""ABS residual generators (paper luo-et-al, Section V) and the parity signal helpers."""
+
+import numpy as np
+import pytest
+from scipy.interpolate import make_smoothing_spline
+from scipy.signal import sosfilt
+
+from fdikit.errors import DataError
+from fdikit.plants.abs import PARAMS, Scenario, mu, simulate, slip
+from fdikit.residuals.abs_residuals import (
+    ABSObserver,
+    ParityR1,
+    ParityR2,
+    linear_part,
+    observer_gain,
+    r2_magnitude_study,
+)
+from fdikit.residuals.parity import (
+    CausalDerivative,
+    CausalLowPass,
+    butter_sos,
+    causal_spline_derivative,
+    lowpass,
+    spline_derivative,
+    spline_lam,
+)
+from fdikit.signals import Signals
+
+
+@pytest.fixture(scope="module")
+def short_runs():
+    res = simulate(None, Scenario(t_end=4.0), runs=3, seed=5)
+    return res.y.concat_channels(res.u)
+
+
+# ------------------------------------------------------------------ parity helpers
+def test_causal_spline_derivative_equals_refitting_every_window():
+    rng = np.random.default_rng(1)
+    x = np.cumsum(rng.normal(size=60))
+    dt, window, lam = 0.01, 12, spline_lam(4.0, 0.01)
+    d = causal_spline_derivative(x, dt, window=window, lam=lam)
+    t = np.arange(window) * dt
+    for k in (window - 1, 30, 59):  # brute force: a new smoothing spline on each window
+        spl = make_smoothing_spline(t, x[k - window + 1:k + 1], lam=lam)
+        assert d[k] == pytest.approx(float(spl.derivative()(t[-1])), rel=1e-9, abs=1e-9)
+    # before the window is full: padded with the first sample
+    xp = np.r_[np.full(window - 1, x[0]), x[:5]]
+    spl = make_smoothing_spline(t, xp[-window:], lam=lam)
+    assert d[4] == pytest.approx(float(spl.derivative()(t[-1])), rel=1e-9, abs=1e-9)
+
+
+def test_spline_derivatives_without_smoothing():
+    # lam = 0: the natural interpolating cubic spline; exact for a cubic away from the ends
+    # (the natural end conditions f'' = 0 perturb the first/last knots only, decaying ~0.27 per knot)
+    t = np.arange(60) * 0.01
+    x = 2.0 + 3.0 * t - 4.0 * t**2 + 5.0 * t**3
+    for order, ref in ((1, 3 - 8 * t + 15 * t**2), (2, -8 + 30 * t)):
+        d = spline_derivative(x, 0.01, lam=0.0, order=order)
+        np.testing.assert_allclose(d[20:-20], ref[20:-20], atol=1e-6 * 10**order)
+    # the causal end-point derivative is exact for a line, whatever the smoothing
+    for lam in (0.0, 1e-3):
+        dc = causal_spline_derivative(1.5 - 0.7 * t, 0.01, window=10, lam=lam)
+        np.testing.assert_allclose(dc[9:], -0.7, atol=1e-9)  # once the window is full
+
+
+def test_spline_lam_sets_the_half_power_frequency():
+    # gain of the offline smoother on a sinusoid at the cut-off, away from the record ends: ~1/2
+    dt, fc = 0.01, 3.0
+    t = np.arange(3000) * dt
+    x = np.sin(2 * np.pi * fc * t)
+    s = spline_derivative(x, dt, lam=spline_lam(fc, dt), order=0)
+    gain = np.std(s[500:-500]) / np.std(x[500:-500])
+    assert gain == pytest.approx(0.5, abs=0.05)
+
+
+def test_lowpass_causal_matches_sosfilt_and_streaming():
+    sos = butter_sos(10, 10.0, 100.0)
+    rng = np.random.default_rng(2)
+    x = rng.normal(size=(2, 80, 3))
+    y = lowpass(x, sos, axis=1)
+    # independent: plain sosfilt on the signal minus its first value, plus that value (steady start)
+    ref = sosfilt(sos, x - x[:, :1], axis=1) + x[:, :1]
+    np.testing.assert_allclose(y, ref, atol=1e-10)
+    f = CausalLowPass(sos)
+    f.reset(2, 3)
+    ys = np.stack([f.step(x[:, k]) for k in range(80)], axis=1)
+    np.testing.assert_allclose(ys, y, atol=1e-12)
+    d = CausalDerivative(8, 0.01, 1e-5)
+    d.reset(2, 3)
+    ds = np.stack([d.step(x[:, k]) for k in range(80)], axis=1)
+    np.testing.assert_allclose(ds, causal_spline_derivative(x, 0.01, window=8, lam=1e-5, axis=1), atol=1e-9)
+    # 10 Hz Butterworth: -3 dB at the cut-off, zero phase has the squared gain
+    from scipy.signal import sosfreqz
+
+    _, h = sosfreqz(sos, worN=[10.0], fs=100.0)
+    assert abs(h[0]) == pytest.approx(2**-0.5, rel=1e-6)
+
+
+# ------------------------------------------------------------------ r1, eq. (25)
+def test_r1_batch_equals_streaming(short_runs):
+    g = ParityR1(0.01)
+    b = g.run(short_runs).values
+    g.reset(short_runs.runs)
+    u, y = g._inputs(short_runs)
+    s = np.stack([g.step(u[:, k], y[:, k]) for k in range(short_runs.n_samples)], axis=1)
+    np.testing.assert_allclose(s, b, rtol=1e-9, atol=1e-9)
+    with pytest.raises(DataError, match="offline"):
+        ParityR1(0.01, variant="zero_phase").step(np.zeros((1, 0)), y[:, 0])
+
+
+def test_r1_by_hand_on_a_steady_deceleration():
+    # y2 decelerating at a constant rate, y1 at a fixed slip: r1 = dy2/dt + 4 N_v mu / (R_w M_v)
+    t = np.arange(300) * 0.01
+    y2 = 80.0 - 6.0 * t
+    y1 = 0.9 * y2
+    g = ParityR1(0.01)
+    r = g.run(Signals(t, np.stack([y1, y2], -1), ["omega_w", "omega_v"]))["r1"][0]
+    p = PARAMS
+    expect = -6.0 + 4 * p["N_v"] * float(mu(0.1)) / (p["R_w"] * p["M_v"])
+    np.testing.assert_allclose(r[150:], expect, atol=1e-3)
+
+
+def _mean_r1(fault, magnitude):
+    sc = Scenario(fault=fault, magnitude=magnitude, snr_db=None, meas_var=0.0)
+    res = simulate(None, sc, runs=1, seed=0, keep_states=True)
+    r1 = ParityR1(0.01).run(res.y.concat_channels(res.u))["r1"][0]
+    x = res.x.values[0]
+    R_true = float(np.broadcast_to(res.params["R_w"], (1,))[0])
+    p = PARAMS
+    # eq. (25) evaluated on the true states with the true dynamics dx2/dt = -4 N_v mu/(R_true M_v)
+    m = mu(slip(x[:, 0], x[:, 1]))
+    expect = 4 * p["N_v"] * m / p["M_v"] * (1 / p["R_w"] - 1 / R_true)
+    sl = slice(150, 900)  # braking, ABS active, car still moving
+    return float(np.mean(r1[sl])), float(np.mean(expect[sl]))
+
+
+def test_r1_ignores_kf_and_iw_faults_but_sees_rw():
+    base, _ = _mean_r1("F0", None)
+    for fault in ("F3", "F4"):
+        for m in (-0.1, 0.1):
+            val, expect = _mean_r1(fault, m)
+            assert expect == 0.0  # eq. (25) contains neither K_f nor I_w
+            assert abs(val - base) < 0.05, (fault, m, val, base)
+    val, expect = _mean_r1("F2.2", -0.25)
+    assert expect < -2.0
+    assert val - base == pytest.approx(expect, rel=0.1)
+
+
+# ------------------------------------------------------------------ r2, eq. (26)
+def test_r2_batch_equals_streaming_and_is_dominated_by_noise(short_runs):
+    g = ParityR2(0.01)
+    b = g.run(short_runs).values
+    g.reset(short_runs.runs)
+    u, y = g._inputs(short_runs)
+    s = np.stack([g.step(u[:, k], y[:, k]) for k in range(short_runs.n_samples)], axis=1)
+    np.testing.assert_allclose(s, b, rtol=1e-8, atol=1e-6 * np.abs(b).max())
+    res = simulate(None, Scenario(), runs=4, seed=2)
+    out = r2_magnitude_study(res.y, res.u)
+    assert out["rms_r2_causal"] > out["rms_torque_term"]  # nominal r2 larger than the term it balances
+    assert out["fault_to_noise_kf10_causal"] < 0.2  # a 10 % K_f change is buried
+
+
+# ------------------------------------------------------------------ observer, eqs. (29)-(33)
+@pytest.mark.filterwarnings("ignore:Convergence was not reached")  # scipy place_poles' robustness loop
+def test_observer_gain_is_the_kalman_bucy_gain():
+    import control
+
+    A, C = linear_part()
+    qv = np.array([11.5, 14.0, 5659.0, 1408.0, 0.78])
+    L = observer_gain(process_var=qv)
+    Lc, _, _ = control.lqe(A, np.eye(5), C, np.diag(qv * 1e-3), np.eye(2) * 0.004 * 0.01)
+    np.testing.assert_allclose(L, Lc, rtol=1e-6, atol=1e-6)
+    L2 = observer_gain(method="place", poles=[-2, -3, -4, -5, -6])
+    np.testing.assert_allclose(np.sort(np.linalg.eigvals(A - L2 @ C).real), [-6, -5, -4, -3, -2], atol=1e-6)
+    from fdikit.errors import ConditionError
+
+    with pytest.raises(ConditionError, match="hold"):
+        observer_gain(method="place", poles=[-2, -3, -4, -5, -200])
+
+
+def test_observer_batch_equals_streaming(short_runs):
+    g = ABSObserver(0.01)
+    b = g.run(short_runs).values
+    g.reset(short_runs.runs)
+    u, y = g._inputs(short_runs)
+    s = np.stack([g.step(u[:, k], y[:, k]) for k in range(short_runs.n_samples)], axis=1)
+    np.testing.assert_array_equal(s, b)
+
+
+def test_observer_tracks_noise_free_nominal_and_sees_faults():
+    def rms(fault, mag):
+        res = simulate(None, Scenario(fault=fault, magnitude=mag, snr_db=None, meas_var=0.0), runs=1, seed=0)
+        r = ABSObserver(0.01).run(res.y.concat_channels(res.u)).values[0]
+        return np.sqrt(np.mean(r[:1000] ** 2, axis=0))
+
+    # rad/s: model and plant agree up to the held inputs and the slow (-1.2 1/s) torque-error
+    # mode excited by the brake step; measured 0.072 / 0.038
+    nom = rms("F0", None)
+    assert np.all(nom < 0.1)
+    assert rms("F1.2", -0.05)[0] > 5 * nom[0]  # sensor fault on the wheel speed -> r3
+    f22 = rms("F2.2", -0.25)
+    assert f22[0] > 5 * nom[0] and f22[1] > 3 * nom[1]
+    assert rms("F3", 0.1)[0] > 3 * nom[0]
+
+
+# ------------------------------------------------------------------ bad input
+def test_bad_input_errors(short_runs):
+    v = short_runs.values.copy()
+    v[1, 37, 0] = np.nan
+    bad = Signals(short_runs.t, v, short_runs.names, check=False)
+    for g in (ParityR1(0.01), ABSObserver(0.01), ParityR2(0.01)):
+        with pytest.raises(DataError, match="omega_w"):
+            g.run(bad)
+    g = ABSObserver(0.01)
+    g.reset(1)
+    with pytest.raises(DataError, match="non-finite"):
+        g.step([[14.0, 1.0, 0.0]], [[np.nan, 80.0]])
+    short = short_runs.window(0.0, 0.1)
+    with pytest.raises(DataError, match="shorter"):
+        ParityR1(0.01).run(short)
+    with pytest.raises(DataError, match="window"):
+        ParityR1(0.01, window=3)
+    with pytest.raises(DataError, match="variant"):
+        ParityR1(0.01, variant="acausal")
