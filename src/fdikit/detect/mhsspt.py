@@ -16,6 +16,7 @@ computed with log-sum-exp so that likelihoods of 1e-300 neither underflow nor gi
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
@@ -40,6 +41,49 @@ def _log_diff_ndtr(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     lo = np.where(upper, -u, v)
     lhi, llo = log_ndtr(hi), log_ndtr(lo)
     return lhi + np.log1p(-np.exp(np.minimum(llo - lhi, 0.0)))
+
+
+@njit(cache=True)
+def _log_ndtr_nb(x):  # pragma: no cover - compiled
+    """log Phi(x): erfc down to x = -37 (Phi ~ 1e-300), the asymptotic series below."""
+    if x > 0.0:
+        return math.log1p(-0.5 * math.erfc(x / math.sqrt(2.0)))
+    if x > -37.0:
+        return math.log(0.5 * math.erfc(-x / math.sqrt(2.0)))
+    z = 1.0 / (x * x)
+    # Phi(x) = phi(x)/|x| (1 - 1/x^2 + 3/x^4 - 15/x^6 + ...): error < 11! ! / 37^14 ~ 1e-18 here
+    s = 1.0 + z * (-1.0 + z * (3.0 + z * (-15.0 + z * (105.0 + z * (-945.0 + z * 10395.0)))))
+    return -0.5 * x * x - math.log(-x) - 0.5 * math.log(2.0 * math.pi) + math.log(s)
+
+
+@njit(cache=True)
+def _loglik_umg(x, low, high, std, point, logw, out):  # pragma: no cover - compiled
+    """Log densities of uniform-mean Gaussians: x (R, T, C) -> out (R, T, H)."""
+    R, T, C = x.shape
+    H = low.shape[0]
+    half_log_2pi = 0.5 * math.log(2.0 * math.pi)
+    for r in range(R):
+        for k in range(T):
+            for j in range(H):
+                acc = 0.0
+                for c in range(C):
+                    s = std[j, c]
+                    if point[j, c]:
+                        z = (x[r, k, c] - low[j, c]) / s
+                        acc += -0.5 * z * z - math.log(s) - half_log_2pi
+                    else:
+                        u = (x[r, k, c] - low[j, c]) / s
+                        v = (x[r, k, c] - high[j, c]) / s
+                        if v > 0.0:  # upper tail: Phi(u) - Phi(v) = Phi(-v) - Phi(-u)
+                            hi, lo = -v, -u
+                        else:
+                            hi, lo = u, v
+                        lhi = _log_ndtr_nb(hi)
+                        d = _log_ndtr_nb(lo) - lhi
+                        if d > 0.0:
+                            d = 0.0
+                        acc += lhi + math.log1p(-math.exp(d)) - logw[j, c]
+                out[r, k, j] = acc
 
 
 class UniformMeanGaussian:
@@ -215,11 +259,28 @@ class MHSSPT(ResidualProcessor):
             self._logp_pi = np.r_[-np.inf, np.log(self.p) + np.log(pi)]
             self._logq = np.log(self.q) if self.q > 0 else -np.inf
         self._log1mp, self._log1mq = np.log1p(-self.p), np.log1p(-self.q)
+        if all(isinstance(d, UniformMeanGaussian) for d in self.densities):
+            st = [np.stack([getattr(d, a) for d in self.densities]) for a in ("low", "high", "std")]
+            point = np.stack([d._point for d in self.densities])
+            logw = np.log(np.where(point, 1.0, st[1] - st[0]))
+            self._umg = (*st, point, logw)
+        else:
+            self._umg = None
         self.reset(1)
 
     def loglik(self, x: np.ndarray) -> np.ndarray:
-        """Log densities of every hypothesis: x (..., C) -> (..., H)."""
-        return np.stack([d.logpdf(x) for d in self.densities], axis=-1)
+        """Log densities of every hypothesis: x (..., C) -> (..., H).
+
+        When every density is a :class:`UniformMeanGaussian` this runs a compiled kernel;
+        other density objects are evaluated through their ``logpdf``.
+        """
+        x = np.asarray(x, float)
+        if self._umg is None:
+            return np.stack([d.logpdf(x) for d in self.densities], axis=-1)
+        x3 = np.ascontiguousarray(x.reshape(-1, 1, x.shape[-1]) if x.ndim != 3 else x)
+        out = np.empty((*x3.shape[:2], len(self.hypotheses)))
+        _loglik_umg(x3, *self._umg, out)
+        return out.reshape((*x.shape[:-1], len(self.hypotheses)))
 
     def reset(self, runs: int = 1) -> None:
         self._logF = np.full((runs, len(self.hypotheses)), -np.inf)
