@@ -13,6 +13,7 @@ import json
 
 import numpy as np
 import pytest
+from scipy.linalg import solve_discrete_lyapunov
 from scipy.signal import cont2discrete
 
 from fdikit.errors import ConditionError, ModelError
@@ -29,6 +30,8 @@ from fdikit.residuals.fdf import (
     filter_frequency_response,
     internal_form,
     reduce_filter,
+    residual_covariance,
+    stack_designs,
 )
 from fdikit.signals import Signals
 
@@ -463,3 +466,60 @@ def test_runtime_rejects_wrong_sample_rate():
     sig = Signals(np.arange(10) * 0.02, np.zeros((10, 3)), [*m.inputs, *m.outputs])
     with pytest.raises(ModelError):
         FaultDetectionFilter(d).run(sig)
+
+
+# ----------------------------------------------------------------------------- optimality and noise
+def test_optimal_gain_minimises_the_stationary_error_covariance():
+    """P from the Riccati equation is the stationary covariance of e = x - x_hat for the model with
+    nuisance intensity Q2 / gamma, and no other gain L gives a smaller trace (brute force)."""
+    rng = np.random.default_rng(41)
+    m = _sensor_nuisance_system()
+    Qw = np.diag(rng.uniform(0.1, 1.0, 5)) * 1e-3
+    V = np.diag(rng.uniform(0.5, 2.0, 3)) * 1e-2
+    gamma = 1e-3
+    d = design_optimal_fdf(m, "actuator:u0", ["sensor:y0"], gamma=gamma, Qw=Qw, V=V, reduce=None)
+    F2 = fault_directions(m, "sensor:y0")
+    Q = Qw + F2 @ F2.T / gamma
+
+    def sigma(L):
+        Acl = m.A - L @ m.C
+        return solve_discrete_lyapunov(Acl, Q + L @ V @ L.T)
+
+    L = d.info["L"]
+    S = sigma(L)
+    np.testing.assert_allclose(S, d.info["P"], rtol=1e-7, atol=1e-9 * np.max(np.abs(S)))
+    t0 = np.trace(S)
+    for _ in range(20):
+        dL = rng.normal(size=L.shape) * 1e-3 * np.max(np.abs(L))
+        assert np.trace(sigma(L + dL)) > t0
+
+
+def test_residual_covariance_matches_impulse_response_sum():
+    rng = np.random.default_rng(42)
+    m = _with_groups(_random_discrete(rng, 4, 1, 3, faults=["actuator:u0", "sensor:y2"]), rng, w=True)
+    d = design_optimal_fdf(m, "actuator:u0", ["sensor:y2"], gamma=1e-4, reduce=None)
+    R = residual_covariance(d, m)
+    # brute force: sum_k h_k h_k' over the impulse response of noise -> residual (simulated)
+    M = internal_form(d, m)
+    Bw, Dw = M.B_of("w"), M.D_of("w")
+    acc = Dw @ Dw.T
+    X = Bw.copy()
+    for _ in range(5000):
+        h = M.C @ X
+        acc += h @ h.T
+        X = M.A @ X
+    np.testing.assert_allclose(R, acc, rtol=1e-8, atol=1e-12)
+
+
+def test_stacked_filters_equal_the_members():
+    rng = np.random.default_rng(43)
+    m = _random_discrete(rng, 5, 2, 3, faults=["actuator:u0", "actuator:u1"])
+    fs = design_filter_set(m, ["actuator:u0", "actuator:u1"], method="optimal", gamma=1e-6)
+    big = stack_designs(list(fs.values()))
+    runs, T = 2, 200
+    u, y, _ = _simulate(m, runs, T, rng)
+    sig = Signals(np.arange(T) * m.dt, np.concatenate([u, y], axis=2), [*m.inputs, *m.outputs])
+    parts = np.concatenate([FaultDetectionFilter(d).run(sig).values for d in fs.values()], axis=2)
+    fused = FaultDetectionFilter(big).run(sig)
+    assert fused.names == [s for d in fs.values() for s in d.residual_names]
+    np.testing.assert_allclose(fused.values, parts, rtol=0, atol=1e-12 * np.max(np.abs(parts)))
