@@ -86,6 +86,7 @@ _RESIDUALS = ("r1", "r3", "r4")
 class TestSpec:
     """One GLRT test: residual channel, window ``W``, hold ``Z`` and optional gate time ``T`` (s)."""
 
+    __test__ = False  # not a pytest class
     name: str
     residual: str
     W: int
@@ -174,6 +175,8 @@ class TestBank:
     thresholds : dict test -> float
     design : dict test -> dict (achieved_pfa on the design runs, runs, Z, pfa)
     """
+
+    __test__ = False  # not a pytest class
 
     specs: list[TestSpec]
     mu0: dict[str, float]
