@@ -523,3 +523,16 @@ def test_stacked_filters_equal_the_members():
     fused = FaultDetectionFilter(big).run(sig)
     assert fused.names == [s for d in fs.values() for s in d.residual_names]
     np.testing.assert_allclose(fused.values, parts, rtol=0, atol=1e-12 * np.max(np.abs(parts)))
+
+
+def test_designs_carry_their_internal_form():
+    m = _sensor_nuisance_system()
+    for d in (design_optimal_fdf(m, "actuator:u0", ["sensor:y0"], gamma=1e-6),
+              design_optimal_fdf(m, "actuator:u0", ["sensor:y0"], gamma=1e-6, reduce=None)):
+        assert d.internal is not None and d.internal.n_states == m.n_states + d.order
+        assert d.internal.outputs == d.residual_names and d.internal.fault_names == m.fault_names
+        np.testing.assert_allclose(dc_gain(d.internal, "f"), dc_gain(internal_form(d, m), "f"), atol=1e-12)
+    rng = np.random.default_rng(44)
+    m2 = _random_discrete(rng, 4, 2, 3, faults=["actuator:u0", "actuator:u1"])
+    d = design_uio(m2, "actuator:u0", ["actuator:u1"])
+    assert np.max(np.abs(dc_gain(d.internal, "f")[:, 1])) < 1e-12

@@ -35,6 +35,7 @@ Every design is a plain-matrix :class:`FilterDesign` (the *implementation form*)
     r[k]    = C xi[k] + Du u[k] + Dy y[k]
 
 run by :class:`FaultDetectionFilter` (batch ``run`` and streaming ``step``, bitwise equal);
+its ``internal`` attribute holds the internal form against the design model, and
 :func:`internal_form` composes any design with any :class:`~fdikit.model.linear.LinearFaultModel`
 into the transfer from every input group (controls, disturbances, faults, noise) to ``r``; the
 design's ``info`` records the conditions checked, ranks, ``gamma``, eigenvalues and reduction.
@@ -100,6 +101,9 @@ class FilterDesign:
     info : dict
         Method, target and nuisance, conditions checked with their ranks, ``gamma``, filter
         eigenvalues, reduction order (see the design functions).
+    internal : LinearFaultModel or None
+        Internal form against the design model (:func:`internal_form`), set by the design
+        functions: the transfer from every input group of the model to the residual.
     """
 
     A: np.ndarray
@@ -113,6 +117,7 @@ class FilterDesign:
     y_names: list[str]
     residual_names: list[str]
     info: dict[str, Any] = field(default_factory=dict)
+    internal: LinearFaultModel | None = field(default=None, repr=False)
 
     @property
     def order(self) -> int:
@@ -460,6 +465,7 @@ def design_uio(
     info.update(gain_method=how, eigenvalues=eig, spectral_radius=rho, unobservable_modes=um,
                 H=H, T=T, K1=K1, order=n, reduction=None)
     info["target_markov_max"] = _check_target_visible(design, md, tnames, F1)
+    design.internal = internal_form(design, md)
     return design
 
 
@@ -621,11 +627,13 @@ def design_optimal_fdf(
     info["target_markov_max"] = _check_target_visible(full, md, tnames, F1)
     info["conditions"]["target visibility"] = f"largest Markov parameter {info['target_markov_max']:.3e}"
     full.info["target_markov_max"] = info["target_markov_max"]
+    full.internal = internal_form(full, md)
     if reduce is None:
         return full
     red = reduce_filter(full, order, fast_modulus=fast_modulus, weak_observability=weak_observability,
                         method=reduce)
     red.info = dict(info, full=full, **red.info)
+    red.internal = internal_form(red, md)
     return red
 
 
@@ -959,7 +967,7 @@ class FaultDetectionFilter(ResidualGenerator):
         if u.shape[0] != self._xi.shape[0]:
             raise ModelError(f"sample has {u.shape[0]} runs but the filter was reset for "
                              f"{self._xi.shape[0]}")
-        return self._advance(np.ascontiguousarray(np.hstack([u, y])))
+        return self._advance(np.concatenate((u, y), axis=1))
 
     def run(self, signals: Signals) -> Signals:
         """Residuals over a record (all runs at once; time recursion sample by sample)."""
