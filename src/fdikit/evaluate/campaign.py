@@ -517,7 +517,7 @@ def run_campaign(runs: int = 200, *, nominal_runs: int | None = None, design_run
     for c in classes:
         best, tie = diagnose_ml(fired[c], pfail, classes)
         lab = np.array(classes)[best]
-        confusion[c] = {k: int(v) for k, v in zip(*np.unique(lab, return_counts=True))}
+        confusion[c] = {str(k): int(v) for k, v in zip(*np.unique(lab, return_counts=True))}
         if c == "F0":
             specificity = float(np.mean(lab == "F0"))
             continue
