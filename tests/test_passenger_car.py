@@ -439,3 +439,91 @@ def test_cli_fit_json(capsys):
     assert set(out["fitted_parameters"]) >= {"C_f", "C_r", "b_r"}
     assert 0.8 < out["yaw_rate"]["correlation"] < 1.0
     assert "nrmse" in out["lateral_acceleration"]
+
+
+# ------------------------------------------------------------------ automated driving, faults, nonlinearity
+def test_track_geometry():
+    from fdikit.plants.passenger_car import Track
+
+    tr = Track(straight=100.0, radius=200.0)
+    # on the curve, a point 1 m inside the arc (towards the centre) at 30 degrees travelled
+    th = np.deg2rad(30.0)
+    X = 100.0 + 199.0 * np.sin(th)
+    Y = 200.0 - 199.0 * np.cos(th)
+    e_y, e_psi, kappa = tr.errors(np.array([X]), np.array([Y]), np.array([th + 0.01]))
+    assert e_y[0] == pytest.approx(1.0, abs=1e-9) and e_psi[0] == pytest.approx(0.01, abs=1e-12)
+    assert kappa[0] == pytest.approx(1 / 200.0)
+
+
+def test_cruise_is_an_equilibrium_of_the_closed_loop():
+    from fdikit.plants.passenger_car import simulate_drive
+
+    res = simulate_drive("straight", 20.0, duration=2.0, dt=2e-3)
+    assert np.allclose(res.x["v_x"][0], 20.0, atol=1e-6)
+    assert np.allclose(res.y["lateral_offset"][0], 0.0, atol=1e-9)
+
+
+@pytest.mark.slow
+def test_controllers_fight_actuator_faults():
+    """Paper 1, Section V: a driver steps on the brake / turns the wheel while the car is under
+    automatic control; the speed controller opens the throttle, the path controller counter-steers.
+    Run 0: +0.6 MPa brake at 3 s on the curve at 24 m/s; run 1: +0.01 rad steering at 3 s at 20 m/s
+    is simulated separately (different speed)."""
+    from fdikit.faults import Bias
+    from fdikit.plants.passenger_car import simulate_drive
+
+    res = simulate_drive("curve", 24.0, duration=9.0, dt=2e-3,
+                         faults=[Bias("actuator:brake", 0.6, start=3.0)])
+    t, u, y, x = res.u.t, res.u, res.y, res.x
+    pre, post = (t > 2.0) & (t < 3.0), t > 7.0
+    assert u["brake"][0][post].max() == 0.0  # the controller never commands the brake ...
+    assert y["brake_meas"][0][post].mean() == pytest.approx(0.6, rel=1e-6)  # ... but the sensor sees it
+    assert u["throttle"][0][post].mean() > u["throttle"][0][pre].mean() + 10.0
+    assert x["v_x"][0].min() > 24.0 - 2.5 and abs(y["lateral_offset"][0]).max() < 0.5
+    res = simulate_drive("curve", 20.0, duration=9.0, dt=2e-3,
+                         faults=[Bias("actuator:steer", 0.01, start=3.0)])
+    t, u, y = res.u.t, res.u, res.y
+    post = t > 7.0
+    # the commanded steering moves against the extra angle (on the curve the feed-forward is ~0.0164 rad)
+    ff = (2.814 + 0.00407 * 400) / 300.0
+    assert u["steer"][0][post].mean() < ff - 0.005
+    assert abs(y["lateral_offset"][0]).max() < 1.5
+    assert abs(y["lateral_offset"][0][-1]) < abs(y["lateral_offset"][0]).max()  # and it is coming back
+
+
+def test_curve_on_a_slope_at_20():
+    """Curved track (R = 300 m) on a 2 % slope at 20 m/s: steady yaw rate v / R, path held."""
+    from fdikit.plants.passenger_car import simulate_drive
+
+    res = simulate_drive("curve", 20.0, duration=12.0, dt=2e-3)
+    t, y = res.y.t, res.y
+    late = t > 10.0
+    assert res.x["r"][0][late].mean() == pytest.approx(20.0 / 300.0, rel=0.03)
+    assert abs(y["lateral_offset"][0]).max() < 0.2
+    assert res.x["v_x"][0][late].mean() == pytest.approx(20.0, abs=0.1)
+
+
+@pytest.mark.slow
+def test_speed_change():
+    """Reference 20 -> 24 -> 20 m/s (steps at 6 and 12 s); in 4th gear the car accelerates at
+    under 1 m/s^2, so it needs ~5 s."""
+    from fdikit.plants.passenger_car import simulate_drive
+
+    res = simulate_drive("speed_change", 20.0, duration=18.0, dt=2e-3)
+    t, v = res.x.t, res.x["v_x"][0]
+    assert v[(t > 11.0) & (t < 12.0)].mean() == pytest.approx(24.0, abs=0.5)
+    assert v.max() < 25.5
+    assert v[-1] == pytest.approx(20.0, abs=0.8)
+
+
+@pytest.mark.slow
+def test_nonlinearity_direction(lin20):
+    from fdikit.plants.passenger_car import nonlinearity_directions
+
+    nd = nonlinearity_directions(lin20, "longitudinal", k=2, duration=9.0)
+    assert nd.E.shape == (14, 2) and np.allclose(nd.E.T @ nd.E, np.eye(2), atol=1e-10)
+    assert nd.energy.sum() > 0.8  # one or two directions carry most of the mismatch (paper: 1-2)
+    assert nd.reduced.fault_names[-2:] == ["nonlinearity:1", "nonlinearity:2"]
+    assert nd.reduced.states == LONGITUDINAL_REDUCED
+    # the direction really is the mismatch: projecting it out of the mismatch leaves < 20 % energy
+    assert 1 - nd.energy.sum() < 0.2
