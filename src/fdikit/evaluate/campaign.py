@@ -232,6 +232,7 @@ def _progress(enabled: bool, total: int, what: str):
 
     if not enabled:
         return nullcontext(), None
+    from rich.console import Console
     from rich.progress import (
         BarColumn,
         MofNCompleteColumn,
@@ -241,8 +242,10 @@ def _progress(enabled: bool, total: int, what: str):
         TimeRemainingColumn,
     )
 
+    # on stderr, so that a JSON object on stdout stays the only thing there
     prog = Progress(TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),
-                    TextColumn("runs"), TimeElapsedColumn(), TimeRemainingColumn(), transient=False)
+                    TextColumn("runs"), TimeElapsedColumn(), TimeRemainingColumn(), transient=False,
+                    console=Console(stderr=True))
     return prog, (what, total)
 
 
