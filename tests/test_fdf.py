@@ -13,11 +13,11 @@ import json
 
 import numpy as np
 import pytest
-from scipy.linalg import solve_discrete_lyapunov
+from scipy.linalg import solve_discrete_lyapunov, subspace_angles
 from scipy.signal import cont2discrete
 
 from fdikit.errors import ConditionError, ModelError
-from fdikit.model import LinearFaultModel, dc_gain, frequency_response
+from fdikit.model import LinearFaultModel, dc_gain, frequency_response, observability_matrix
 from fdikit.residuals.fdf import (
     FaultDetectionFilter,
     FilterDesign,
@@ -262,6 +262,27 @@ def test_optimal_fdf_recovers_uio_structure_in_the_limit():
         fast.append(np.min(np.abs(d.info["eigenvalues"])))
     assert ratios[0] > ratios[1] > ratios[2] and ratios[2] < 1e-4
     assert fast[2] < fast[0] and fast[2] < 1e-3
+
+
+@pytest.mark.parametrize("system", ["sensor", "uio-exists"])
+def test_nuisance_subspace_becomes_unobservable_from_the_residual(system):
+    """The UIO's geometric structure: as gamma -> 0 the (weakly) unobservable subspace of the filter
+    (Hr C, A - L C) converges to the nuisance subspace S2* (principal angles from an SVD of the
+    observability matrix, independent of the design's own computations)."""
+    if system == "sensor":
+        m, t, nu, gammas = _sensor_nuisance_system(), "actuator:u0", "sensor:y0", (1e-4, 1e-6, 1e-8, 1e-10)
+    else:
+        m = _random_discrete(np.random.default_rng(2), 5, 2, 3, faults=["actuator:u0", "actuator:u1"])
+        t, nu, gammas = "actuator:u0", "actuator:u1", (1e-2, 1e-4, 1e-6, 1e-8)
+    S2 = conditioned_invariant_subspace(m.A, m.C, fault_directions(m, nu))
+    k = S2.shape[1]
+    angles = []
+    for g in gammas:
+        d = design_optimal_fdf(m, t, [nu], gamma=g, reduce=None)
+        _, _, Vt = np.linalg.svd(observability_matrix(d.A, d.C))
+        angles.append(float(np.max(subspace_angles(Vt[-k:].T, S2))))
+    assert all(b < a for a, b in itertools.pairwise(angles)), angles
+    assert angles[-1] < 1e-3
 
 
 @pytest.mark.parametrize("seed", [4, 5, 6])
@@ -536,3 +557,20 @@ def test_designs_carry_their_internal_form():
     m2 = _random_discrete(rng, 4, 2, 3, faults=["actuator:u0", "actuator:u1"])
     d = design_uio(m2, "actuator:u0", ["actuator:u1"])
     assert np.max(np.abs(dc_gain(d.internal, "f")[:, 1])) < 1e-12
+
+
+def test_unstable_nuisance_zero_rules_out_the_uio_but_not_the_optimal_filter():
+    """Nuisance e2 with y1 = x1 + x2 has the invariant zero a = 1.2 (x1 moves, y does not): the
+    UIO's unobservable mode of (C, A1) is unstable, yet the stochastic filter blocks the nuisance."""
+    A = np.diag([1.2, 0.5, 0.3])
+    C = np.array([[1.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+    m = LinearFaultModel(A, [[0.0], [0.0], [1.0]], C, dt=0.1,
+                         faults=["actuator:u0", ("n", [0.0, 1.0, 0.0], None)])
+    with pytest.raises(ConditionError) as ei:
+        design_uio(m, "actuator:u0", ["n"])
+    assert ei.value.condition == "detectability of (C, A1)"
+    d = design_optimal_fdf(m, "actuator:u0", ["n"], gamma=1e-8, reduce=None)
+    np.testing.assert_allclose(d.info["nuisance_invariant_zeros"].real, [1.2], atol=1e-9)
+    assert d.info["spectral_radius"] < 1
+    worst, dc, _ = _ratio(d, m, "actuator:u0", ["n"])
+    assert worst <= 1e-3 and dc <= 1e-3

@@ -52,7 +52,7 @@ import scipy.linalg as sla
 
 from ..errors import ConditionError, ModelError
 from ..model.linear import GROUPS, LinearFaultModel
-from ..model.structure import default_tol, rank, unobservable_modes
+from ..model.structure import default_tol, invariant_zeros, rank, unobservable_modes
 from ..monitor.core import ResidualGenerator
 from ..signals import Signals
 
@@ -538,8 +538,11 @@ def design_optimal_fdf(
     -------
     FilterDesign
         ``info`` has ``gamma``, ``rank_E``/``rank_CE`` of the nuisance (whether an exact UIO
-        would exist), ``nuisance_output_rank``, ``H``, ``L``, ``P``, ``eigenvalues`` of the full
-        filter, ``full`` (the unreduced :class:`FilterDesign`), ``order`` and ``reduction``.
+        would exist), ``nuisance_output_rank``, ``nuisance_invariant_zeros`` (discrete: the
+        fixed modes an exact UIO would have; an unstable one rules the UIO out but not this
+        filter, whose eigenvalues are always inside the unit circle), ``H``, ``L``, ``P``,
+        ``eigenvalues`` of the full filter, ``full`` (the unreduced :class:`FilterDesign`),
+        ``order`` and ``reduction``.
 
     Raises
     ------
@@ -614,11 +617,15 @@ def design_optimal_fdf(
         u_names=list(md.inputs), y_names=list(md.outputs),
         residual_names=[f"{nm}:{i}" for i in range(p - s)])
     rE, rCE = rank(F2), rank(C @ F2)
+    # invariant zeros of the nuisance channel (A, F2, C): the fixed modes of an exact UIO (its
+    # unobservable modes of (C, A1)); the stochastic filter stays stable when one is unstable
+    zeros = invariant_zeros(A, F2, C) if F2.shape[1] else np.zeros(0, complex)
     info: dict[str, Any] = {
         "method": "optimal_fdf", "target": tnames, "nuisance": nnames, "gamma": float(gamma),
         "discrete": True, "rank_E": rE, "rank_CE": rCE, "exact_uio_rank_condition": rE == rCE,
         "nuisance_subspace_dim": S2.shape[1], "nuisance_output_rank": s,
         "target_output_rank": rank(C @ conditioned_invariant_subspace(A, C, F1)),
+        "nuisance_invariant_zeros": zeros,
         "H": H, "Hr": Hr, "L": L, "P": P, "eigenvalues": eig, "spectral_radius": rho,
         "conditions": {"residual dimension": f"{p} outputs - {s} nuisance output directions = {p - s}",
                        "output separability": f"rank C S*(F1, F2) = {s12} > rank C S*(F2) = {s}"},
