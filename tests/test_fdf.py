@@ -26,6 +26,7 @@ from fdikit.residuals.fdf import (
     design_optimal_fdf,
     design_uio,
     fault_detection_filter,
+    fault_direction_split,
     fault_directions,
     filter_frequency_response,
     internal_form,
@@ -574,3 +575,50 @@ def test_unstable_nuisance_zero_rules_out_the_uio_but_not_the_optimal_filter():
     assert d.info["spectral_radius"] < 1
     worst, dc, _ = _ratio(d, m, "actuator:u0", ["n"])
     assert worst <= 1e-3 and dc <= 1e-3
+
+
+# ----------------------------------------------------------------------------- output-space sensor faults
+def _redundant_sensor_system():
+    """Two sensors on the same state: C has rank 2 < 3 outputs, e2 is not in range(C)."""
+    A = np.array([[0.95, 0.05, 0.0], [-0.04, 0.9, 0.1], [0.0, 0.02, 0.8]])
+    B = np.array([[0.0], [0.0], [0.1]])
+    C = np.array([[1.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    return LinearFaultModel(A, B, C, dt=0.01, faults=["actuator:u0", "sensor:y1", "sensor:y2"])
+
+
+@pytest.mark.parametrize("design", ["uio", "optimal"])
+def test_sensor_nuisance_outside_range_of_C_is_projected_out(design):
+    m = _redundant_sensor_system()
+    E, Y = fault_direction_split(m, "sensor:y1")
+    assert E.shape[1] == 0 and Y.shape[1] == 1
+    with pytest.raises(ConditionError) as ei:
+        fault_directions(m, "sensor:y1")
+    assert ei.value.condition == "sensor direction"
+    if design == "uio":
+        with pytest.raises(ConditionError):
+            design_uio(m, "actuator:u0", ["sensor:y1"], sensor="state")
+        d = design_uio(m, "actuator:u0", ["sensor:y1"])
+    else:
+        d = design_optimal_fdf(m, "actuator:u0", ["sensor:y1"], gamma=1e-6, reduce=None)
+    assert d.info["output_nuisance_directions"] == 1
+    # the filter does not read y1 at all: its y1 columns are zero (P e2 = 0)
+    np.testing.assert_allclose(d.By[:, 1], 0.0, atol=1e-12)
+    np.testing.assert_allclose(d.Dy[:, 1], 0.0, atol=1e-12)
+    G = frequency_response(internal_form(d, m), F_BAND, "f")
+    assert np.max(np.abs(G[:, :, 1])) <= 1e-12 * np.max(np.abs(G[:, :, 0]))
+    assert np.min(np.linalg.norm(G[:, :, 0], axis=1)) > 1e-3
+    # the other sensor fault is still seen
+    assert np.max(np.abs(G[:, :, 2])) > 1e-2
+
+
+def test_output_treatment_of_an_in_range_sensor_fault_keeps_more_residuals():
+    m = _sensor_nuisance_system()
+    ds = design_optimal_fdf(m, "actuator:u0", ["sensor:y0"], gamma=1e-8, reduce=None, sensor="state")
+    do = design_optimal_fdf(m, "actuator:u0", ["sensor:y0"], gamma=1e-8, reduce=None, sensor="output")
+    assert len(ds.residual_names) == 1 and len(do.residual_names) == 2
+    for d in (ds, do):
+        worst, dc, _ = _ratio(d, m, "actuator:u0", ["sensor:y0"])
+        assert worst <= 1e-3 and dc <= 1e-3
+    # with the output treatment the sensor is simply not read
+    np.testing.assert_allclose(do.By[:, 0], 0.0, atol=1e-12)
+    np.testing.assert_allclose(do.Dy[:, 0], 0.0, atol=1e-12)

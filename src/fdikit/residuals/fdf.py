@@ -64,6 +64,7 @@ __all__ = [
     "design_optimal_fdf",
     "design_uio",
     "fault_detection_filter",
+    "fault_direction_split",
     "fault_directions",
     "filter_frequency_response",
     "internal_form",
@@ -201,7 +202,8 @@ def fault_directions(model: LinearFaultModel, faults: str | Sequence[Any], *, dt
     Raises
     ------
     ConditionError
-        ``"sensor direction"`` when ``d`` is not in the range of ``C`` (no ``f_d`` exists).
+        ``"sensor direction"`` when ``d`` is not in the range of ``C`` (no ``f_d`` exists; see
+        :func:`fault_direction_split` for the output-space treatment of such faults).
 
     Examples
     --------
@@ -214,12 +216,52 @@ def fault_directions(model: LinearFaultModel, faults: str | Sequence[Any], *, dt
     >>> fault_directions(m, "sensor:y0").round(12).tolist()   # [f_j, -A f_j], C f_j = 1
     [[1.0, -0.9], [0.0, 0.0]]
     """
+    return fault_direction_split(model, faults, dt=dt, sensor="state")[0]
+
+
+def fault_direction_split(model: LinearFaultModel, faults: str | Sequence[Any], *, dt: float | None = None,
+                          sensor: str = "auto") -> tuple[np.ndarray, np.ndarray]:
+    """State directions and remaining output directions of faults (see :func:`fault_directions`).
+
+    A fault ``(b, d)`` with ``d != 0`` is turned into state directions ``[f_d, b - A f_d]`` when
+    ``sensor="state"``, or when ``sensor="auto"`` and ``d`` lies in the range of ``C`` (the
+    construction of the notes, which needs ``C f_d = d`` solvable). Otherwise (``sensor="output"``,
+    or ``"auto"`` with ``d`` outside the range of ``C``, e.g. when ``C`` has lower rank than the
+    number of outputs) it is kept as an *output* direction ``d`` (and a state direction ``b``):
+    a filter blind to it discards the component of ``y`` along ``d`` (paper-free generalisation:
+    the filter is designed on the projected outputs ``P y`` with ``P d = 0``).
+
+    Returns
+    -------
+    E : ndarray (n, k)
+        State-space directions.
+    Y : ndarray (p, l)
+        Output-space directions to be projected out.
+
+    Raises
+    ------
+    ConditionError
+        ``"sensor direction"`` with ``sensor="state"`` when ``d`` is not in the range of ``C``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from fdikit.model import LinearFaultModel
+    >>> m = LinearFaultModel(np.eye(2) * 0.5, np.zeros((2, 0)), [[1.0, 0.0], [1.0, 0.0]], dt=0.1,
+    ...                      faults=["sensor:y1"])
+    >>> E, Y = fault_direction_split(m, "sensor:y1")     # e2 is not in range(C): output direction
+    >>> E.shape, Y.ravel().tolist()
+    ((2, 0), [0.0, 1.0])
+    """
+    if sensor not in ("auto", "state", "output"):
+        raise ModelError(f"sensor must be 'auto', 'state' or 'output', got {sensor!r}")
     md = _discrete(model, dt)
     A, C = md.A, md.C
-    n = md.n_states
+    n, p = md.n_states, md.n_outputs
     if isinstance(faults, str):
         faults = [faults]
     cols: list[np.ndarray] = []
+    ycols: list[np.ndarray] = []
     Cp = np.linalg.pinv(C)
     for spec in faults:
         if isinstance(spec, str):
@@ -229,7 +271,12 @@ def fault_directions(model: LinearFaultModel, faults: str | Sequence[Any], *, dt
                 continue
             f = Cp @ d
             res = np.linalg.norm(C @ f - d)
-            if res > 1e3 * _EPS * max(1.0, np.linalg.norm(d)) * max(1.0, np.linalg.norm(C, 2)) * n:
+            in_range = res <= 1e3 * _EPS * max(1.0, np.linalg.norm(d)) * max(1.0, np.linalg.norm(C, 2)) * n
+            if sensor == "output" or (sensor == "auto" and not in_range):
+                ycols.append(d[:, None])
+                cols.append(b[:, None])
+                continue
+            if not in_range:
                 raise ConditionError(
                     "sensor direction",
                     f"fault {spec!r}: its output direction d = {np.round(d, 6).tolist()} is not in the "
@@ -246,11 +293,16 @@ def fault_directions(model: LinearFaultModel, faults: str | Sequence[Any], *, dt
             if M.shape[0] != n or not np.all(np.isfinite(M)):
                 raise ModelError(f"directions {label!r} must be finite with {n} rows, got shape {M.shape}")
             cols.append(M)
-    F = np.hstack(cols) if cols else np.zeros((n, 0))
-    if F.size:
-        scale = max(1.0, float(np.max(np.abs(F))))
-        F = F[:, np.linalg.norm(F, axis=0) > 1e3 * _EPS * scale]
-    return F
+
+    def _nonzero(F: np.ndarray) -> np.ndarray:
+        if F.size:
+            scale = max(1.0, float(np.max(np.abs(F))))
+            F = F[:, np.linalg.norm(F, axis=0) > 1e3 * _EPS * scale]
+        return F
+
+    E = _nonzero(np.hstack(cols)) if cols else np.zeros((n, 0))
+    Y = _nonzero(np.hstack(ycols)) if ycols else np.zeros((p, 0))
+    return E, Y
 
 
 def conditioned_invariant_subspace(A: Any, C: Any, F: Any, *, tol: float | None = None) -> np.ndarray:
@@ -291,15 +343,16 @@ def conditioned_invariant_subspace(A: Any, C: Any, F: Any, *, tol: float | None 
     return S  # pragma: no cover - dimension grows at most n times
 
 
-def _target_nuisance(md: LinearFaultModel, target: Any, nuisance: Any):
+def _target_nuisance(md: LinearFaultModel, target: Any, nuisance: Any, sensor: str):
     target = [target] if isinstance(target, str) else list(target)
     nuisance = [nuisance] if isinstance(nuisance, str) else list(nuisance or [])
     if not target:
         raise ModelError("a fault detection filter needs a target fault")
-    F1 = fault_directions(md, target)
-    F2 = fault_directions(md, nuisance) if nuisance else np.zeros((md.n_states, 0))
+    E1, Y1 = fault_direction_split(md, target, sensor=sensor)
+    E2, Y2 = fault_direction_split(md, nuisance, sensor=sensor) if nuisance else \
+        (np.zeros((md.n_states, 0)), np.zeros((md.n_outputs, 0)))
     label = lambda s: s if isinstance(s, str) else str(s[0])  # noqa: E731
-    return [label(s) for s in target], [label(s) for s in nuisance], F1, F2
+    return [label(s) for s in target], [label(s) for s in nuisance], E1, Y1, E2, Y2
 
 
 def _markov_visible(Af: np.ndarray, B: np.ndarray, Cf: np.ndarray, D: np.ndarray, steps: int) -> float:
@@ -374,6 +427,7 @@ def design_uio(
     poles: Any = None,
     Q: Any = None,
     R: Any = None,
+    sensor: str = "auto",
     name: str | None = None,
 ) -> FilterDesign:
     """Exact unknown input observer (Chen, Patton & Zhang 1996) decoupling the nuisance faults.
@@ -400,13 +454,18 @@ def design_uio(
         Discrete eigenvalues of ``F`` (pole placement on ``(A1, C)``; needs ``(C, A1)`` observable).
         Default: ``K1`` from the discrete Riccati equation on ``(A1, C)`` with weights ``Q``
         (default I) and ``R`` (default I), which only needs detectability.
+    sensor : {"auto", "state", "output"}
+        Treatment of nuisance faults with an output direction (:func:`fault_direction_split`);
+        output-space directions are removed by a projection ``P`` (``P d = 0``) of the
+        measurements and the observer is designed on ``(A, B, P C, P D)``.
 
     Returns
     -------
     FilterDesign
-        ``p`` residuals ``"<name>:<output>"``; ``info`` has ``rank_CE``, ``rank_E``,
+        ``p`` residuals ``"<name>:<output>"`` (``p - l`` residuals ``"<name>:<i>"`` after
+        projecting out ``l`` output directions); ``info`` has ``rank_CE``, ``rank_E``,
         ``unobservable_modes`` of ``(C, A1)``, ``eigenvalues`` and ``spectral_radius`` of ``F``,
-        ``H``, ``T``, ``K1``.
+        ``H``, ``T``, ``K1``, the projection ``P``.
 
     Raises
     ------
@@ -425,19 +484,27 @@ def design_uio(
     (1, 1)
     """
     md = _discrete(model, dt)
-    tnames, nnames, F1, E = _target_nuisance(md, target, nuisance)
-    A, B, C, D = md.A, md.B, md.C, md.D
-    n, p = md.n_states, md.n_outputs
+    tnames, nnames, E1, _, E, Yd = _target_nuisance(md, target, nuisance, sensor)
+    A, B, n = md.A, md.B, md.n_states
+    # output-space nuisance directions (sensor faults outside range C) are projected out first
+    Pd = _complement_rows(_orth(Yd), md.n_outputs)
+    C, D = Pd @ md.C, Pd @ md.D
+    p = C.shape[0]
+    if p == 0:
+        raise ConditionError("residual dimension", "the nuisance output directions span all "
+                             f"{md.n_outputs} outputs: no measurement is left", {"outputs": md.n_outputs})
     rE, rCE = rank(E), rank(C @ E)
     info: dict[str, Any] = {"method": "uio", "target": tnames, "nuisance": nnames, "rank_E": rE,
-                            "rank_CE": rCE, "conditions": {}}
+                            "rank_CE": rCE, "output_nuisance_directions": Yd.shape[1], "P": Pd,
+                            "conditions": {}}
     if rCE != rE:
         raise ConditionError("rank(CE) = rank(E)",
                              f"the nuisance directions E ({n} x {E.shape[1]}) have rank {rE} but C E has "
                              f"rank {rCE}: no exact unknown input observer exists (use the optimal "
                              "stochastic filter)", {"rank_E": rE, "rank_CE": rCE})
     info["conditions"]["rank(CE) = rank(E)"] = f"{rCE} = {rE}"
-    H = E @ np.linalg.pinv(C @ E) if E.shape[1] else np.zeros((n, p))
+    Eo = _orth(E)  # same H for any basis of range(E) when rank(CE) = rank(E); better conditioned
+    H = Eo @ np.linalg.pinv(C @ Eo) if Eo.shape[1] else np.zeros((n, p))
     T = np.eye(n) - H @ C
     A1 = T @ A
     um = unobservable_modes(A1, C)
@@ -458,13 +525,13 @@ def design_uio(
                              {"eigenvalues": eig.tolist()})
     I_CH = np.eye(p) - C @ H
     nm = name or f"uio[{','.join(tnames)}]"
+    rnames = [f"{nm}:{y}" for y in md.outputs] if Yd.shape[1] == 0 else [f"{nm}:{i}" for i in range(p)]
     design = FilterDesign(
-        A=F, Bu=T @ B - K @ D, By=K, C=-C, Du=-I_CH @ D, Dy=I_CH, dt=float(md.dt),
-        u_names=list(md.inputs), y_names=list(md.outputs),
-        residual_names=[f"{nm}:{y}" for y in md.outputs], info=info)
+        A=F, Bu=T @ B - K @ D, By=K @ Pd, C=-C, Du=-I_CH @ D, Dy=I_CH @ Pd, dt=float(md.dt),
+        u_names=list(md.inputs), y_names=list(md.outputs), residual_names=rnames, info=info)
     info.update(gain_method=how, eigenvalues=eig, spectral_radius=rho, unobservable_modes=um,
                 H=H, T=T, K1=K1, order=n, reduction=None)
-    info["target_markov_max"] = _check_target_visible(design, md, tnames, F1)
+    info["target_markov_max"] = _check_target_visible(design, md, tnames, E1)
     design.internal = internal_form(design, md)
     return design
 
@@ -484,6 +551,7 @@ def design_optimal_fdf(
     order: int | None = None,
     fast_modulus: float = 0.05,
     weak_observability: float = 1e-4,
+    sensor: str = "auto",
     name: str | None = None,
 ) -> FilterDesign:
     """Optimal stochastic fault detection filter (Chen, Mingori & Speyer 2003), steady state, discrete.
@@ -533,6 +601,10 @@ def design_optimal_fdf(
         Modulus below which a discrete mode counts as fast (0.05: faster than ``dt / 3``).
     weak_observability : float
         Relative modal observability (:func:`modal_observability`) below which a mode is dropped.
+    sensor : {"auto", "state", "output"}
+        Treatment of faults with an output direction (:func:`fault_direction_split`): output-space
+        nuisance directions are removed by a projection ``P`` of the measurements (``P d = 0``)
+        before steps 2-3, which then use ``P C``, ``P D`` and ``P V P'``.
 
     Returns
     -------
@@ -565,46 +637,52 @@ def design_optimal_fdf(
     if not (gamma > 0 and np.isfinite(gamma)):
         raise ModelError(f"gamma must be a positive number, got {gamma}")
     md = _discrete(model, dt)
-    tnames, nnames, F1, F2 = _target_nuisance(md, target, nuisance)
-    A, B, C, D = md.A, md.B, md.C, md.D
-    n, p = md.n_states, md.n_outputs
+    tnames, nnames, F1, Y1, F2, Yd = _target_nuisance(md, target, nuisance, sensor)
+    A, B, n = md.A, md.B, md.n_states
+    # output-space nuisance directions (sensor faults outside range C) are projected out first
+    Pd = _complement_rows(_orth(Yd), md.n_outputs)
+    C, D = Pd @ md.C, Pd @ md.D
+    p = C.shape[0]
     S2 = conditioned_invariant_subspace(A, C, F2)
-    Y2 = _orth(C @ S2)  # nuisance output directions
+    Y2 = _orth(C @ S2)  # nuisance output directions (C F_hat_2 of the paper)
     s = Y2.shape[1]
     if s >= p:
         raise ConditionError("residual dimension",
-                             f"the nuisance output directions span all {p} outputs (rank C S2* = {s}); "
-                             "the projected residual H (y - C x_hat) would be identically zero",
-                             {"nuisance_output_rank": s, "outputs": p})
-    Hr = _complement_rows(Y2, p)
+                             f"the nuisance output directions span all {md.n_outputs} outputs "
+                             f"({Yd.shape[1]} direct, rank C S2* = {s}); the projected residual "
+                             "H (y - C x_hat) would be identically zero",
+                             {"nuisance_output_rank": s + Yd.shape[1], "outputs": md.n_outputs})
+    Hr = _complement_rows(Y2, p) @ Pd  # (p_out - l - s, p_out), orthonormal rows
     H = Hr.T @ Hr
     # output separability: the target must add output directions to the nuisance's
-    s12 = rank(C @ conditioned_invariant_subspace(A, C, np.hstack([F2, F1])))
+    s12 = rank(np.hstack([C @ conditioned_invariant_subspace(A, C, np.hstack([F2, F1])), Pd @ Y1]))
     if s12 <= s:
         raise ConditionError("target visibility",
                              f"target {tnames} adds no output direction to the nuisance's (rank C S* = {s} "
                              f"with and without it): target and nuisance are not output separable",
                              {"nuisance_output_rank": s, "joint_output_rank": s12})
     k2 = F2.shape[1]
+    po = md.n_outputs
     Q2m = np.eye(k2) if Q2 is None else np.atleast_2d(np.asarray(Q2, float))
     Bw, Dw = md.B_of("w"), md.D_of("w")
     Qwm = Bw @ Bw.T + 1e-6 * np.eye(n) if Qw is None else np.atleast_2d(np.asarray(Qw, float))
     if V is None:
-        Vm = Dw @ Dw.T + 1e-6 * np.eye(p) if Dw.size and np.any(Dw) else np.eye(p)
+        Vm = Dw @ Dw.T + 1e-6 * np.eye(po) if Dw.size and np.any(Dw) else np.eye(po)
     else:
         Vm = np.atleast_2d(np.asarray(V, float))
-    if Q2m.shape != (k2, k2) or Qwm.shape != (n, n) or Vm.shape != (p, p):
-        raise ModelError(f"Q2 must be {(k2, k2)}, Qw {(n, n)} and V {(p, p)}; got {Q2m.shape}, "
+    if Q2m.shape != (k2, k2) or Qwm.shape != (n, n) or Vm.shape != (po, po):
+        raise ModelError(f"Q2 must be {(k2, k2)}, Qw {(n, n)} and V {(po, po)}; got {Q2m.shape}, "
                          f"{Qwm.shape}, {Vm.shape}")
+    Vp = Pd @ Vm @ Pd.T
     Qtot = Qwm + F2 @ Q2m @ F2.T / gamma  # nuisance weighted by 1/gamma (paper 4, Riccati eq.)
     Qtot = 0.5 * (Qtot + Qtot.T)
     try:
-        P = sla.solve_discrete_are(A.T, C.T, Qtot, Vm)
+        P = sla.solve_discrete_are(A.T, C.T, Qtot, Vp)
     except (np.linalg.LinAlgError, ValueError) as exc:
         raise ConditionError("riccati", f"the filter Riccati equation has no stabilising solution "
                              f"(gamma = {gamma:g}): {exc}", {"gamma": gamma}) from None
     P = 0.5 * (P + P.T)
-    L = A @ P @ C.T @ np.linalg.inv(C @ P @ C.T + Vm)
+    L = A @ P @ C.T @ np.linalg.inv(C @ P @ C.T + Vp)  # gain on the projected outputs P y
     Af = A - L @ C
     eig = np.linalg.eigvals(Af)
     rho = float(np.max(np.abs(eig))) if n else 0.0
@@ -613,9 +691,9 @@ def design_optimal_fdf(
                              f"(gamma = {gamma:g})", {"eigenvalues": eig.tolist()})
     nm = name or f"fdf[{','.join(tnames)}]"
     full = FilterDesign(
-        A=Af, Bu=B - L @ D, By=L, C=-Hr @ C, Du=-Hr @ D, Dy=Hr.copy(), dt=float(md.dt),
+        A=Af, Bu=B - L @ D, By=L @ Pd, C=-Hr @ md.C, Du=-Hr @ md.D, Dy=Hr.copy(), dt=float(md.dt),
         u_names=list(md.inputs), y_names=list(md.outputs),
-        residual_names=[f"{nm}:{i}" for i in range(p - s)])
+        residual_names=[f"{nm}:{i}" for i in range(Hr.shape[0])])
     rE, rCE = rank(F2), rank(C @ F2)
     # invariant zeros of the nuisance channel (A, F2, C): the fixed modes of an exact UIO (its
     # unobservable modes of (C, A1)); the stochastic filter stays stable when one is unstable
@@ -623,10 +701,11 @@ def design_optimal_fdf(
     info: dict[str, Any] = {
         "method": "optimal_fdf", "target": tnames, "nuisance": nnames, "gamma": float(gamma),
         "discrete": True, "rank_E": rE, "rank_CE": rCE, "exact_uio_rank_condition": rE == rCE,
+        "output_nuisance_directions": Yd.shape[1],
         "nuisance_subspace_dim": S2.shape[1], "nuisance_output_rank": s,
-        "target_output_rank": rank(C @ conditioned_invariant_subspace(A, C, F1)),
+        "target_output_rank": rank(np.hstack([C @ conditioned_invariant_subspace(A, C, F1), Pd @ Y1])),
         "nuisance_invariant_zeros": zeros,
-        "H": H, "Hr": Hr, "L": L, "P": P, "eigenvalues": eig, "spectral_radius": rho,
+        "P_out": Pd, "H": H, "Hr": Hr, "L": L, "P": P, "eigenvalues": eig, "spectral_radius": rho,
         "conditions": {"residual dimension": f"{p} outputs - {s} nuisance output directions = {p - s}",
                        "output separability": f"rank C S*(F1, F2) = {s12} > rank C S*(F2) = {s}"},
     }
@@ -803,7 +882,7 @@ def fault_detection_filter(model: LinearFaultModel, target: Any, nuisance: Any =
     >>> fault_detection_filter(m, "actuator:u0", ["actuator:u1"]).info["method"]
     'uio'
     """
-    uio_kw = {k: v for k, v in kwargs.items() if k in ("dt", "poles", "Q", "R", "name")}
+    uio_kw = {k: v for k, v in kwargs.items() if k in ("dt", "poles", "Q", "R", "name", "sensor")}
     opt_kw = {k: v for k, v in kwargs.items() if k not in ("poles", "Q", "R")}
     if method == "uio":
         return design_uio(model, target, nuisance, **uio_kw)
