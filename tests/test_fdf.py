@@ -249,6 +249,10 @@ def test_optimal_fdf_nuisance_transmission_decreases_with_gamma():
                     m, "actuator:u0", ["sensor:y0"])[0] for g in (1e-2, 1e-4, 1e-6, 1e-8)]
     assert all(b < a for a, b in itertools.pairwise(worst)), worst
     assert worst[-1] < 1e-2 * worst[0]
+    # near the limit the transmission is proportional to gamma
+    w10, w12 = (_ratio(design_optimal_fdf(m, "actuator:u0", ["sensor:y0"], gamma=g, reduce=None),
+                       m, "actuator:u0", ["sensor:y0"])[0] for g in (1e-10, 1e-12))
+    assert 50 < w10 / w12 < 200
 
 
 def test_optimal_fdf_recovers_uio_structure_in_the_limit():

@@ -23,11 +23,26 @@ feedthrough, additive state fault) it is ``b``. With ``d != 0`` (sensor fault, o
 feedthrough) pick ``f_d`` with ``C f_d = d`` and change variables ``x_bar = x + f_d mu``; then
 ``y = C x_bar`` and ``x_bar[k+1] = A x_bar + f_d mu[k+1] + (b - A f_d) mu[k]``, so the fault acts
 as a state fault along ``[f_d, b - A f_d]`` (for a sensor fault ``b = 0``: ``[f_j, A f_j]``,
-signs being irrelevant to the span). ``f_d = C^+ d`` is the minimum-norm solution: any other
-solution differs by an element of ``ker C``, which adds an unmeasured component that the
-filter must also block (the ``A f_d`` term drags it through the dynamics); the minimum-norm
-choice is unique, lies in the measured subspace ``range(C^T)`` and keeps the nuisance set as
-small as the measurement allows.
+signs being irrelevant to the span). Why the minimum-norm ``f_d = C^+ d``: the solutions of
+``C f = d`` are ``f_d + k`` with ``k`` in ``ker C``, and every choice is an exact model of the
+fault, but the filter must block the whole span ``[f, A f]``: an unmeasured component ``k``
+enlarges the nuisance subspace (``A k`` adds a direction, and the smallest conditioned-invariant
+subspace containing it may eat residual dimensions or swallow the target). ``C^+ d`` is the
+unique solution orthogonal to ``ker C`` (no unmeasured component; Euclidean metric of the
+model's state coordinates). When ``d`` is not in the range of ``C`` (``C`` of lower rank than
+the number of outputs) no ``f_d`` exists: :func:`fault_direction_split` then keeps ``d`` as an
+*output* direction that the designs project out of the measurements (``P y`` with ``P d = 0``).
+
+Source note: only the abstract of Chen, Mingori & Speyer (2003) and the table of contents of
+R. H. Chen's dissertation (2000) were readable with the search tools. The discrete steady-state
+formulation below (nuisance as white noise of intensity ``Q2 / gamma`` in a Kalman predictor,
+projector ``H`` from the smallest ``(C, A)``-invariant subspace of the nuisance, which reduces
+to ``C F_hat_2`` with ``F_hat_2 = [A^delta_i f_i]`` of Chen & Speyer when those are independent)
+is derived here to have the properties the abstract and the notes state: the limit
+``gamma -> 0`` recovers the UIO's structure, the nuisance transmission vanishes like ``gamma``
+(both checked in the tests), and near the limit the filter has fast weakly observable modes.
+The paper's weighting of the target fault in its cost is not modelled (the target enters only
+through the separability and visibility checks).
 
 Every design is a plain-matrix :class:`FilterDesign` (the *implementation form*)
 
@@ -566,12 +581,13 @@ def design_optimal_fdf(
            P = A P A' - A P C' (C P C' + V)^-1 C P A' + Qw + F2 Q2 F2' / gamma
            L = A P C' (C P C' + V)^-1,     x_hat[k+1] = A x_hat + B u + L (y - C x_hat - D u)
 
-       the nuisance weighted by ``1/gamma``: as ``gamma -> 0``, ``(A - L C) S2* -> ... `` the
-       nuisance subspace becomes unobservable from ``r`` with eigenvalues -> 0 (the UIO
+       the nuisance weighted by ``1/gamma``. As ``gamma -> 0`` the filter corrects the nuisance
+       directions in one step where it can (``(A - L C) f -> 0`` for ``C f != 0``), the
+       nuisance subspace ``S2*`` becomes unobservable from ``r`` with eigenvalues -> 0 (the UIO
        structure; in continuous time they go to ``-infinity``), and the nuisance transmission
-       vanishes like ``gamma``. Discrete time is used because the monitor runs at a fixed sample
-       rate; a continuous model is discretised by ZOH first. (The paper's target-fault weighting
-       in the Riccati equation is not used: the target enters only through the projector check.)
+       falls in proportion to ``gamma``. Discrete time is used because the monitor runs at a fixed sample
+       rate; a continuous model is discretised by ZOH first. (See the module's source note:
+       the paper's target-fault weighting is not modelled.)
     4. Model reduction (paper 1, Section IV-C): the fast (``|z| <= fast_modulus``) and the weakly
        observable (relative modal observability from ``r`` below ``weak_observability``)
        filter modes, which approximate the nuisance subspace, are removed by
