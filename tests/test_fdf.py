@@ -626,3 +626,19 @@ def test_output_treatment_of_an_in_range_sensor_fault_keeps_more_residuals():
     # with the output treatment the sensor is simply not read
     np.testing.assert_allclose(do.By[:, 0], 0.0, atol=1e-12)
     np.testing.assert_allclose(do.Dy[:, 0], 0.0, atol=1e-12)
+
+
+def test_internal_form_of_a_filter_reading_a_subset_of_channels():
+    """A filter designed on a sub-model (three outputs of four) composed with the full model equals
+    it composed with the sub-model, with zero response to the unread output's fault."""
+    rng = np.random.default_rng(45)
+    m = _random_discrete(rng, 5, 1, 4, faults=["actuator:u0", "sensor:y0", "sensor:y1", "sensor:y2"])
+    sub = m.select_outputs(["y0", "y2", "y3"])
+    d = design_uio(sub, "actuator:u0", ["sensor:y0"])
+    G_sub = frequency_response(internal_form(d, sub), F_BAND, "f")
+    G_full = frequency_response(internal_form(d, m), F_BAND, "f")
+    np.testing.assert_allclose(G_full, G_sub, atol=1e-12 * np.max(np.abs(G_sub)))
+    assert np.max(np.abs(G_full[:, :, 2])) == 0.0  # the fault on y1, which the filter does not read
+    assert np.max(np.abs(G_full[:, :, 1])) <= 1e-12 * np.max(np.abs(G_full[:, :, 0]))
+    with pytest.raises(ModelError):
+        internal_form(d, LinearFaultModel(m.A, m.B, m.C, dt=m.dt, outputs=["a", "b", "c", "d"]))

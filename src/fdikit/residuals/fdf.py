@@ -1098,8 +1098,9 @@ def internal_form(design: FilterDesign, model: LinearFaultModel) -> LinearFaultM
         [x; xi][k+1] = [[A, 0], [By C, Af]] [x; xi] + [B_g; By D_g (+ Bu)] v_g
         r            = [Dy C, Cf] [x; xi] + (Dy D_g (+ Du)) v_g
 
-    (``Bu``, ``Du`` only for the controls). Returns a :class:`LinearFaultModel` with the model's
-    input groups and the residual channels as outputs.
+    (``Bu``, ``Du`` only for the controls). The design may read a subset of the model's channels
+    (matched by name). Returns a :class:`LinearFaultModel` with the model's input groups and
+    the residual channels as outputs.
 
     Examples
     --------
@@ -1112,18 +1113,28 @@ def internal_form(design: FilterDesign, model: LinearFaultModel) -> LinearFaultM
     (True, True)
     """
     md = _discrete(model, design.dt)
-    if md.outputs != design.y_names or md.inputs != design.u_names:
-        raise ModelError(f"model channels (inputs {md.inputs}, outputs {md.outputs}) differ from the "
-                         f"design's ({design.u_names}, {design.y_names})")
+    missing = [s for s in design.y_names if s not in md.outputs] + \
+        [s for s in design.u_names if s not in md.inputs]
+    if missing:
+        raise ModelError(f"the design reads channels {missing} that model {md.name!r} does not have "
+                         f"(inputs {md.inputs}, outputs {md.outputs})")
+    # the filter's gains on the model's channels (zero columns for channels it does not read)
+    By = np.zeros((design.order, md.n_outputs))
+    Dy = np.zeros((len(design.residual_names), md.n_outputs))
+    By[:, md.output_index(design.y_names)], Dy[:, md.output_index(design.y_names)] = design.By, design.Dy
+    iu = [md.inputs.index(s) for s in design.u_names]
+    Bu = np.zeros((design.order, len(md.inputs)))
+    Du = np.zeros((len(design.residual_names), len(md.inputs)))
+    Bu[:, iu], Du[:, iu] = design.Bu, design.Du
     n, nf = md.n_states, design.order
-    A = np.block([[md.A, np.zeros((n, nf))], [design.By @ md.C, design.A]])
-    C = np.hstack([design.Dy @ md.C, design.C])
+    A = np.block([[md.A, np.zeros((n, nf))], [By @ md.C, design.A]])
+    C = np.hstack([Dy @ md.C, design.C])
     groups = {}
     for g in GROUPS:
         Bg, Dg = md.B_of(g), md.D_of(g)
-        Bo, Do = design.By @ Dg, design.Dy @ Dg
+        Bo, Do = By @ Dg, Dy @ Dg
         if g == "u":
-            Bo, Do = Bo + design.Bu, Do + design.Du
+            Bo, Do = Bo + Bu, Do + Du
         groups[g] = (np.vstack([Bg, Bo]), Do)
     states = [*md.states, *(f"xi{i}" for i in range(nf))]
     return md.with_matrices(A, C, groups, states=states, outputs=design.residual_names)
