@@ -129,9 +129,11 @@ class DriveController:
     """Speed and path controller of the automated car, vectorised over runs.
 
     Speed: PI on the speed error (speed measured from the rear, undriven wheel-speed sensors),
-    giving a desired acceleration ``a_des`` (clipped to +-6 m/s^2); throttle = trim throttle at the
-    reference speed + ``a_des / g_thr`` when ``a_des`` is above the coasting deceleration, brake
-    pressure = ``(a_coast - a_des) * m r_w / (k_bf + k_br)`` below it. Path: steering =
+    giving a desired acceleration ``a_des`` (an internal command, clipped to +-10 m/s^2);
+    throttle = trim throttle at the reference speed + ``a_des / g_thr`` (``g_thr``: acceleration
+    per degree of throttle near cruise, from the trims on a 1 % slope) when ``a_des`` is above the
+    coasting deceleration, brake pressure = ``(a_coast - a_des) * m r_w / (k_bf + k_br)`` below it;
+    the integrator is frozen while the acting actuator saturates (anti-windup). Path: steering =
     curvature feed-forward ``kappa (L + K_us v^2)`` - ``k_y e_y`` - ``k_psi e_psi`` - ``k_i int e_y``
     with gains giving the kinematic path-error dynamics (``e_y' = v e_psi``,
     ``e_psi' = v delta / L - v kappa``) the characteristic polynomial
@@ -188,13 +190,18 @@ class DriveController:
         v = self.r_w * y[:, 4] / 2.0  # rear wheel-speed sum -> speed
         v_ref = float(self.speed_ref(t))
         e = v_ref - v
-        a_des = np.clip(self.kp * e + self.ki * self._i, -6.0, 6.0)
-        # anti-windup: integrate only when not saturated
-        self._i += np.where(np.abs(a_des) < 6.0, e * self.dt, 0.0)
+        a_des = np.clip(self.kp * e + self.ki * self._i, -10.0, 10.0)
         thr_ff = np.interp(v_ref, self._ff_v, self._ff_thr)
-        thr = np.clip(thr_ff + a_des / self.acc_per_deg, 0.0, 83.0)
-        brake = np.clip((self.a_coast - a_des) * self.brake_gain, 0.0, 10.0)
+        thr_raw = thr_ff + a_des / self.acc_per_deg
+        thr = np.clip(thr_raw, 0.0, 83.0)
+        brake_raw = (self.a_coast - a_des) * self.brake_gain
+        brake = np.clip(brake_raw, 0.0, 10.0)
         thr = np.where(brake > 0, 0.0, thr)
+        # anti-windup (conditional integration): freeze the integrator while the actuator that
+        # should act is saturated in the direction of the error
+        saturated = ((e > 0) & ((thr_raw >= 83.0) | (a_des >= 10.0))) | ((e < 0) & ((brake_raw >= 10.0)
+                                                                                  | (a_des <= -10.0)))
+        self._i += np.where(saturated, 0.0, e * self.dt)
         e_y, e_psi = y[:, 11], y[:, 12]
         kappa = self._kappa(y)
         vv = np.maximum(v, 3.0)
