@@ -80,7 +80,17 @@ def test_diagnose_ml_matches_brute_force():
     assert tie[np.arange(len(best)), best].all()
     for o, b in zip(outcomes, best):
         lik = [np.prod([pi if oi else 1 - pi for pi, oi in zip(row, o)]) for row in p]
+        # Go path: all tests pass -> F0; otherwise the most likely *fault*
+        assert b == (0 if not o.any() else 1 + int(np.argmax(lik[1:])))
+    best, _ = diagnose_ml(outcomes, p, ["F0", "a", "b", "c"], nominal=None)
+    for o, b in zip(outcomes, best):
+        lik = [np.prod([pi if oi else 1 - pi for pi, oi in zip(row, o)]) for row in p]
         assert b == int(np.argmax(lik))
+    # an undetectable fault (learned firing rates below the nominal false-alarm rates) must not
+    # take the all-pass runs from "system OK"
+    q = np.array([[1e-4, 5e-4], [0.0, 0.0], [0.9, 0.9]])
+    best, _ = diagnose_ml(np.zeros((3, 2), bool), q, ["F0", "F5", "F1"])
+    assert best.tolist() == [0, 0, 0]
     with pytest.raises(DataError):
         diagnose_ml(outcomes, p[:, :2], ["F0", "a", "b", "c"])
 

@@ -30,7 +30,8 @@ alarm fired anywhere in the 12.5 s record; Pd/Pf and the binary D-matrix come fr
 :meth:`fdikit.isolate.DMatrix.from_outcomes`. The decision logic available now (the optimal
 diagnostic tree and the SVM tests S_Kf/S_Iw come with the isolation issue) is the maximum-
 likelihood fault given the five outcomes, with the learned (Pd, Pf) as independent test
-reliabilities and equal prior probabilities of the classes. Sensitivity is the fraction of
+reliabilities and equal prior probabilities of the faults, after the Go-path rule "no test
+fired: system OK" (:func:`diagnose_ml`). Sensitivity is the fraction of
 faulty runs diagnosed correctly (``sensitivity``: up to the ambiguity groups of the learned
 D-matrix; ``sensitivity_exact``: the class itself), specificity the fraction of nominal runs
 diagnosed "F0" (paper, Section VII).
@@ -343,41 +344,59 @@ def design_tests(specs: Sequence[TestSpec] | None = None, *, design_runs: int = 
     return bank
 
 
-def diagnose_ml(fired: np.ndarray, fail_prob: np.ndarray,
-                classes: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
-    """Maximum-likelihood class of each run from binary test outcomes and test reliabilities.
+def diagnose_ml(fired: np.ndarray, fail_prob: np.ndarray, classes: Sequence[str], *,
+                nominal: str | None = "F0") -> tuple[np.ndarray, np.ndarray]:
+    """Diagnosis from binary test outcomes: "system OK" when every test passes, else the most likely fault.
 
-    ``log P(o | i) = sum_j o_j log p_ij + (1 - o_j) log(1 - p_ij)`` with ``p_ij`` the probability
-    that test ``j`` fires under class ``i`` (clipped to [1e-6, 1 - 1e-6]); equal priors.
+    A run in which no test fired is diagnosed ``nominal`` (the Go path of the paper's diagnostic
+    tree, Section VII). Otherwise the diagnosis is the fault class (``nominal`` excluded) of
+    maximum likelihood ``log P(o | i) = sum_j o_j log p_ij + (1 - o_j) log(1 - p_ij)``, with
+    ``p_ij`` the probability that test ``j`` fires under class ``i`` (clipped to [1e-6, 1 - 1e-6])
+    and equal priors. (Without the Go-path rule, an undetectable fault whose learned firing
+    probabilities are a hair below the nominal false-alarm rates would win every all-pass run.)
 
     Parameters
     ----------
     fired : bool array (runs, n_tests)
     fail_prob : array (n_classes, n_tests)
     classes : sequence of str
+    nominal : str or None
+        The no-fault class; None: plain maximum likelihood over every class.
 
     Returns
     -------
     best : ndarray of int (runs,)
-        Index of the most likely class (first on ties).
+        Index of the diagnosed class (first on ties).
     tie : ndarray of bool (runs, n_classes)
-        Classes whose likelihood equals the best (to 1e-9).
+        Candidate classes whose likelihood equals the best (to 1e-9); only ``nominal`` for
+        all-pass runs.
 
     Examples
     --------
     >>> import numpy as np
     >>> p = np.array([[0.01, 0.01], [0.99, 0.01], [0.99, 0.99]])
-    >>> best, _ = diagnose_ml(np.array([[0, 0], [1, 0], [1, 1]], bool), p, ["F0", "A", "B"])
+    >>> best, _ = diagnose_ml(np.array([[0, 0], [1, 0], [1, 1], [0, 1]], bool), p, ["F0", "A", "B"])
     >>> best.tolist()
-    [0, 1, 2]
+    [0, 1, 2, 2]
     """
     o = np.asarray(fired, float)
     p = np.clip(np.asarray(fail_prob, float), 1e-6, 1 - 1e-6)
+    classes = list(classes)
     if o.ndim != 2 or p.ndim != 2 or o.shape[1] != p.shape[1] or p.shape[0] != len(classes):
         raise DataError(f"outcomes {o.shape} and reliabilities {p.shape} do not match {len(classes)} classes")
     ll = o @ np.log(p).T + (1 - o) @ np.log1p(-p).T
+    if nominal is not None:
+        if nominal not in classes:
+            raise DataError(f"nominal class {nominal!r} not among {classes}")
+        i0 = classes.index(nominal)
+        ll[:, i0] = -np.inf
+        ok = ~o.any(axis=1)
     best = ll.argmax(axis=1)
     tie = ll >= ll.max(axis=1, keepdims=True) - 1e-9
+    if nominal is not None:
+        best[ok] = i0
+        tie[ok] = False
+        tie[ok, i0] = True
     return best, tie
 
 
