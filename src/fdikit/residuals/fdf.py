@@ -64,6 +64,7 @@ from typing import Any
 
 import numpy as np
 import scipy.linalg as sla
+from numba import njit
 
 from ..errors import ConditionError, ModelError
 from ..model.linear import GROUPS, LinearFaultModel
@@ -1027,11 +1028,51 @@ def residual_covariance(design: FilterDesign, model: LinearFaultModel, group: st
 
 
 # ---------------------------------------------------------------------------------- runtime
+@njit(cache=True)
+def _advance_row(xi, v, A, Bv, C, Dv, r, tmp):  # pragma: no cover - compiled
+    """One sample of one run: r = C xi + Dv v; xi <- A xi + Bv v (in place; tmp scratch (nf,))."""
+    nf, m, q = A.shape[0], v.shape[0], C.shape[0]
+    for a in range(q):
+        acc = 0.0
+        for j in range(nf):
+            acc += C[a, j] * xi[j]
+        for j in range(m):
+            acc += Dv[a, j] * v[j]
+        r[a] = acc
+    for a in range(nf):
+        acc = 0.0
+        for j in range(nf):
+            acc += A[a, j] * xi[j]
+        for j in range(m):
+            acc += Bv[a, j] * v[j]
+        tmp[a] = acc
+    for a in range(nf):
+        xi[a] = tmp[a]
+
+
+@njit(cache=True)
+def _step_kernel(xi, v, A, Bv, C, Dv, r):  # pragma: no cover - compiled
+    """All runs, one sample: xi (R, nf) in place, v (R, m), r (R, q)."""
+    tmp = np.empty(A.shape[0])
+    for i in range(xi.shape[0]):
+        _advance_row(xi[i], v[i], A, Bv, C, Dv, r[i], tmp)
+
+
+@njit(cache=True)
+def _run_kernel(xi, v, A, Bv, C, Dv, out):  # pragma: no cover - compiled
+    """All runs, all samples: v (R, T, m), out (R, T, q); the same row arithmetic as the step."""
+    tmp = np.empty(A.shape[0])
+    for i in range(v.shape[0]):
+        for k in range(v.shape[1]):
+            _advance_row(xi[i], v[i, k], A, Bv, C, Dv, out[i, k], tmp)
+
+
 class FaultDetectionFilter(ResidualGenerator):
     """Runtime of a :class:`FilterDesign`: batch ``run`` and streaming ``reset``/``step``.
 
-    Both paths perform the same floating-point operations in the same order (the same matrix
-    products on ``(runs, .)`` blocks, sample by sample), so their outputs are bitwise equal.
+    Both paths call the same compiled row update (numba, strict IEEE arithmetic in a fixed
+    order), sample by sample, so their outputs are bitwise equal; the batch path loops over
+    runs and samples inside compiled code.
 
     Examples
     --------
@@ -1051,28 +1092,25 @@ class FaultDetectionFilter(ResidualGenerator):
         self.output_names = list(design.residual_names)
         nf = design.order
         self.x0 = np.zeros(nf) if x0 is None else np.asarray(x0, float).reshape(nf)
-        self._At, self._Ct = np.ascontiguousarray(design.A.T), np.ascontiguousarray(design.C.T)
-        self._Bvt = np.ascontiguousarray(np.hstack([design.Bu, design.By]).T)
-        self._Dvt = np.ascontiguousarray(np.hstack([design.Du, design.Dy]).T)
+        self._A = np.ascontiguousarray(design.A, dtype=float)
+        self._C = np.ascontiguousarray(design.C, dtype=float)
+        self._Bv = np.ascontiguousarray(np.hstack([design.Bu, design.By]), dtype=float)
+        self._Dv = np.ascontiguousarray(np.hstack([design.Du, design.Dy]), dtype=float)
         self.reset(1)
 
     def reset(self, runs: int = 1) -> None:
-        self._xi = np.tile(self.x0, (runs, 1))
-
-    def _advance(self, v: np.ndarray) -> np.ndarray:
-        xi = self._xi
-        r = xi @ self._Ct + v @ self._Dvt
-        self._xi = xi @ self._At + v @ self._Bvt
-        return r
+        self._xi = np.ascontiguousarray(np.tile(self.x0, (runs, 1)))
 
     def _step(self, u: np.ndarray, y: np.ndarray) -> np.ndarray:
         if u.shape[0] != self._xi.shape[0]:
             raise ModelError(f"sample has {u.shape[0]} runs but the filter was reset for "
                              f"{self._xi.shape[0]}")
-        return self._advance(np.concatenate((u, y), axis=1))
+        r = np.empty((u.shape[0], self._C.shape[0]))
+        _step_kernel(self._xi, np.concatenate((u, y), axis=1), self._A, self._Bv, self._C, self._Dv, r)
+        return r
 
     def run(self, signals: Signals) -> Signals:
-        """Residuals over a record (all runs at once; time recursion sample by sample)."""
+        """Residuals over a record (all runs at once, compiled time recursion)."""
         u, y = self._inputs(signals)
         if signals.n_samples > 1:
             dts = np.diff(signals.t)
@@ -1080,12 +1118,10 @@ class FaultDetectionFilter(ResidualGenerator):
                 raise ModelError(f"signals are sampled at {signals.dt:g} s but the filter was designed "
                                  f"for dt = {self.design.dt:g} s")
         self.reset(signals.runs)
-        # (T, runs, m) contiguous so that each sample is the same (runs, m) block as in step()
-        v = np.ascontiguousarray(np.concatenate([u, y], axis=2).transpose(1, 0, 2))
-        out = np.empty((signals.n_samples, signals.runs, len(self.output_names)))
-        for k in range(signals.n_samples):
-            out[k] = self._advance(v[k])
-        return Signals(signals.t, out.transpose(1, 0, 2), self.output_names, check=False)
+        v = np.ascontiguousarray(np.concatenate([u, y], axis=2), dtype=float)
+        out = np.empty((signals.runs, signals.n_samples, len(self.output_names)))
+        _run_kernel(self._xi, v, self._A, self._Bv, self._C, self._Dv, out)
+        return Signals(signals.t, out, self.output_names, check=False)
 
 
 # ---------------------------------------------------------------------------------- internal form
