@@ -642,3 +642,11 @@ def test_internal_form_of_a_filter_reading_a_subset_of_channels():
     assert np.max(np.abs(G_full[:, :, 1])) <= 1e-12 * np.max(np.abs(G_full[:, :, 0]))
     with pytest.raises(ModelError):
         internal_form(d, LinearFaultModel(m.A, m.B, m.C, dt=m.dt, outputs=["a", "b", "c", "d"]))
+
+
+def test_step_rejects_a_run_count_other_than_reset():
+    m = _sensor_nuisance_system()
+    gen = FaultDetectionFilter(design_optimal_fdf(m, "actuator:u0", ["sensor:y0"], gamma=1e-6))
+    gen.reset(2)
+    with pytest.raises(ModelError):
+        gen.step(np.zeros((3, 2)), np.zeros((3, 3)))
