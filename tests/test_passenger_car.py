@@ -527,3 +527,25 @@ def test_nonlinearity_direction(lin20):
     assert nd.reduced.states == LONGITUDINAL_REDUCED
     # the direction really is the mismatch: projecting it out of the mismatch leaves < 20 % energy
     assert 1 - nd.energy.sum() < 0.2
+
+
+def test_parity_outputs_and_the_papers_fault_list():
+    """Every fault of the paper is a named fault of the linear models; with the parity outputs the
+    throttle and brake measurements give the two parity equations of Section IV-D exactly:
+    throttle_meas - throttle = 0 and brake_meas' = (brake - brake_meas) / tau_b."""
+    from fdikit.plants.passenger_car import FAULTS
+
+    lin = linearize_car(20.0, parity_outputs=True)
+    lon, lat = lin.longitudinal_reduced, lin.lateral_reduced
+    assert lon.outputs == [*LONGITUDINAL_OUTPUTS, "throttle_meas", "brake_meas"]
+    paper = {"sensor:w_engine", "sensor:a_x", "sensor:w_front_sum", "sensor:w_rear_sum", "sensor:p_man",
+             "sensor:throttle_meas", "sensor:brake_meas", "actuator:throttle", "actuator:brake",
+             "actuator:steer", "sensor:a_y", "sensor:yaw_rate", "sensor:w_front_diff", "sensor:w_rear_diff"}
+    assert paper == set(FAULTS)
+    assert paper == set(lon.fault_names) | set(lat.fault_names)
+    i_t, i_b = lon.outputs.index("throttle_meas"), lon.outputs.index("brake_meas")
+    assert np.allclose(lon.C[i_t], 0.0) and lon.D[i_t].tolist() == pytest.approx([1.0, 0.0])
+    assert lon.C[i_b, lon.states.index("p_b")] == pytest.approx(1.0)
+    tau = PassengerCar().params["tau_b"]
+    assert lon.A[lon.states.index("p_b"), lon.states.index("p_b")] == pytest.approx(-1 / tau, rel=1e-6)
+    assert lon.B[lon.states.index("p_b")].tolist() == pytest.approx([0.0, 1 / tau], rel=1e-6, abs=1e-9)

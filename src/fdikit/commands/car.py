@@ -35,6 +35,8 @@ def register(subparsers) -> argparse.ArgumentParser:
                    "states (default); residualisation of the named fast states; or balanced "
                    "residualisation")
     s.add_argument("--f-max", type=float, default=5.0, help="upper frequency of the error report, Hz")
+    s.add_argument("--parity", action="store_true",
+                   help="add the throttle and brake measurements to the longitudinal outputs")
     s.add_argument("--json", action="store_true", help="print one JSON object")
     s.set_defaults(func=_linearize)
 
@@ -53,7 +55,7 @@ def _linearize(args) -> int:
     from ..cli import print_json
     from ..plants.passenger_car import linearize_car
 
-    lin = linearize_car(args.speed, method=args.method, f_max=args.f_max)
+    lin = linearize_car(args.speed, method=args.method, f_max=args.f_max, parity_outputs=args.parity)
     out = lin.summary()
     if args.json:
         print_json(out)

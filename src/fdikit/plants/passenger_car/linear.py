@@ -300,7 +300,7 @@ class CarLinearization:
 
 
 def linearize_car(speed: float = 20.0, *, car: PassengerCar | None = None, method: str = "modal",
-                  f_max: float = 5.0) -> CarLinearization:
+                  f_max: float = 5.0, parity_outputs: bool = False) -> CarLinearization:
     """Linearise the car about straight driving on a flat road at ``speed`` and reduce it.
 
     Parameters
@@ -319,6 +319,10 @@ def linearize_car(speed: float = 20.0, *, car: PassengerCar | None = None, metho
         All three keep the DC gain exactly.
     f_max : float
         Upper frequency (Hz) of the reported frequency-response error.
+    parity_outputs : bool
+        Also give the longitudinal block the throttle and brake measurements (``throttle_meas``,
+        ``brake_meas``) and their sensor faults, for the parity equations of Section IV-D. The
+        paper's filters use the 5 outputs without them (default).
 
     Returns
     -------
@@ -335,10 +339,11 @@ def linearize_car(speed: float = 20.0, *, car: PassengerCar | None = None, metho
     car = car or PassengerCar()
     x0, u0 = car.cruise(speed)
     full = linearize(car, x0, u0, faults=SENSOR_FAULTS + ACTUATOR_FAULTS, name=f"car @ {speed:g} m/s")
+    lon_outputs = LONGITUDINAL_OUTPUTS + (["throttle_meas", "brake_meas"] if parity_outputs else [])
     long_faults = ([f"actuator:{u}" for u in LONGITUDINAL_INPUTS]
-                   + [f"sensor:{y}" for y in LONGITUDINAL_OUTPUTS])
+                   + [f"sensor:{y}" for y in lon_outputs])
     lat_faults = [f"actuator:{u}" for u in LATERAL_INPUTS] + [f"sensor:{y}" for y in LATERAL_OUTPUTS]
-    lon = block(full, LONGITUDINAL_STATES, LONGITUDINAL_INPUTS, LONGITUDINAL_OUTPUTS, ["slope"], long_faults,
+    lon = block(full, LONGITUDINAL_STATES, LONGITUDINAL_INPUTS, lon_outputs, ["slope"], long_faults,
                 name=f"car longitudinal @ {speed:g} m/s")
     lat = block(full, LATERAL_STATES, LATERAL_INPUTS, LATERAL_OUTPUTS, (), lat_faults,
                 name=f"car lateral @ {speed:g} m/s")
