@@ -399,6 +399,10 @@ def test_optimal_fdf_conditions():
     assert ei.value.condition == "target visibility"
     with pytest.raises(ModelError):
         design_optimal_fdf(m, "actuator:u0", ["sensor:y0"], gamma=0.0)
+    with pytest.raises(ModelError):
+        design_optimal_fdf(m, "actuator:u0", ["actuator:u0"])
+    with pytest.raises(ModelError):
+        design_uio(m, "actuator:u0", ["nonexistent"])
 
 
 def test_continuous_model_is_discretised():

@@ -364,6 +364,9 @@ def _target_nuisance(md: LinearFaultModel, target: Any, nuisance: Any, sensor: s
     nuisance = [nuisance] if isinstance(nuisance, str) else list(nuisance or [])
     if not target:
         raise ModelError("a fault detection filter needs a target fault")
+    both = [t for t in target if isinstance(t, str) and t in [s for s in nuisance if isinstance(s, str)]]
+    if both:
+        raise ModelError(f"faults {both} are listed both as target and as nuisance")
     E1, Y1 = fault_direction_split(md, target, sensor=sensor)
     E2, Y2 = fault_direction_split(md, nuisance, sensor=sensor) if nuisance else \
         (np.zeros((md.n_states, 0)), np.zeros((md.n_outputs, 0)))
