@@ -150,7 +150,8 @@ def channel_response_error(full: LinearFaultModel, reduced: LinearFaultModel, *,
         e_ij = max_{0 <= w <= 2 pi f_max} |G_ij(jw) - Gr_ij(jw)| / max(|G_ij(jw)|, floor * max_w |G_ij|)
 
     (the floor keeps a channel's own transmission zeros, e.g. the zero DC gain from throttle to
-    the accelerometer, from dividing by zero).
+    the accelerometer, from dividing by zero; a channel that is structurally zero is measured
+    against 1e-9 of its output's largest response).
 
     Returns
     -------
@@ -183,7 +184,11 @@ def channel_response_error(full: LinearFaultModel, reduced: LinearFaultModel, *,
     G = resp(full.A, Bf, Cf, Df)
     Gr = resp(reduced.A, Br, reduced.C, Dr)
     mag = np.abs(G)
-    den = np.maximum(mag, floor * mag.max(axis=0, keepdims=True) + 1e-300)
+    # floors: a share of the channel's own peak (its transmission zeros), and 1e-9 of the output's
+    # largest response over all inputs (channels that are structurally zero, e.g. brake -> throttle
+    # sensor)
+    row = mag.max(axis=(0, 2), keepdims=True)
+    den = np.maximum(np.maximum(mag, floor * mag.max(axis=0, keepdims=True)), 1e-9 * row + 1e-300)
     rel = np.abs(G - Gr) / den
     per = rel.max(axis=0)
     over = np.flatnonzero((rel > 0.05).any(axis=(1, 2)))
