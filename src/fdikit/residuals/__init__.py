@@ -1,5 +1,40 @@
-"""Residual generators: observers, parity equations, fault detection filters, sliding mode observers."""
+"""Residual generators: observers, parity equations, fault detection filters, sliding mode observers.
 
-from .observer import ObserverDesign, ObserverResidual, design_observer_residual, internal_form
+Every linear design returns plain matrices (its implementation form), an info record, and can be
+checked exactly: :func:`internal_form` composes any design with a model and returns the transfer
+from every input group (controls, disturbances, faults, noise) to the residual.
+"""
 
-__all__ = ["ObserverDesign", "ObserverResidual", "design_observer_residual", "internal_form"]
+from .fdf import (
+    FaultDetectionFilter,
+    FilterDesign,
+    design_filter_set,
+    design_optimal_fdf,
+    design_uio,
+    fault_detection_filter,
+    fault_direction_split,
+    fault_directions,
+    internal_form,
+    reduce_filter,
+    residual_covariance,
+    stack_designs,
+)
+from .observer import ObserverDesign, ObserverResidual, design_observer_residual
+
+__all__ = [
+    "FaultDetectionFilter",
+    "FilterDesign",
+    "ObserverDesign",
+    "ObserverResidual",
+    "design_filter_set",
+    "design_observer_residual",
+    "design_optimal_fdf",
+    "design_uio",
+    "fault_detection_filter",
+    "fault_direction_split",
+    "fault_directions",
+    "internal_form",
+    "reduce_filter",
+    "residual_covariance",
+    "stack_designs",
+]

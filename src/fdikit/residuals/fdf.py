@@ -1128,8 +1128,11 @@ class FaultDetectionFilter(ResidualGenerator):
 
 
 # ---------------------------------------------------------------------------------- internal form
-def internal_form(design: FilterDesign, model: LinearFaultModel) -> LinearFaultModel:
+def internal_form(design: Any, model: LinearFaultModel) -> LinearFaultModel:
     """Transfer from every input group of ``model`` to the residual, by composing plant and filter.
+
+    ``design`` is a :class:`FilterDesign` or any design with an ``as_filter()`` method (for
+    example :class:`~fdikit.residuals.ObserverDesign`).
 
     Plant ``x[k+1] = A x + sum_g B_g v_g``, ``y = C x + sum_g D_g v_g`` (discretised at the
     design's ``dt`` when continuous) in series with the filter; composite state ``[x; xi]``::
@@ -1151,6 +1154,8 @@ def internal_form(design: FilterDesign, model: LinearFaultModel) -> LinearFaultM
     >>> bool(np.abs(G[:, 1]).max() < 1e-12), bool(np.abs(G[:, 0]).max() > 0.1)
     (True, True)
     """
+    if not isinstance(design, FilterDesign) and hasattr(design, "as_filter"):
+        design = design.as_filter()
     md = _discrete(model, design.dt)
     missing = [s for s in design.y_names if s not in md.outputs] + \
         [s for s in design.u_names if s not in md.inputs]

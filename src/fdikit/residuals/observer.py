@@ -11,8 +11,9 @@ non-control input group g (disturbances, faults, noise): the controls cancel exa
 reach the residual through ``C (zI - A + LC)^-1 (B_f - L D_f) + D_f``.
 
 Design (:func:`design_observer_residual`) returns plain matrices (:class:`ObserverDesign`); the
-runtime (:class:`ObserverResidual`) only multiplies. :func:`internal_form` recomputes the
-transfer from every input group of a model to the residual by composing plant and observer.
+runtime (:class:`ObserverResidual`) only multiplies. :meth:`ObserverDesign.as_filter` gives the
+generic filter form, so :func:`fdikit.residuals.internal_form` recomputes the transfer from every
+input group of a model to the residual by composing plant and observer.
 """
 
 from __future__ import annotations
@@ -25,11 +26,12 @@ import scipy.linalg as sla
 from scipy.signal import place_poles
 
 from ..errors import ConditionError, ModelError
-from ..model.linear import GROUPS, LinearFaultModel
+from ..model.linear import LinearFaultModel
 from ..monitor.core import ResidualGenerator
 from ..signals import Signals
+from .fdf import FilterDesign, _discrete
 
-__all__ = ["ObserverDesign", "ObserverResidual", "design_observer_residual", "internal_form"]
+__all__ = ["ObserverDesign", "ObserverResidual", "design_observer_residual"]
 
 
 @dataclass
@@ -63,15 +65,15 @@ class ObserverDesign:
     residual_names: list[str]
     info: dict[str, Any] = field(default_factory=dict)
 
-
-def _discrete(model: LinearFaultModel, dt: float | None) -> LinearFaultModel:
-    if model.is_discrete:
-        if dt is not None and abs(dt - model.dt) > 1e-12 * max(1.0, model.dt):
-            raise ModelError(f"model is discrete with dt = {model.dt}, cannot design for dt = {dt}")
-        return model
-    if dt is None:
-        raise ModelError("a continuous model needs the sample time dt of the observer")
-    return model.discretize(dt)
+    def as_filter(self) -> FilterDesign:
+        """The same generator in the generic filter form ``xi+ = Af xi + Bu u + By y``,
+        ``r = Cf xi + Du u + Dy y``: Af = A - L C, Bu = B - L D, By = L, Cf = -C, Du = -D, Dy = I."""
+        p = self.C.shape[0]
+        return FilterDesign(
+            A=self.A - self.L @ self.C, Bu=self.B - self.L @ self.D, By=self.L.copy(), C=-self.C,
+            Du=-self.D, Dy=np.eye(p), dt=self.dt, u_names=list(self.u_names), y_names=list(self.y_names),
+            residual_names=list(self.residual_names), info=dict(self.info),
+        )
 
 
 def design_observer_residual(
@@ -220,32 +222,3 @@ class ObserverResidual(ResidualGenerator):
             out[:, k] = r
         self._xh = xh
         return Signals(signals.t, out, self.output_names, check=False)
-
-
-def internal_form(design: ObserverDesign, model: LinearFaultModel) -> LinearFaultModel:
-    """Transfer from every input group of ``model`` to the residual, by composing plant and observer.
-
-    The plant (``model``, discretised at the design's ``dt`` when continuous) and the observer
-    are connected in series; the composite state is ``[x; xh]``. The result is a
-    :class:`LinearFaultModel` with the plant's input groups and the residual channels as
-    outputs. Exact decoupling of the controls shows as ``B_u = 0`` and ``D_u = 0``.
-    """
-    md = _discrete(model, design.dt)
-    if md.outputs != design.y_names or md.inputs != design.u_names:
-        raise ModelError(f"model channels (inputs {md.inputs}, outputs {md.outputs}) differ from the "
-                         f"design's ({design.u_names}, {design.y_names})")
-    n, no = md.n_states, design.A.shape[0]
-    LC = design.L @ md.C
-    A = np.block([[md.A, np.zeros((n, no))], [LC, design.A - design.L @ design.C]])
-    C = np.hstack([md.C, -design.C])
-    groups = {}
-    for g in GROUPS:
-        Bg, Dg = md.B_of(g), md.D_of(g)
-        Bo = design.L @ Dg
-        Do = Dg.copy()
-        if g == "u":
-            Bo = Bo + design.B - design.L @ design.D
-            Do = Do - design.D
-        groups[g] = (np.vstack([Bg, Bo]), Do)
-    states = [*md.states, *(f"xh_{s}" for s in md.states)] if no == n else None
-    return md.with_matrices(A, C, groups, states=states, outputs=design.residual_names)
