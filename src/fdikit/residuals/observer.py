@@ -27,9 +27,7 @@ from scipy.signal import place_poles
 
 from ..errors import ConditionError, ModelError
 from ..model.linear import LinearFaultModel
-from ..monitor.core import ResidualGenerator
-from ..signals import Signals
-from .fdf import FilterDesign, _discrete
+from .fdf import FaultDetectionFilter, FilterDesign, _discrete
 
 __all__ = ["ObserverDesign", "ObserverResidual", "design_observer_residual"]
 
@@ -165,8 +163,10 @@ def design_observer_residual(
     )
 
 
-class ObserverResidual(ResidualGenerator):
-    """Runtime of an :class:`ObserverDesign`: batch ``run`` and streaming ``reset``/``step``.
+class ObserverResidual(FaultDetectionFilter):
+    """Runtime of an :class:`ObserverDesign`: its filter form (:meth:`ObserverDesign.as_filter`)
+    run by the compiled :class:`~fdikit.residuals.FaultDetectionFilter` (batch ``run`` and
+    streaming ``reset``/``step``, bitwise equal). The filter state is the estimate ``xh``.
 
     Examples
     --------
@@ -180,45 +180,5 @@ class ObserverResidual(ResidualGenerator):
     """
 
     def __init__(self, design: ObserverDesign, x0: Any = None):
-        self.design = design
-        self.u_names = list(design.u_names)
-        self.y_names = list(design.y_names)
-        self.output_names = list(design.residual_names)
-        n = design.A.shape[0]
-        self.x0 = np.zeros(n) if x0 is None else np.asarray(x0, float).reshape(n)
-        # transposed copies for row-vector (runs, n) arithmetic
-        self._At, self._Bt, self._Ct = design.A.T.copy(), design.B.T.copy(), design.C.T.copy()
-        self._Dt, self._Lt = design.D.T.copy(), design.L.T.copy()
-        self.reset(1)
-
-    def reset(self, runs: int = 1) -> None:
-        self._xh = np.tile(self.x0, (runs, 1))
-
-    def _step(self, u: np.ndarray, y: np.ndarray) -> np.ndarray:
-        if u.shape[0] != self._xh.shape[0]:
-            raise ModelError(f"sample has {u.shape[0]} runs but the observer was reset for "
-                             f"{self._xh.shape[0]}")
-        r = y - self._xh @ self._Ct - u @ self._Dt
-        self._xh = self._xh @ self._At + u @ self._Bt + r @ self._Lt
-        return r
-
-    def run(self, signals: Signals) -> Signals:
-        """Residuals over a record, vectorised over runs (time recursion in a loop)."""
-        u, y = self._inputs(signals)
-        if signals.n_samples > 1:
-            dt = np.diff(signals.t)
-            if np.max(np.abs(dt - self.design.dt)) > 1e-6 * self.design.dt:
-                raise ModelError(f"signals are sampled at {signals.dt:g} s but the observer was "
-                                 f"designed for dt = {self.design.dt:g} s")
-        self.reset(signals.runs)
-        # precompute the known-input terms for all samples at once
-        du = u @ self._Dt
-        bu = u @ self._Bt
-        out = np.empty_like(y)
-        xh = self._xh
-        for k in range(signals.n_samples):
-            r = y[:, k] - xh @ self._Ct - du[:, k]
-            xh = xh @ self._At + bu[:, k] + r @ self._Lt
-            out[:, k] = r
-        self._xh = xh
-        return Signals(signals.t, out, self.output_names, check=False)
+        super().__init__(design.as_filter(), x0)
+        self.observer_design = design
