@@ -78,26 +78,31 @@ _HEURISTICS = {"perfect": ("huffman", "entropy", "mincost", "zero"),
 
 
 # ---------------------------------------------------------------------------------------------- inputs
-def _check_prior(dm: DMatrix, prior) -> np.ndarray:
-    nf = len(dm.faults)
-    if prior is None:
-        return np.full(nf, 1.0 / nf)
-    if isinstance(prior, Mapping):
-        unknown = [k for k in prior if k not in dm.faults]
+def _named_vector(values, names: list[str], what: str, per: str, owner: str) -> np.ndarray:
+    """A finite, non-negative vector with one entry per name, from a mapping or a sequence."""
+    if isinstance(values, Mapping):
+        unknown = [k for k in values if k not in names]
         if unknown:
-            raise DataError(f"prior names {unknown} are not faults of the D-matrix {dm.faults}")
-        missing = [f for f in dm.faults if f not in prior]
+            raise DataError(f"{what} names {unknown} are not {per}s of the D-matrix {names}")
+        missing = [f for f in names if f not in values]
         if missing:
-            raise DataError(f"prior has no probability for faults {missing}")
-        p = np.array([float(prior[f]) for f in dm.faults])
+            raise DataError(f"{what} has no value for {per}s {missing}")
+        v = np.array([float(values[f]) for f in names])
     else:
-        p = np.asarray(prior, float).ravel()
-        if p.shape != (nf,):
-            raise DataError(f"prior has {p.size} entries but the D-matrix has {nf} faults {dm.faults}")
-    bad = ~np.isfinite(p) | (p < 0)
+        v = np.asarray(values, float).ravel()
+        if v.shape != (len(names),):
+            raise DataError(f"{what} has {v.size} entries but the D-matrix has {len(names)} {per}s {names}")
+    bad = ~np.isfinite(v) | (v < 0)
     if np.any(bad):
         i = int(np.argmax(bad))
-        raise DataError(f"prior of fault {dm.faults[i]!r} is {p[i]}; priors must be finite and >= 0")
+        raise DataError(f"{what} of {per} {names[i]!r} is {v[i]}; {owner} must be finite and >= 0")
+    return v
+
+
+def _check_prior(dm: DMatrix, prior) -> np.ndarray:
+    if prior is None:
+        return np.full(len(dm.faults), 1.0 / len(dm.faults))
+    p = _named_vector(prior, list(dm.faults), "prior", "fault", "priors")
     s = float(p.sum())
     if abs(s - 1.0) > 1e-9:
         raise DataError(f"prior probabilities sum to {s:.12g}, not 1 (single-fault assumption: the fault "
@@ -106,26 +111,9 @@ def _check_prior(dm: DMatrix, prior) -> np.ndarray:
 
 
 def _check_cost(dm: DMatrix, cost) -> np.ndarray:
-    nt = len(dm.tests)
     if cost is None:
-        return np.ones(nt)
-    if isinstance(cost, Mapping):
-        unknown = [k for k in cost if k not in dm.tests]
-        if unknown:
-            raise DataError(f"cost names {unknown} are not tests of the D-matrix {dm.tests}")
-        missing = [t for t in dm.tests if t not in cost]
-        if missing:
-            raise DataError(f"cost has no value for tests {missing}")
-        c = np.array([float(cost[t]) for t in dm.tests])
-    else:
-        c = np.asarray(cost, float).ravel()
-        if c.shape != (nt,):
-            raise DataError(f"cost has {c.size} entries but the D-matrix has {nt} tests {dm.tests}")
-    bad = ~np.isfinite(c) | (c < 0)
-    if np.any(bad):
-        j = int(np.argmax(bad))
-        raise DataError(f"cost of test {dm.tests[j]!r} is {c[j]}; test costs must be finite and >= 0")
-    return c
+        return np.ones(len(dm.tests))
+    return _named_vector(cost, list(dm.tests), "cost", "test", "test costs")
 
 
 def _mode(dm: DMatrix, tests_model: str, misdiagnosis_cost) -> tuple[str, float | None]:
