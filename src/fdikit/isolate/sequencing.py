@@ -86,7 +86,8 @@ def _named_vector(values, names: list[str], what: str, per: str, owner: str) -> 
             raise DataError(f"{what} names {unknown} are not {per}s of the D-matrix {names}")
         missing = [f for f in names if f not in values]
         if missing:
-            raise DataError(f"{what} has no value for {per}s {missing}")
+            raise DataError(f"{what} has no {'probability' if what == 'prior' else 'value'} for {per}s "
+                            f"{missing}")
         v = np.array([float(values[f]) for f in names])
     else:
         v = np.asarray(values, float).ravel()
