@@ -111,7 +111,7 @@ OUTPUTS = [
     "brake_meas",  # brake pressure sensor (MPa)
     "a_y",         # lateral accelerometer, specific force along body y (m/s^2)
     "yaw_rate",    # yaw rate sensor (rad/s)
-    "w_front_diff",  # difference FL - FR of the front wheel speed sensors (rad/s)
+    "w_front_diff",  # difference FL - FR of the front wheel speed sensors (rad/s): yaw + load transfer
     "w_rear_diff",   # difference RL - RR of the rear wheel speed sensors (rad/s)
 ]
 LONGITUDINAL_OUTPUTS = ["p_man", "w_engine", "a_x", "w_front_sum", "w_rear_sum"]
@@ -441,9 +441,22 @@ class PassengerCar(NonlinearModel):
         y[:, 6] = p_b
         y[:, 7] = F["a_yb"] + G * np.sin(phi)
         y[:, 8] = r
-        # left/right wheels follow their own wheel-centre speeds (open differential, equal slip)
-        y[:, 9] = -p["t_f"] * r * np.cos(delta) / p["r_w"]
-        y[:, 10] = -p["t_r"] * r / p["r_w"]
+        # left/right wheels roll at their own wheel-centre speed (along the wheel) over their own
+        # effective rolling radius, which shrinks by a third of the extra tyre deflection (radial
+        # tyres, Pacejka 2012 sec. 7.2: r_e ~ r_free - deflection / 3), with the axle's slip ratio:
+        # yaw rate AND load transfer (roll, suspension differences) move the differences
+        v_x, v_y = x[:, 2], x[:, 14]
+        a = p["a"]
+        zu_fl, zu_fr, zu_rl, zu_rr = F["zu"]
+        cd, sd = np.cos(delta), np.sin(delta)
+        side = (v_y + a * r) * sd
+        v_fl = (v_x - 0.5 * p["t_f"] * r) * cd + side
+        v_fr = (v_x + 0.5 * p["t_f"] * r) * cd + side
+        v_rl = v_x - 0.5 * p["t_r"] * r
+        v_rr = v_x + 0.5 * p["t_r"] * r
+        rw = p["r_w"]
+        y[:, 9] = (1.0 + F["kappa_f"]) * (v_fl / (rw + zu_fl / 3.0) - v_fr / (rw + zu_fr / 3.0))
+        y[:, 10] = (1.0 + F["kappa_r"]) * (v_rl / (rw + zu_rl / 3.0) - v_rr / (rw + zu_rr / 3.0))
         return y
 
     # ------------------------------------------------------------------ operating points
