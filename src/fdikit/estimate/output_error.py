@@ -290,7 +290,7 @@ def _weight_root(weight: Any, T: int, M: int) -> np.ndarray:
     if not np.allclose(L, np.swapaxes(L, -1, -2), rtol=1e-10, atol=1e-12):
         raise DataError("weight Lambda must be symmetric")
     w, V = np.linalg.eigh(L)
-    bad = w.min(axis=-1) <= 1e-12 * np.maximum(w.max(axis=-1), 1e-300)
+    bad = w.min(axis=-1) <= 1e-14 * np.maximum(w.max(axis=-1), 1e-300)
     if np.any(bad):
         where = "" if L.ndim == 2 else f" at sample {int(np.argmax(bad))}"
         raise DataError(f"weight Lambda must be positive definite (eq. (45) uses its inverse){where}; "
@@ -529,7 +529,10 @@ def output_error(
                     fun(z)
             z0 = best["z"].copy()
         # strictly inside the bounds for TRF
-        z0 = np.clip(z0, zlo + 1e-10 * np.maximum(1, np.abs(zlo)), zhi - 1e-10 * np.maximum(1, np.abs(zhi)))
+        with np.errstate(invalid="ignore"):  # inf bounds stay inf
+            pad_lo = np.where(np.isfinite(zlo), 1e-10 * np.maximum(1.0, np.abs(zlo)), 0.0)
+            pad_hi = np.where(np.isfinite(zhi), 1e-10 * np.maximum(1.0, np.abs(zhi)), 0.0)
+        z0 = np.clip(z0, zlo + pad_lo, zhi - pad_hi)
         sol = least_squares(fun_cached, z0, jac=jac_cached, bounds=(zlo, zhi), method="trf",
                             x_scale=1.0, ftol=ftol, xtol=xtol, gtol=gtol, max_nfev=max_nfev)
         status, message = int(sol.status), str(sol.message)
