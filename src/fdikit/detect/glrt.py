@@ -155,6 +155,8 @@ class GLRT(ResidualProcessor):
         _glrt_batch(np.ascontiguousarray(x), mu0, 1.0 / (2.0 * sigma2), W, out, bufs, heads, counts)
         return out
 
+    _state_attrs = ("_state", "_k")
+
     def reset(self, runs: int = 1) -> None:
         c = len(self.input_names)
         self._state = (np.zeros((runs, c, self.W)), np.full((runs, c), -1, np.int64),
@@ -202,6 +204,9 @@ class TimeGated(ResidualProcessor):
         self.T = float(T)
         self.output_names = [f"{s}:gated" for s in self.input_names]
         self.reset(1)
+
+    _state_attrs = ("_early", "_t0", "_k")
+    needs_time = True  # the Monitor passes the sample time: step_at(t, r)
 
     def reset(self, runs: int = 1) -> None:
         self._early = np.zeros((runs, len(self.input_names)), bool)

@@ -282,6 +282,8 @@ class MHSSPT(ResidualProcessor):
         _loglik_umg(x3, *self._umg, out)
         return out.reshape((*x.shape[:-1], len(self.hypotheses)))
 
+    _state_attrs = ("_logF", "_k")
+
     def reset(self, runs: int = 1) -> None:
         self._logF = np.full((runs, len(self.hypotheses)), -np.inf)
         self._logF[:, 0] = 0.0

@@ -78,6 +78,8 @@ class Hold(ResidualProcessor):
         self.output_names = [f"{s}:alarm" for s in self.input_names]
         self._count = np.zeros((1, len(self.input_names)), int)
 
+    _state_attrs = ("_count",)
+
     def _exceed(self, r: np.ndarray) -> np.ndarray:
         return (np.abs(r) if self.absolute else r) > self.threshold
 

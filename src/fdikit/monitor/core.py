@@ -23,6 +23,7 @@ import numpy as np
 
 from ..errors import DataError
 from ..signals import Signals, check_finite
+from .state import Stateful, load_state, save_state
 
 __all__ = [
     "Decision",
@@ -45,13 +46,14 @@ def _as_batch(x: Any, n: int, what: str, names: Sequence[str]) -> np.ndarray:
     return x
 
 
-class ResidualGenerator:
+class ResidualGenerator(Stateful):
     """Base class of residual generators (observers, filters, parity equations, SMOs).
 
     Subclasses set ``u_names`` (known-input channels), ``y_names`` (measured channels),
     ``output_names`` (what they produce) and implement :meth:`reset` and :meth:`_step`.
     :meth:`run` defaults to a loop over :meth:`step`; subclasses override it with a vectorised
-    form and a test asserts both agree.
+    form and a test asserts both agree. Subclasses list their streaming state in
+    ``_state_attrs`` (see :class:`~fdikit.monitor.state.Stateful`) for checkpoint and restore.
     """
 
     u_names: list[str]
@@ -87,7 +89,7 @@ class ResidualGenerator:
         return Signals(signals.t, out, self.output_names, self.output_units, check=False)
 
 
-class ResidualProcessor:
+class ResidualProcessor(Stateful):
     """Base class of residual processors (threshold rules, GLRT, CUSUM, MHSSPT).
 
     Subclasses set ``input_names`` and ``output_names`` and implement :meth:`reset` and
@@ -286,7 +288,9 @@ class Monitor:
         pool = dict(zip(self.residual_names, r.T))
         stats = []
         for p in self.processors:
-            s = p.step(np.column_stack([pool[n] for n in p.input_names]))
+            r_in = np.column_stack([pool[n] for n in p.input_names])
+            # processors whose rule depends on time (e.g. TimeGated) take it with the sample
+            s = p.step_at(float(t), r_in) if getattr(p, "needs_time", False) else p.step(r_in)
             stats.append(s)
             pool.update(zip(p.output_names, s.T))
         st = np.concatenate(stats, axis=1) if stats else np.zeros((vals.shape[0], 0))
@@ -304,6 +308,48 @@ class Monitor:
         self._k += 1
         self._t_prev = t
         return r, st, events
+
+    # ------------------------------------------------------------------ checkpoint / restore
+    def state(self) -> dict[str, Any]:
+        """The streaming state of the whole chain (plain data; see :meth:`restore`)."""
+        return {
+            "k": self._k,
+            "t_prev": self._t_prev,
+            "on": None if self._on is None else self._on.copy(),
+            "runs": getattr(self, "_runs", 1),
+            "generators": [g.get_state() for g in self.generators],
+            "processors": [p.get_state() for p in self.processors],
+            "channels": {"inputs": list(self.input_names), "residuals": list(self.residual_names),
+                         "statistics": list(self.stat_names)},
+        }
+
+    def restore(self, state: dict[str, Any]) -> None:
+        """Continue from a state captured by :meth:`state` on an identically built Monitor."""
+        ch = state.get("channels", {})
+        mine = {"inputs": list(self.input_names), "residuals": list(self.residual_names),
+                "statistics": list(self.stat_names)}
+        if ch != mine:
+            raise DataError(f"checkpoint is for a monitor with channels {ch}, this one has {mine}")
+        if len(state["generators"]) != len(self.generators) or \
+                len(state["processors"]) != len(self.processors):
+            raise DataError("checkpoint has a different number of generators or processors")
+        for g, s in zip(self.generators, state["generators"]):
+            g.set_state(s)
+        for p, s in zip(self.processors, state["processors"]):
+            p.set_state(s)
+        self._k, self._t_prev, self._runs = int(state["k"]), state["t_prev"], int(state["runs"])
+        self._on = None if state["on"] is None else np.array(state["on"], dtype=bool)
+
+    def save_checkpoint(self, path) -> None:
+        """Write :meth:`state` to ``path`` atomically (temporary file + rename)."""
+        save_state(path, self.state(), meta={"kind": "Monitor"})
+
+    def load_checkpoint(self, path) -> None:
+        """Restore from a file written by :meth:`save_checkpoint`."""
+        state, meta = load_state(path)
+        if meta.get("kind") != "Monitor":
+            raise DataError(f"{path}: not a Monitor checkpoint (kind {meta.get('kind')!r})")
+        self.restore(state)
 
     def stream(self, signals: Signals) -> MonitorResult:
         """Run the streaming path over a record (for tests and follow mode)."""

@@ -1101,6 +1101,8 @@ class FaultDetectionFilter(ResidualGenerator):
         self._Dv = np.ascontiguousarray(np.hstack([design.Du, design.Dy]), dtype=float)
         self.reset(1)
 
+    _state_attrs = ("_xi",)
+
     def reset(self, runs: int = 1) -> None:
         self._xi = np.ascontiguousarray(np.tile(self.x0, (runs, 1)))
 

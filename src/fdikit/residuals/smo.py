@@ -952,6 +952,8 @@ class SlidingModeReconstructor(ResidualGenerator):
                           outputs=[f"fhat_err:{n.removeprefix('fhat:')}" for n in self.output_names])
 
     # ------------------------------------------------------------------ state
+    _state_attrs = ("_state",)
+
     def reset(self, runs: int = 1) -> None:
         """Zero observer states for ``runs`` parallel runs."""
         n1, p1, n2, p2 = self._dims
