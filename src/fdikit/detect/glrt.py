@@ -157,6 +157,15 @@ class GLRT(ResidualProcessor):
 
     _state_attrs = ("_state", "_k")
 
+    def to_dict(self) -> dict:
+        """Configuration as plain data (see :mod:`fdikit.monitor.artifacts`)."""
+        return {"inputs": list(self.input_names), "mu0": self.mu0.tolist(), "sigma2": self.sigma2.tolist(),
+                "W": self.W}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> GLRT:
+        return cls(d["inputs"], d["mu0"], d["sigma2"], d["W"])
+
     def reset(self, runs: int = 1) -> None:
         c = len(self.input_names)
         self._state = (np.zeros((runs, c, self.W)), np.full((runs, c), -1, np.int64),
@@ -207,6 +216,13 @@ class TimeGated(ResidualProcessor):
 
     _state_attrs = ("_early", "_t0", "_k")
     needs_time = True  # the Monitor passes the sample time: step_at(t, r)
+
+    def to_dict(self) -> dict:
+        return {"inputs": list(self.input_names), "q": self.q.tolist(), "T": self.T}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> TimeGated:
+        return cls(d["inputs"], d["q"], d["T"])
 
     def reset(self, runs: int = 1) -> None:
         self._early = np.zeros((runs, len(self.input_names)), bool)

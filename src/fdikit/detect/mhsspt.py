@@ -284,6 +284,19 @@ class MHSSPT(ResidualProcessor):
 
     _state_attrs = ("_logF", "_k")
 
+    def to_dict(self) -> dict:
+        """Configuration as plain data; densities must be :class:`UniformMeanGaussian`."""
+        if self._umg is None:
+            raise DataError("only MHSSPTs with UniformMeanGaussian densities can be exported")
+        return {"inputs": list(self.input_names),
+                "densities": {h: d.to_dict() for h, d in zip(self.hypotheses, self.densities)},
+                "p": self.p, "pi": self.pi.tolist(), "q": self.q, "groups": self.groups}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> MHSSPT:
+        dens = {h: UniformMeanGaussian(v["low"], v["high"], v["std"]) for h, v in d["densities"].items()}
+        return cls(d["inputs"], dens, d["p"], d["pi"], d["q"], d["groups"])
+
     def reset(self, runs: int = 1) -> None:
         self._logF = np.full((runs, len(self.hypotheses)), -np.inf)
         self._logF[:, 0] = 0.0

@@ -80,6 +80,15 @@ class Hold(ResidualProcessor):
 
     _state_attrs = ("_count",)
 
+    def to_dict(self) -> dict:
+        """Configuration as plain data (see :mod:`fdikit.monitor.artifacts`)."""
+        return {"inputs": list(self.input_names), "threshold": self.threshold.tolist(), "Z": self.Z,
+                "absolute": self.absolute}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> Hold:
+        return cls(d["inputs"], d["threshold"], d["Z"], absolute=d["absolute"])
+
     def _exceed(self, r: np.ndarray) -> np.ndarray:
         return (np.abs(r) if self.absolute else r) > self.threshold
 

@@ -63,6 +63,24 @@ class ObserverDesign:
     residual_names: list[str]
     info: dict[str, Any] = field(default_factory=dict)
 
+    def to_dict(self) -> dict[str, Any]:
+        """Matrices and names as plain data (``info`` is summarised)."""
+        out: dict[str, Any] = {k: getattr(self, k).tolist() for k in ("A", "B", "C", "D", "L")}
+        out.update(dt=self.dt, u_names=list(self.u_names), y_names=list(self.y_names),
+                   residual_names=list(self.residual_names),
+                   info={"method": self.info.get("method"),
+                         "spectral_radius": float(self.info.get("spectral_radius", np.nan))})
+        return out
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> ObserverDesign:
+        n, p = len(d["A"]), len(d["y_names"])
+        m = len(d["u_names"])
+        mats = {k: np.asarray(d[k], float).reshape(shape) for k, shape in
+                (("A", (n, n)), ("B", (n, m)), ("C", (p, n)), ("D", (p, m)), ("L", (n, p)))}
+        return cls(**mats, dt=float(d["dt"]), u_names=list(d["u_names"]), y_names=list(d["y_names"]),
+                   residual_names=list(d["residual_names"]), info=dict(d.get("info", {})))
+
     def as_filter(self) -> FilterDesign:
         """The same generator in the generic filter form ``xi+ = Af xi + Bu u + By y``,
         ``r = Cf xi + Du u + Dy y``: Af = A - L C, Bu = B - L D, By = L, Cf = -C, Du = -D, Dy = I."""

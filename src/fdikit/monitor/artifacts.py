@@ -1,0 +1,176 @@
+"""Design artifacts: every design saved as data, versioned and self-describing, never pickled.
+
+Paper luo-et-al's point: thresholds and designs are *data*, uploaded to a vehicle without
+changing the diagnostic software. An artifact is two files with one stem:
+
+* ``NAME.json`` -- the manifest: format version, fdikit version, kind (the class), the channel
+  names (and units) the design reads and writes, free metadata, and the design's structure with
+  every scalar, name and small matrix as JSON (Python's ``repr`` of a float round-trips
+  exactly, so nothing is lost);
+* ``NAME.npz`` -- the design's NumPy arrays, when its ``to_dict`` returns any (loaded with
+  ``allow_pickle=False``).
+
+JSON keeps an artifact readable, diffable and editable by an engineer; NPZ keeps large arrays
+(e.g. support vectors) compact and exact. A kind is any class with ``to_dict()`` and
+``from_dict(d)`` registered in :data:`KINDS` (or passed explicitly). Loading checks the format
+version and, when asked, the channel names, and refuses a mismatch with a clear message.
+"""
+
+from __future__ import annotations
+
+import importlib
+import json
+import os
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import DataError
+from .state import _flatten, _unflatten
+
+__all__ = ["ARTIFACT_FORMAT", "KINDS", "artifact_channels", "load_artifact", "save_artifact"]
+
+#: Version of the artifact layout; a different major version is refused on loading.
+ARTIFACT_FORMAT = "fdikit-artifact/1"
+
+#: Registered kinds: class name -> "module:attribute".
+KINDS: dict[str, str] = {
+    "ObserverDesign": "fdikit.residuals.observer:ObserverDesign",
+    "FilterDesign": "fdikit.residuals.fdf:FilterDesign",
+    "SlidingModeReconstructor": "fdikit.residuals.smo:SlidingModeReconstructor",
+    "GLRT": "fdikit.detect.glrt:GLRT",
+    "TimeGated": "fdikit.detect.glrt:TimeGated",
+    "Hold": "fdikit.detect.threshold:Hold",
+    "MHSSPT": "fdikit.detect.mhsspt:MHSSPT",
+    "DMatrix": "fdikit.isolate.dmatrix:DMatrix",
+    "DiagnosticTree": "fdikit.isolate.sequencing:DiagnosticTree",
+}
+
+
+def _resolve(kind: str) -> type:
+    if kind not in KINDS:
+        raise DataError(f"unknown artifact kind {kind!r}; known kinds: {sorted(KINDS)}")
+    mod, _, attr = KINDS[kind].partition(":")
+    return getattr(importlib.import_module(mod), attr)
+
+
+def artifact_channels(obj: Any) -> dict[str, list[str]]:
+    """Channel names a design reads (``inputs``) and writes (``outputs``), where it has them."""
+    ins: list[str] = []
+    for attr in ("u_names", "y_names", "input_names"):
+        ins += [str(s) for s in getattr(obj, attr, None) or []]
+    outs: list[str] = []
+    for attr in ("residual_names", "output_names"):
+        v = getattr(obj, attr, None)
+        if v:
+            outs = [str(s) for s in v]
+            break
+    return {"inputs": ins, "outputs": outs}
+
+
+def _stem(path: str | os.PathLike) -> Path:
+    p = Path(path)
+    return p.with_suffix("") if p.suffix in (".json", ".npz") else p
+
+
+def _atomic_write(path: Path, write) -> None:
+    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            write(fh)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
+def save_artifact(path: str | os.PathLike, obj: Any, *, meta: dict | None = None,
+                  units: dict[str, str] | None = None) -> Path:
+    """Save a design as ``<stem>.json`` (+ ``<stem>.npz`` when it has arrays); returns the JSON path.
+
+    Examples
+    --------
+    >>> import os, tempfile
+    >>> from fdikit.detect import Hold
+    >>> p = save_artifact(os.path.join(tempfile.mkdtemp(), "hold"), Hold(["r"], 0.5, Z=3))
+    >>> h = load_artifact(p, expect_inputs=["r"])
+    >>> (h.Z, float(h.threshold[0]))
+    (3, 0.5)
+    """
+    kind = type(obj).__name__
+    if kind not in KINDS:
+        raise DataError(f"{kind} is not a registered artifact kind; known kinds: {sorted(KINDS)}")
+    from .. import __version__
+
+    arrays: dict[str, np.ndarray] = {}
+    payload = _flatten(obj.to_dict(), "p", arrays)
+    stem = _stem(path)
+    manifest = {
+        "format": ARTIFACT_FORMAT,
+        "fdikit_version": __version__,
+        "kind": kind,
+        "channels": artifact_channels(obj),
+        "units": dict(units or {}),
+        "meta": dict(meta or {}),
+        "arrays": {k: f"a{i}" for i, k in enumerate(arrays)},
+        "payload": payload,
+    }
+    if arrays:
+        stored = {f"a{i}": a for i, a in enumerate(arrays.values())}
+        _atomic_write(stem.with_suffix(".npz"), lambda fh: np.savez(fh, **stored))
+    text = json.dumps(manifest, indent=1, allow_nan=True)
+    _atomic_write(stem.with_suffix(".json"), lambda fh: fh.write(text.encode()))
+    return stem.with_suffix(".json")
+
+
+def load_artifact(path: str | os.PathLike, *, kind: str | None = None,
+                  expect_inputs: list[str] | None = None,
+                  expect_outputs: list[str] | None = None) -> Any:
+    """Load a design saved by :func:`save_artifact`.
+
+    Parameters
+    ----------
+    kind : str, optional
+        Refuse an artifact of another kind.
+    expect_inputs, expect_outputs : list of str, optional
+        Refuse an artifact whose channel names differ (a design from another model).
+    """
+    stem = _stem(path)
+    jpath = stem.with_suffix(".json")
+    try:
+        manifest = json.loads(jpath.read_text())
+    except FileNotFoundError:
+        raise DataError(f"{jpath}: no such artifact") from None
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise DataError(f"{jpath}: not a readable artifact ({exc})") from None
+    if not isinstance(manifest, dict) or "format" not in manifest:
+        raise DataError(f"{jpath}: not an fdikit artifact (no format field)")
+    fmt = str(manifest["format"])
+    if fmt.split("/")[0] != ARTIFACT_FORMAT.split("/")[0] or fmt != ARTIFACT_FORMAT:
+        raise DataError(f"{jpath}: artifact format {fmt!r}, this fdikit reads {ARTIFACT_FORMAT!r}")
+    k = manifest.get("kind")
+    if kind is not None and k != kind:
+        raise DataError(f"{jpath}: artifact is a {k}, expected a {kind}")
+    ch = manifest.get("channels", {})
+    for what, want in (("inputs", expect_inputs), ("outputs", expect_outputs)):
+        if want is not None and list(ch.get(what, [])) != list(want):
+            raise DataError(f"{jpath}: the design's {what} are {ch.get(what)}, but {list(want)} were "
+                            "expected (a design for another model or channel map?)")
+    arrays: dict[str, np.ndarray] = {}
+    if manifest.get("arrays"):
+        npz = stem.with_suffix(".npz")
+        try:
+            with np.load(npz, allow_pickle=False) as z:
+                arrays = {key: z[stored] for key, stored in manifest["arrays"].items()}
+        except (OSError, ValueError, KeyError) as exc:
+            raise DataError(f"{npz}: arrays of the artifact are missing or unreadable ({exc})") from None
+    cls = _resolve(k)
+    try:
+        return cls.from_dict(_unflatten(manifest["payload"], arrays))
+    except (KeyError, TypeError, ValueError) as exc:
+        raise DataError(f"{jpath}: a {k} cannot be rebuilt from this artifact ({exc!r})") from None
