@@ -220,3 +220,15 @@ def test_abs_table_vi_small():
     assert row["subset_err"] < 1.05  # Table VI, subset column
     assert row["subset_err"] < row["block_err"][1]
     assert tab["rows"]["K_f"].block.shape == (3, 4)
+
+
+def test_abs_table_vi_subset_column_measurement_noise_only():
+    """Table VI's subset column over 20 runs per fault, records with measurement noise only.
+
+    With the plant's 23 dB process noise as well, only K_f meets the column (see the benchmark);
+    the process noise makes the closed loop drift away from any noise-free re-simulation.
+    """
+    tab = abs_table_vi(runs=20, snr_db=None, block=False, seed=1)
+    for f, paper in (("K_f", 1.05), ("I_w", 0.52), ("tau_m", 2.0), ("R_w", 0.004)):
+        assert tab[f]["subset_err"] <= paper, (f, tab[f])
+        assert tab[f]["subset_time_mean"] < 2.0  # target 1 s, measured in the benchmark; slack for CI load

@@ -11,7 +11,8 @@ from .output_error import (
     OutputErrorResult,
     abs_table_vi,
     output_error,
+    output_error_covariance,
 )
 
 __all__ = ["ABS_ESTIMATED", "ABS_TABLE_VI_PAPER", "ABS_TABLE_VI_TRUE", "ABSSimulator", "ModelSimulator",
-           "OutputErrorResult", "abs_table_vi", "output_error"]
+           "OutputErrorResult", "abs_table_vi", "output_error", "output_error_covariance"]

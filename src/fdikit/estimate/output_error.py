@@ -44,6 +44,7 @@ __all__ = [
     "OutputErrorResult",
     "abs_table_vi",
     "output_error",
+    "output_error_covariance",
 ]
 
 #: The four "interesting" ABS parameters of Section VIII.
@@ -565,6 +566,45 @@ def output_error(
         success=stopped or status > 0, elapsed=time.perf_counter() - t_start)
 
 
+def output_error_covariance(y_runs: Any, y_hat: Any, *, floor: float = 0.0) -> np.ndarray:
+    """Per-sample output-error covariance ``Lambda(i) = mean_runs r r'`` from a calibration Monte Carlo.
+
+    ``r(i) = y(i) - y_hat(i)`` for noisy records ``y_runs`` of a known (e.g. nominal) system and
+    its noise-free re-simulation ``y_hat``. Used as ``weight`` of :func:`output_error` it is the
+    Gaussian maximum-likelihood weighting of eq. (45) for errors independent across samples
+    (process noise makes them correlated in time, so this is a heuristic there).
+
+    Parameters
+    ----------
+    y_runs : array_like (R, T, p)
+        Calibration records (R >= 2).
+    y_hat : array_like (T, p)
+        Noise-free outputs of the same system.
+    floor : float
+        Added to the diagonal (e.g. the measurement-noise variance), keeps ``Lambda(i)``
+        positive definite where all runs agree (a car at rest).
+
+    Returns
+    -------
+    ndarray (T, p, p)
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from fdikit.estimate.output_error import output_error_covariance
+    >>> L = output_error_covariance(np.random.default_rng(0).normal(size=(4000, 3, 1)), np.zeros((3, 1)))
+    >>> L.shape, bool(np.all(np.abs(L - 1.0) < 0.1))
+    ((3, 1, 1), True)
+    """
+    Y = np.asarray(getattr(y_runs, "values", y_runs), dtype=float)
+    Yh = np.asarray(y_hat, dtype=float)
+    if Y.ndim != 3 or Y.shape[0] < 2 or Yh.shape != Y.shape[1:]:
+        raise DataError(f"y_runs must be (R >= 2, T, p) and y_hat (T, p); got {Y.shape} and {Yh.shape}")
+    r = Y - Yh[None]
+    L = np.einsum("rti,rtj->tij", r, r) / Y.shape[0]
+    return L + float(floor) * np.eye(Y.shape[2])[None]
+
+
 # --------------------------------------------------------------------------------------------
 # Table VI
 # --------------------------------------------------------------------------------------------
@@ -605,8 +645,10 @@ def abs_table_vi(
     snr_db: float | None = 23.0,
     meas_var: float = 0.004,
     block: bool = True,
-    scan: int = 13,
+    scan: int = 21,
     diff_step: float = 1e-3,
+    weight: str = "identity",
+    calib_runs: int = 100,
     scenario: Any = None,
 ) -> dict[str, Any]:
     """Reproduce Table VI: block estimation of (R_w, K_f, I_w, tau_m) vs subset estimation.
@@ -633,6 +675,12 @@ def abs_table_vi(
     diff_step : float
         Relative Jacobian step (the closed loop switches every few ms: the output is only
         piecewise smooth in the parameters, so steps ~1e-3 average over the switching jitter).
+    weight : {"identity", "calibrated"}
+        ``Lambda`` of eq. (45): the paper's identity, or the per-sample covariance of the output
+        errors of ``calib_runs`` nominal (F0) records with the same noise
+        (:func:`output_error_covariance`, floor = measurement variance; independent seed).
+    calib_runs : int
+        Records of the calibration Monte Carlo for ``weight="calibrated"``.
     scenario : fdikit.plants.abs.Scenario, optional
         Manoeuvre (default: 28 m/s, 12.5 s).
 
@@ -656,6 +704,14 @@ def abs_table_vi(
     sim = ABSSimulator(base_sc)
     nom = sim.params
     out: dict[str, Any] = {"rows": {}}
+    if weight == "identity":
+        W = None
+    elif weight == "calibrated":
+        cal_sc = replace(base_sc, fault="F0", magnitude=None, snr_db=snr_db, meas_var=meas_var)
+        cal = A.simulate(sim.plant, cal_sc, runs=calib_runs, seed=seed + 104729).y.values
+        W = output_error_covariance(cal, sim(nom), floor=max(meas_var, 1e-12))
+    else:
+        raise DataError(f"weight must be 'identity' or 'calibrated', got {weight!r}")
     for fault in faults:
         if fault not in ABS_ESTIMATED:
             raise ModelError(f"unknown Table VI row {fault!r}; rows: {list(ABS_ESTIMATED)}")
@@ -670,10 +726,11 @@ def abs_table_vi(
         ts, tb = np.empty(runs), np.empty(runs)
         for i in range(runs):
             yi = rec.y.values[i]
-            r = output_error(sim, yi, [fault], bounds={fault: bnd[fault]}, scan=scan, diff_step=diff_step)
+            r = output_error(sim, yi, [fault], bounds={fault: bnd[fault]}, scan=scan, diff_step=diff_step,
+                             weight=W)
             sub[i], ts[i] = r.theta[fault], r.elapsed
             if block:
-                rb = output_error(sim, yi, ABS_ESTIMATED, bounds=bnd, diff_step=diff_step)
+                rb = output_error(sim, yi, ABS_ESTIMATED, bounds=bnd, diff_step=diff_step, weight=W)
                 blk[i], tb[i] = [rb.theta[k] for k in ABS_ESTIMATED], rb.elapsed
         row = TableVIRow(fault, truth, blk, sub, tb if block else np.zeros(0), ts)
         out["rows"][fault] = row
