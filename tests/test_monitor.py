@@ -135,3 +135,35 @@ def test_monitor_bad_input(plant):
         mon.run(sig.select(["pos1", "pos2"]))
     with pytest.raises(DataError, match="Z must be an integer"):
         Hold(["r:pos1"], 0.1, Z=0)
+
+
+def test_hold_on_invalid_samples_keeps_state(plant):
+    sig = _record(plant, runs=1, T=400)
+    bad_k = [100, 101, 102, 250]
+    v = sig.values.copy()
+    v[0, 100:103, 1] = np.nan
+    v[0, 250, 2] = np.inf
+    bad = Signals(sig.t, v, sig.names, check=False)
+
+    def build():
+        gen = ObserverResidual(design_observer_residual(plant, dt=DT, Q=np.eye(4) * 1e-8, R=np.eye(2) * 4e-6))
+        return Monitor([gen], [Hold(gen.output_names, 0.05, Z=5)], on_invalid="hold")
+
+    res = build().run(bad)
+    assert np.all(np.isfinite(res.residuals.values)) and np.all(np.isfinite(res.statistics.values))
+    assert [k for _, k, _ in res.invalid] == bad_k
+    assert "channel 'pos1' has a non-finite value at sample 100" in res.invalid[0][2]
+    assert not res.valid[0, bad_k].any() and res.valid[0].sum() == 400 - len(bad_k)
+    # held samples repeat the last good output ...
+    np.testing.assert_array_equal(res.residuals.values[0, 100], res.residuals.values[0, 99])
+    # ... and the components behave as if the bad samples had never arrived
+    keep = np.setdiff1d(np.arange(400), bad_k)
+    clean = Signals(sig.t[keep], sig.values[:, keep], sig.names)
+    ref = build().stream(clean)  # (time has gaps: the batch path would refuse the sample rate)
+    np.testing.assert_array_equal(res.residuals.values[0, keep], ref.residuals.values[0])
+    # a duplicated time stamp is held too, not raised
+    mon = build()
+    mon.reset(1)
+    mon.step(0.0, {"force": 0.0, "pos1": 0.0, "pos2": 0.0})
+    mon.step(0.0, {"force": 0.0, "pos1": 0.0, "pos2": 0.0})
+    assert "time is not increasing at sample 1" in mon.last_invalid

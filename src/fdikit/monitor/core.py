@@ -163,6 +163,10 @@ class MonitorResult:
     residuals: Signals
     statistics: Signals
     events: list[Event]
+    #: (runs, T) True where the sample was processed; False where it was held (bad input)
+    valid: np.ndarray | None = None
+    #: (run, sample, reason) of every held sample
+    invalid: list[tuple[int, int, str]] = field(default_factory=list)
 
     def first_event(self, run: int = 0) -> Event | None:
         ev = [e for e in self.events if e.run == run]
@@ -181,7 +185,13 @@ class Monitor:
     decision : Decision, optional
         Announcement rule over the processors' outputs.
     validate : bool
-        Check every incoming sample for NaN/inf and raise :class:`DataError` naming the channel.
+        Check every incoming sample for NaN/inf (and time for monotonicity).
+    on_invalid : {"raise", "hold"}
+        What a bad sample does: ``"raise"`` a :class:`DataError` naming the channel and sample,
+        or ``"hold"``: the sample is flagged invalid with a reason, every component keeps its
+        state (nothing non-finite enters a filter or a probability), the previous residuals and
+        statistics are repeated, and processing resumes with the next good sample. ``"hold"``
+        is for recorded or live data of one run (a Monte Carlo batch has no bad samples).
 
     Batch (:meth:`run`) and streaming (:meth:`reset` / :meth:`step`) give identical outputs.
     """
@@ -193,11 +203,15 @@ class Monitor:
         decision: Decision | None = None,
         *,
         validate: bool = True,
+        on_invalid: str = "raise",
     ):
         self.generators = list(generators)
         self.processors = list(processors)
         self.decision = decision
         self.validate = validate
+        if on_invalid not in ("raise", "hold"):
+            raise DataError(f"on_invalid must be 'raise' or 'hold', got {on_invalid!r}")
+        self.on_invalid = on_invalid
         self.residual_names = [n for g in self.generators for n in g.output_names]
         if len(set(self.residual_names)) != len(self.residual_names):
             raise DataError(f"residual channel names collide: {self.residual_names}")
@@ -222,7 +236,10 @@ class Monitor:
     def run(self, signals: Signals) -> MonitorResult:
         """Run the whole chain over a record (all runs at once)."""
         if self.validate:
-            check_finite(signals.select(self.input_names).values, self.input_names)
+            sel = signals.select(self.input_names).values
+            if self.on_invalid == "hold" and not np.all(np.isfinite(sel)):
+                return self.stream(signals)  # the streaming path holds state over bad samples
+            check_finite(sel, self.input_names)
         res = [g.run(signals) for g in self.generators]
         r = res[0]
         for s in res[1:]:
@@ -236,7 +253,7 @@ class Monitor:
         st = pool.select(self.stat_names) if self.stat_names else Signals(
             signals.t, np.zeros((signals.runs, signals.n_samples, 0)), [], check=False)
         events = self.decision.events(signals.t, st) if self.decision is not None else []
-        return MonitorResult(r, st, events)
+        return MonitorResult(r, st, events, np.ones((signals.runs, signals.n_samples), bool))
 
     # ------------------------------------------------------------------ streaming
     def reset(self, runs: int = 1) -> None:
@@ -248,6 +265,8 @@ class Monitor:
         self._t_prev = None
         self._on = None
         self._runs = runs
+        self._last: tuple[np.ndarray, np.ndarray] | None = None
+        self.last_invalid: str | None = None
 
     def step(self, t: float, sample: dict[str, Any] | np.ndarray,
              names: Sequence[str] | None = None) -> tuple[np.ndarray, np.ndarray, list[Event]]:
@@ -257,8 +276,14 @@ class Monitor:
         ``(runs, len(names))``. Returns residuals ``(runs, R)``, statistics ``(runs, S)`` and the
         events announced at this sample.
         """
+        self.last_invalid = None
         if self._t_prev is not None and not t > self._t_prev:
-            raise DataError(f"time is not increasing at sample {self._k}: {t} after {self._t_prev}")
+            msg = f"time is not increasing at sample {self._k}: {t} after {self._t_prev}"
+            if self.on_invalid == "raise" or not np.isfinite(t):
+                raise DataError(msg)
+            return self._hold(msg)
+        if not np.isfinite(t):
+            raise DataError(f"time is not finite at sample {self._k}: {t}")
         if isinstance(sample, dict):
             names = list(sample)
             vals = np.column_stack([np.broadcast_to(np.asarray(sample[n], float), (self._runs,))
@@ -277,8 +302,11 @@ class Monitor:
             bad = ~np.isfinite(vals[:, sel])
             if bad.any():
                 run, c = np.argwhere(bad)[0]
-                raise DataError(f"channel {self.input_names[c]!r} has a non-finite value at "
-                                f"sample {self._k} (run {run})")
+                msg = (f"channel {self.input_names[c]!r} has a non-finite value at sample {self._k} "
+                       f"(run {run})")
+                if self.on_invalid == "raise":
+                    raise DataError(msg)
+                return self._hold(msg, t)
         outs = []
         for g in self.generators:
             u = vals[:, [lookup[n] for n in g.u_names]]
@@ -307,7 +335,21 @@ class Monitor:
             self._on = on
         self._k += 1
         self._t_prev = t
+        self._last = (r, st)
         return r, st, events
+
+    def _hold(self, reason: str, t: float | None = None):
+        """Skip a bad sample: components keep their state, outputs repeat the last good ones."""
+        self.last_invalid = reason
+        if self._last is None:
+            R = np.zeros((self._runs, len(self.residual_names)))
+            S = np.zeros((self._runs, len(self.stat_names)))
+        else:
+            R, S = self._last
+        self._k += 1
+        if t is not None:
+            self._t_prev = t
+        return R.copy(), S.copy(), []
 
     # ------------------------------------------------------------------ checkpoint / restore
     def state(self) -> dict[str, Any]:
@@ -319,6 +361,7 @@ class Monitor:
             "runs": getattr(self, "_runs", 1),
             "generators": [g.get_state() for g in self.generators],
             "processors": [p.get_state() for p in self.processors],
+            "last": None if getattr(self, "_last", None) is None else [a.copy() for a in self._last],
             "channels": {"inputs": list(self.input_names), "residuals": list(self.residual_names),
                          "statistics": list(self.stat_names)},
         }
@@ -339,6 +382,8 @@ class Monitor:
             p.set_state(s)
         self._k, self._t_prev, self._runs = int(state["k"]), state["t_prev"], int(state["runs"])
         self._on = None if state["on"] is None else np.array(state["on"], dtype=bool)
+        last = state.get("last")
+        self._last = None if last is None else (np.array(last[0]), np.array(last[1]))
 
     def save_checkpoint(self, path) -> None:
         """Write :meth:`state` to ``path`` atomically (temporary file + rename)."""
@@ -357,12 +402,17 @@ class Monitor:
         R = np.empty((signals.runs, signals.n_samples, len(self.residual_names)))
         S = np.empty((signals.runs, signals.n_samples, len(self.stat_names)))
         events: list[Event] = []
+        valid = np.ones((signals.runs, signals.n_samples), bool)
+        invalid: list[tuple[int, int, str]] = []
         for k, t in enumerate(signals.t):
             r, s, ev = self.step(float(t), signals.values[:, k], signals.names)
             R[:, k], S[:, k] = r, s
             events.extend(ev)
+            if self.last_invalid is not None:
+                valid[:, k] = False
+                invalid.append((0, k, self.last_invalid))
         events.sort(key=lambda e: (e.run, e.k, e.hypothesis))
         return MonitorResult(Signals(signals.t, R, self.residual_names, check=False),
-                             Signals(signals.t, S, self.stat_names, check=False), events)
+                             Signals(signals.t, S, self.stat_names, check=False), events, valid, invalid)
 
 
