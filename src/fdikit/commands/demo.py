@@ -15,58 +15,33 @@ import importlib
 import time
 from collections.abc import Callable
 
-import numpy as np
-
 from ..cli import print_json
 
 
 def section_linear(seed: int = 0) -> dict:
     """Sensor-bias detection on a linear two-mass plant (issue: foundation)."""
-    from ..detect import Hold, design_threshold
-    from ..faults import Bias, Noise, Scenario
-    from ..model import LinearFaultModel
+    from ..faults import Bias
     from ..monitor import Decision, Monitor
-    from ..residuals import ObserverResidual, design_observer_residual
-    from ..sim import simulate
+    from ..plants import two_mass
+    from ..residuals import ObserverResidual
 
-    A = [[0, 1, 0, 0], [-2, -0.4, 1, 0], [0, 0, 0, 1], [1, 0, -1, -0.3]]
-    plant = LinearFaultModel(A, [[0], [1], [0], [0]], [[1, 0, 0, 0], [0, 0, 1, 0]],
-                             states=["x1", "v1", "x2", "v2"], inputs=["force"], outputs=["pos1", "pos2"],
-                             faults=["sensor:pos1", "sensor:pos2"], name="two-mass")
-    dt, duration, onset, bias = 0.01, 10.0, 4.0, 0.012
-    noise_std = 0.002
-
-    def force(t):
-        return np.sin(0.7 * np.asarray(t))
-
-    def scenario(faults):
-        return Scenario(faults=faults, duration=duration, dt=dt, inputs=force,
-                        noise=Noise(measurement=[noise_std**2] * 2))
-
-    def record(faults, runs, seed):
-        res = simulate(plant, scenario(faults), runs=runs, seed=seed, keep=("y", "u"))
-        return res.u.concat_channels(res.y)
-
-    design = design_observer_residual(plant, dt=dt, Q=np.eye(4) * 1e-8, R=np.eye(2) * noise_std**2)
-    gen = ObserverResidual(design)
-    # threshold for a 0.1 % per-run false-alarm probability from 300 nominal runs
-    nominal = record([], 300, seed)
-    r_nom = gen.run(nominal)
-    Z = 5
-    thr = [design_threshold(r_nom[name][:, 100:], 1e-3, Z=Z, absolute=True).threshold
-           for name in gen.output_names]
-    monitor = Monitor([gen], [Hold(gen.output_names, thr, Z=Z)],
-                      Decision([f"{n}:alarm" for n in gen.output_names],
-                               names={f"r:{y}:alarm": f"sensor:{y}" for y in plant.outputs}))
-    faulty = record([Bias("sensor:pos2", bias, start=onset)], 1, seed + 1)
+    onset, bias = 4.0, 0.012
+    # observer residuals, thresholds for a 0.1 % per-run false-alarm probability from 300 nominal
+    # runs, hold Z = 5 (the same recipe as examples/two-mass/monitor.toml)
+    designs = two_mass.design({"seed": seed})
+    gen = ObserverResidual(designs["observer"])
+    hold = designs["hold"]
+    names = {f"r:{y}:alarm": f"sensor:{y}" for y in ("pos1", "pos2")}
+    monitor = Monitor([gen], [hold], Decision(hold.output_names, names=names))
+    faulty = two_mass.record([Bias("sensor:pos2", bias, start=onset)], 1, seed + 1)
     res = monitor.run(faulty)
     ev = res.first_event(0)
     false_alarms = [e for e in res.events if e.t < onset]
     return {
         "plant": "linear two-mass system, 4 states, sensors pos1 and pos2",
         "fault": f"sensor:pos2 bias {bias} from t = {onset} s",
-        "thresholds": dict(zip(gen.output_names, thr)),
-        "hold_Z": Z,
+        "thresholds": dict(zip(gen.output_names, hold.threshold.tolist())),
+        "hold_Z": hold.Z,
         "detected": ev.hypothesis if ev else None,
         "detection_time_s": ev.t if ev else None,
         "delay_s": (ev.t - onset) if ev else None,
