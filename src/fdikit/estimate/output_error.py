@@ -20,7 +20,26 @@ columns in one (parallel) pass. Two are provided: :class:`ModelSimulator` (any
 :class:`~fdikit.model.NonlinearModel` through :func:`fdikit.sim.simulate`, per-run parameter
 arrays) and :class:`ABSSimulator` (the closed-loop ABS numba kernel with the noise switched off).
 
-Table VI of the paper is reproduced by :func:`abs_table_vi`.
+Table VI of the paper is reproduced by :func:`abs_table_vi` (``benchmarks/bench_svm_estimation.py``).
+Measured, 20 runs per fault, mean relative error of the subset estimate in percent (Table VI's
+subset column in brackets), ~0.05-0.25 s per estimate:
+
+================  =============  ============  =============  ==============
+records           K_f (1.05)     I_w (0.52)    tau_m (2.0)    R_w (0.004)
+================  =============  ============  =============  ==============
+meas. noise only  0.0016         0.019         0.60           0.0011
+23 dB, Lambda=I   0.19           0.77          54 (at bound)  0.16
+23 dB, calibr.    0.17           0.78          41 (at bound)  0.075
+================  =============  ============  =============  ==============
+
+With measurement noise only, every subset estimate beats Table VI and the block estimates are
+biased (tau_m 22-70 % off when another parameter is faulted), Section VIII's finding. The
+plant's 23 dB process noise (white, on every state, every 1 ms; see :mod:`fdikit.plants.abs`)
+makes the vehicle speed random-walk by ~0.5 rad/s over the record; no noise-free re-simulation
+follows that drift, and the output error of eq. (43) is then dominated by it: K_f is still
+estimated well, I_w and R_w to 0.1-0.8 %, and tau_m (which only delays the pressure rise by ~3
+ms at brake onset) is not identifiable from the outputs at all (V_N's slope in tau_m is set by
+the noise realisation; restricting the fit to the first 0.3-2.5 s after braking does not help).
 """
 
 from __future__ import annotations
@@ -251,11 +270,18 @@ class ABSSimulator:
         sc = self.scenario
         X0 = np.zeros((k, 6))
         X0[:, 0] = X0[:, 1] = sc.v0 / P[:, A.PARAM_NAMES.index("R_w")]  # free rolling at v0
-        # The public simulate() always also runs a nominal pass for the noise SNR reference; the
-        # kernel alone, noise off, is what eq. (43) needs (and takes many parameter sets at once).
-        y = A._run_kernel(self.plant, sc, P, X0, np.ones((k, 4), np.uint64), np.zeros(6), np.zeros(2),
-                          False, 10, 0, False)[0]
-        return y
+        # The public simulate() always also runs a nominal pass for the noise SNR reference and
+        # takes one parameter set per call; the kernel alone, noise off, is what eq. (43) needs
+        # and takes many parameter sets at once. Fall back to the public path if it changes.
+        kernel = getattr(A, "_run_kernel", None)
+        if kernel is not None:
+            try:
+                return kernel(self.plant, sc, P, X0, np.ones((k, 4), np.uint64), np.zeros(6), np.zeros(2),
+                              False, 10, 0, False)[0]
+            except TypeError:  # pragma: no cover - private signature changed
+                pass
+        return np.stack([A.simulate(A.ABSPlant({n: P[j, i] for i, n in enumerate(A.PARAM_NAMES)}),
+                                    sc).y.values[0] for j in range(k)])
 
     def __call__(self, params: Mapping[str, float]) -> np.ndarray:
         """Outputs ``(1250, 2)`` for one parameter dictionary (missing names: nominal)."""
