@@ -20,7 +20,7 @@ from . import __version__
 from .errors import FdikitError
 
 #: Modules under fdikit.commands that register subcommands, in help order.
-COMMAND_MODULES = ("demo", "reconstruct", "abs", "car")
+COMMAND_MODULES = ("demo", "reconstruct", "abs", "car", "monitor")
 
 
 def _to_jsonable(obj: Any) -> Any:

@@ -1,0 +1,175 @@
+"""``fdikit design CONFIG`` and ``fdikit monitor LOG --config CONFIG``: config-driven monitors.
+
+* ``fdikit design CONFIG [--json]`` runs the config's design recipe and writes the design
+  artifacts (JSON + NPZ) into the config's artifact directory.
+* ``fdikit monitor LOG --config CONFIG [--events FILE.jsonl] [--stats FILE.parquet] [--json]``
+  reads a recorded log, maps its channels (scale, offset), runs the monitor built from the
+  artifacts, writes the announcements (and every held bad sample) as JSON lines and the full
+  residuals and statistics as Parquet, and prints a summary.
+* ``fdikit monitor - --config CONFIG --follow`` reads CSV lines from standard input as they
+  arrive (a header line with the time column and the source channels first), steps the
+  monitor per line and prints each announcement as one JSON line at once; the results equal
+  the batch run over the same data.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ..cli import print_json
+from ..errors import DataError
+
+__all__ = ["register"]
+
+
+def _design(args) -> int:
+    from ..monitor.config import load_config, run_design
+
+    t0 = time.perf_counter()
+    cfg = load_config(args.config)
+    paths = run_design(cfg)
+    out = {"config": str(cfg.path), "artifacts": {k: str(v) for k, v in paths.items()},
+           "wall_seconds": round(time.perf_counter() - t0, 3)}
+    if args.json:
+        print_json(out)
+    else:
+        for k, v in paths.items():
+            print(f"{k}: {v}")
+    return 0
+
+
+def _event_record(e) -> dict:
+    return {"t": e.t, "run": e.run, "sample": e.k, "hypothesis": e.hypothesis, "value": e.value,
+            "announcement": True}
+
+
+def _batch(args, cfg) -> int:
+    from ..monitor.config import build_monitor, map_channels, read_log
+
+    t0 = time.perf_counter()
+    log = read_log(cfg, args.log)
+    sig = map_channels(cfg, log)
+    mon = build_monitor(cfg)
+    res = mon.run(sig)
+    records = [_event_record(e) for e in res.events]
+    records += [{"t": float(sig.t[k]), "run": r, "sample": k, "invalid": why} for r, k, why in res.invalid]
+    records.sort(key=lambda d: (d["sample"], "invalid" in d))
+    if args.events:
+        with open(args.events, "w") as fh:
+            for rec in records:
+                fh.write(json.dumps(rec) + "\n")
+    if args.stats:
+        import pandas as pd
+
+        df = pd.DataFrame({"t": sig.t})
+        for s in (res.residuals, res.statistics):
+            for i, ch in enumerate(s.names):
+                df[ch] = s.values[0, :, i]
+        df["valid"] = res.valid[0] if res.valid is not None else True
+        df.to_parquet(args.stats, index=False)
+    summary = {
+        "config": str(cfg.path), "log": str(args.log), "samples": sig.n_samples,
+        "duration_s": float(sig.t[-1] - sig.t[0]) if sig.n_samples else 0.0,
+        "channels": sig.names, "n_events": len(res.events),
+        "events": [_event_record(e) for e in res.events[:100]],
+        "first_event": _event_record(res.events[0]) if res.events else None,
+        "invalid_samples": len(res.invalid),
+        "max_statistics": {n: float(np.max(res.statistics.values[..., i]))
+                           for i, n in enumerate(res.statistics.names)},
+        "wall_seconds": round(time.perf_counter() - t0, 3),
+    }
+    if args.json:
+        print_json(summary)
+    else:
+        print(f"{summary['samples']} samples, {summary['n_events']} announcements, "
+              f"{summary['invalid_samples']} invalid samples held")
+        for e in res.events:
+            print(f"  t = {e.t:.3f} s  {e.hypothesis}  ({e.value:.4g})")
+    return 0
+
+
+def _follow(args, cfg) -> int:
+    """Stream CSV lines from stdin through the monitor, printing announcements as they happen."""
+    from ..monitor.config import build_monitor, map_sample
+
+    mon = build_monitor(cfg)
+    mon.reset(1)
+    tcol = cfg.log.get("time", "t")
+    stream = sys.stdin if args.log == "-" else open(args.log)  # closed below
+    try:
+        reader = csv.reader(stream)
+        header = next(reader, None)
+        if header is None:
+            raise DataError("follow mode: no header line on the input")
+        header = [h.strip() for h in header]
+        if tcol not in header:
+            raise DataError(f"follow mode: the header has no time column {tcol!r}: {header}")
+        n = 0
+        for lineno, row in enumerate(reader, start=2):
+            if not row:
+                continue
+            if len(row) != len(header):
+                print(json.dumps({"line": lineno, "invalid": f"{len(row)} fields, expected {len(header)}"}),
+                      flush=True)
+                continue
+            vals = {}
+            for h, v in zip(header, row):
+                try:
+                    vals[h] = float(v)
+                except ValueError:
+                    vals[h] = float("nan")
+            t = vals.pop(tcol)
+            if not np.isfinite(t):
+                bad_t = row[header.index(tcol)]
+                print(json.dumps({"line": lineno, "invalid": f"time {bad_t!r} is not a number"}), flush=True)
+                continue
+            _, _, events = mon.step(t, map_sample(cfg, vals))
+            if mon.last_invalid is not None:
+                print(json.dumps({"t": t, "sample": n, "invalid": mon.last_invalid}), flush=True)
+            for e in events:
+                print(json.dumps(_event_record(e)), flush=True)
+            n += 1
+    finally:
+        if stream is not sys.stdin:
+            stream.close()
+    return 0
+
+
+def _monitor(args) -> int:
+    from ..monitor.config import load_config
+
+    cfg = load_config(args.config)
+    if args.follow:
+        if args.json:
+            raise DataError("--follow prints one JSON line per announcement; it does not take --json")
+        return _follow(args, cfg)
+    if args.log == "-":
+        raise DataError("reading a log from standard input needs --follow")
+    if not Path(args.log).exists():
+        raise DataError(f"{args.log}: no such log file")
+    return _batch(args, cfg)
+
+
+def register(sub) -> None:
+    p = sub.add_parser("design", help="make the design artifacts of a monitor config",
+                       description="Run the design recipe of a monitor configuration (TOML) and save "
+                                   "every design as a versioned artifact (JSON + NPZ).")
+    p.add_argument("config", help="monitor configuration (TOML)")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=_design)
+    p = sub.add_parser("monitor", help="run a config-driven monitor over a log",
+                       description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("log", help="recorded log (CSV or CAN log), or - with --follow for standard input")
+    p.add_argument("--config", required=True, help="monitor configuration (TOML)")
+    p.add_argument("--events", help="write announcements and held samples as JSON lines here")
+    p.add_argument("--stats", help="write residuals and statistics as Parquet here")
+    p.add_argument("--follow", action="store_true", help="stream CSV lines (stdin with LOG = -)")
+    p.add_argument("--json", action="store_true", help="print one JSON summary object")
+    p.set_defaults(func=_monitor)
