@@ -1,14 +1,18 @@
-"""Fault isolation: D-matrices, optimal test sequencing (AO*), diagnostic trees and their code generation.
+"""Fault isolation: D-matrices, optimal test sequencing (AO*), diagnostic trees and their code
+generation, and data-driven classifiers.
 
 Generic machinery for any test design: build or learn a :class:`DMatrix`, find the minimum expected
 cost :class:`DiagnosticTree` with :func:`ao_star` (checked against :func:`exhaustive`), and emit the
 tree as IF-THEN-ELSE logic in Python or C (:func:`to_python`, :func:`to_c`, :func:`to_listing`),
-as in paper luo-et-al, Section VII.
+as in paper luo-et-al, Section VII. :class:`SVMIsolator` (scikit-learn) separates faults that
+the residual tests cannot (paper luo-et-al, Section VI).
 """
 
 from .codegen import compile_python, to_c, to_listing, to_python
 from .dmatrix import DMatrix, wilson_interval
 from .sequencing import DiagnosticTree, TreeNode, ao_star, exhaustive, huffman_cost
+from .svm import SVMDecision, SVMIsolator, WindowFeatures, improved_pipeline, paper_pipeline, rbf_gamma
 
-__all__ = ["DMatrix", "DiagnosticTree", "TreeNode", "ao_star", "compile_python", "exhaustive",
-           "huffman_cost", "to_c", "to_listing", "to_python", "wilson_interval"]
+__all__ = ["DMatrix", "DiagnosticTree", "SVMDecision", "SVMIsolator", "TreeNode", "WindowFeatures",
+           "ao_star", "compile_python", "exhaustive", "huffman_cost", "improved_pipeline",
+           "paper_pipeline", "rbf_gamma", "to_c", "to_listing", "to_python", "wilson_interval"]
