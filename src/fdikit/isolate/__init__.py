@@ -11,7 +11,18 @@ the residual tests cannot (paper luo-et-al, Section VI).
 from .codegen import compile_python, to_c, to_listing, to_python
 from .dmatrix import DMatrix, wilson_interval
 from .sequencing import DiagnosticTree, TreeNode, ao_star, exhaustive, huffman_cost
-from .svm import SVMDecision, SVMIsolator, WindowFeatures, improved_pipeline, paper_pipeline, rbf_gamma
+
+_SVM_NAMES = ("SVMDecision", "SVMIsolator", "WindowFeatures", "improved_pipeline", "paper_pipeline",
+              "rbf_gamma")
+
+
+def __getattr__(name: str):
+    # the SVM part imports scikit-learn (about 1 s): load it only when it is used
+    if name in _SVM_NAMES:
+        from . import svm
+
+        return getattr(svm, name)
+    raise AttributeError(f"module 'fdikit.isolate' has no attribute {name!r}")
 
 __all__ = ["DMatrix", "DiagnosticTree", "SVMDecision", "SVMIsolator", "TreeNode", "WindowFeatures",
            "ao_star", "compile_python", "exhaustive", "huffman_cost", "improved_pipeline",
