@@ -110,3 +110,15 @@ def test_refusals(tmp_path, plant):
     for k in KINDS:
         cls = _resolve(k)
         assert hasattr(cls, "to_dict") and hasattr(cls, "from_dict"), k
+
+
+def test_svm_artifact(tmp_path):
+    from fdikit.isolate.svm import SVMDecision, SVMIsolator
+
+    rng = np.random.default_rng(4)
+    X = np.vstack([rng.normal(0, 1, (40, 6)), rng.normal(2, 1, (40, 6))])
+    labels = ["a"] * 40 + ["b"] * 40
+    dec = SVMDecision(SVMIsolator("paper").fit(X, labels).export())
+    back = roundtrip(tmp_path, dec, "svm")
+    assert (tmp_path / "svm.npz").exists()  # the support vectors travel as an array
+    np.testing.assert_array_equal(back.decision_function(X), dec.decision_function(X))

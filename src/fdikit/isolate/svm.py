@@ -376,6 +376,16 @@ class SVMDecision:
         self.gamma = float(data["gamma"])
         self.classes = list(data["classes"])
 
+    def to_dict(self) -> dict[str, Any]:
+        """The exported SVM (plain data; support vectors become an NPZ array in an artifact)."""
+        out = dict(self.data)
+        out["support_vectors"] = self.sv
+        return out
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> SVMDecision:
+        return cls(d)
+
     def features(self, X: Any) -> np.ndarray:
         X = np.asarray(getattr(X, "values", X), dtype=float)
         if X.ndim == 3:

@@ -46,6 +46,7 @@ KINDS: dict[str, str] = {
     "MHSSPT": "fdikit.detect.mhsspt:MHSSPT",
     "DMatrix": "fdikit.isolate.dmatrix:DMatrix",
     "DiagnosticTree": "fdikit.isolate.sequencing:DiagnosticTree",
+    "SVMDecision": "fdikit.isolate.svm:SVMDecision",
 }
 
 
