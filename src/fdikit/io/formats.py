@@ -167,6 +167,21 @@ def _longest_constant(t: np.ndarray, v: np.ndarray) -> float:
     return float(np.max(t[ends] - t[starts]))
 
 
+def _touches_bad(t: np.ndarray, fin: np.ndarray, grid: np.ndarray, method: str) -> np.ndarray:
+    """Grid samples whose interpolation gives a non-zero weight to a non-finite source sample."""
+    n = t.size
+    if fin.all():
+        return np.zeros(grid.shape, bool)
+    i = np.searchsorted(t, grid, side="right") - 1
+    if method == "previous" or n == 1:
+        return (i >= 0) & ~fin[np.clip(i, 0, n - 1)]
+    i0 = np.clip(i, 0, n - 2)
+    i1 = i0 + 1
+    span = t[i1] - t[i0]
+    w = np.where(span > 0, (grid - t[i0]) / np.where(span > 0, span, 1.0), 0.0)
+    return (~fin[i0] & (w < 1)) | (~fin[i1] & (w > 0))
+
+
 def _clean_series(name: str, t: np.ndarray, v: np.ndarray,
                   where: str) -> tuple[np.ndarray, np.ndarray, int, int]:
     """Check a per-signal time axis and merge same-time samples.
@@ -329,9 +344,12 @@ def series_to_grid(
             target = units.get(n, src_unit)
         if target != src_unit:
             v = convert_units(v, src_unit, target, channel=n)
+        fin = np.isfinite(v)
+        vals, ok = resample_to_grid(t, np.where(fin, v, 0.0), grid, max_gap=max_gap, method=method,
+                                    period=period[n])
+        ok &= ~_touches_bad(t, fin, grid, method)  # an interpolation that uses a bad sample is bad
         with np.errstate(invalid="ignore", over="ignore"):
-            vals, ok = resample_to_grid(t, v, grid, max_gap=max_gap, method=method, period=period[n])
-        ok &= np.isfinite(vals)  # an interpolation that touches a bad sample is a bad sample
+            ok &= np.isfinite(vals)
         vals[~ok] = np.nan
         values[:, c] = vals
         valid[:, c] = ok
@@ -811,9 +829,10 @@ def read_parquet(path, signals=None, rate=None, *, time: str | None = None,
         meta = table.schema.field(c).metadata or {}
         units_src[c] = (meta.get(b"unit") or meta.get(b"units") or b"").decode("utf-8", "replace")
     for k, u in (source_units or {}).items():
-        if k not in cols:
-            raise DataError(f"source unit given for {k!r}, which is not a selected column {cols}")
-        units_src[k] = u
+        if k not in names:
+            raise DataError(f"source unit given for {k!r}, which is not a column of the file")
+        if k in cols:
+            units_src[k] = u
     src = SourceReport("parquet", str(p), int(t.size))
     return _table_to_grid(t, cols, present, values, units_src, rate, kw, src, where)
 
@@ -890,9 +909,10 @@ def read_table_csv(path, signals=None, rate=None, *, time: str | None = None,
         values[:, j], present[:, j] = parse(header.index(c), c)
     units_src = {c: "" for c in cols}
     for k, u in (source_units or {}).items():
-        if k not in cols:
-            raise DataError(f"source unit given for {k!r}, which is not a selected column {cols}")
-        units_src[k] = u
+        if k not in header:
+            raise DataError(f"source unit given for {k!r}, which is not a column of the file")
+        if k in cols:
+            units_src[k] = u
     src = SourceReport("csv", str(p), int(t.size))
     return _table_to_grid(t, cols, present, values, units_src, rate, kw, src, where)
 
