@@ -598,7 +598,8 @@ def pattern_table(speed: float = 20.0, *, kind: str = "straight", duration: floa
     -------
     dict
         ``columns`` (feature names), ``rows`` {fault: [0/1, ...]}, ``ratio`` {fault: [response /
-        nominal std, ...]}, ``distinct`` (every row distinct and non-zero), ``text`` (the table).
+        nominal std, ...]}, ``distinct`` (every binary row distinct and non-zero), ``max_cosine``
+        and ``closest_pair`` (largest cosine between two hypotheses' graded rows), ``text``.
     """
     des = design_car_monitor(speed)
     faults = {**{k: v for k, v in LONGITUDINAL_FAULTS.items()}, "throttle_actuator": "actuator:throttle",
@@ -633,6 +634,13 @@ def pattern_table(speed: float = 20.0, *, kind: str = "straight", duration: floa
     # throttle actuator and sensor share a hypothesis (paper IV-D): compare the hypotheses' rows
     hyp_rows = {n: tuple(v) for n, v in rows.items() if n != "throttle_actuator"}
     distinct = len(set(hyp_rows.values())) == len(hyp_rows) and all(any(v) for v in hyp_rows.values())
+    # graded patterns (what the MHSSPT densities see): unit vectors of the positive z-scores; the
+    # largest cosine between two hypotheses' rows
+    hyp = [n for n in names if n != "throttle_actuator"]
+    Z = np.array([np.clip(ratio[n], 0.0, None) for n in hyp])
+    Zn = Z / np.maximum(np.linalg.norm(Z, axis=1, keepdims=True), 1e-300)
+    cos = Zn @ Zn.T - 2 * np.eye(len(hyp))
+    i, j = np.unravel_index(np.argmax(cos), cos.shape)
     short = [c.strip("|").replace("sensor:", "").replace("actuator:", "") for c in cols]
     w = max(len(n) for n in names)
     lines = [" " * w + " | " + " ".join(f"{j:>2d}" for j in range(len(cols)))]
@@ -640,6 +648,7 @@ def pattern_table(speed: float = 20.0, *, kind: str = "straight", duration: floa
     lines += ["columns: " + ", ".join(f"{j}={c}" for j, c in enumerate(short))]
     del keys
     return {"columns": cols, "rows": rows, "ratio": ratio, "distinct": bool(distinct),
+            "max_cosine": float(cos[i, j]), "closest_pair": [hyp[i], hyp[j]],
             "throttle_actuator_equals_sensor": rows["throttle_actuator"] == rows["throttle"],
             "text": "\n".join(lines)}
 

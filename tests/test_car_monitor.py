@@ -1,0 +1,236 @@
+"""Passenger-car health monitor (paper 1, Sections IV-V): filters, parity equations, features, the
+assembled monitors, the pattern table and the experiments."""
+
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+import pytest
+
+from fdikit import Signals
+from fdikit.detect.mhsspt import calibrate_densities
+from fdikit.plants.passenger_car.monitor import (
+    FILTER_SETS,
+    LATERAL_SETS,
+    LONGITUDINAL_SETS,
+    FeatureNorms,
+    OffsetFilter,
+    ParityEquations,
+    build_monitor,
+    design_car_monitor,
+    pattern_table,
+)
+from fdikit.residuals import internal_form
+from fdikit.residuals.fdf import filter_frequency_response
+
+
+@pytest.fixture(scope="module")
+def des():
+    return design_car_monitor(20.0)
+
+
+def _plant_response(model, group, z):
+    """Discrete plant response (F, p, k) of one input group at the points z, by direct solves."""
+    A, B, C, D = model.A, model.B_of(group), model.C, model.D_of(group)
+    n = A.shape[0]
+    return np.array([C @ np.linalg.solve(zi * np.eye(n) - A, B) + D for zi in z])
+
+
+def _response(M, group, z):
+    return _plant_response(M, group, z)
+
+
+FREQS = np.r_[0.0, np.linspace(0.05, 5.0, 40)]
+
+
+@pytest.mark.parametrize("s", sorted(FILTER_SETS))
+def test_nuisance_blocked_dc_to_5hz(des, s):
+    """Nuisance-to-residual transmission <= 1e-3 of target-to-residual at DC and across 0-5 Hz, from
+    the recomputed internal form AND from the plant and filter responses composed by hand."""
+    model = des.models["longitudinal" if s in LONGITUDINAL_SETS else "lateral"]
+    z = np.exp(2j * np.pi * FREQS * des.dt)
+    for target, d in des.designs[s].items():
+        nuisance = [o for o in FILTER_SETS[s] if o != target]
+        if s in LONGITUDINAL_SETS:
+            nuisance.append("nonlinearity:1")
+        M = internal_form(d, model)
+        Gf = _response(M, "f", z)                       # (F, q, k) from the recomputed internal form
+        jt = M.fault_names.index(target)
+        jn = [M.fault_names.index(n) for n in nuisance]
+        tgt = np.linalg.norm(Gf[:, :, jt], axis=1).max()
+        assert tgt > 0
+        # exact UIO: the nuisance is zero to rounding at every frequency
+        nu = np.abs(Gf[:, :, jn]).max()
+        assert nu <= 1e-3 * tgt, (s, target, nu, tgt)
+        assert nu <= 1e-8 * tgt, (s, target, nu, tgt)
+        # independent composition: filter response x plant response (faults enter through y only)
+        _Gu, Gy = filter_frequency_response(d, FREQS)
+        Gp = _plant_response(model, "f", z)[:, model.output_index(d.y_names)]
+        Gc = Gy @ Gp
+        assert np.allclose(Gc, Gf, atol=1e-8 * max(1.0, np.abs(Gf).max()))
+        # the target reaches the residual at DC
+        assert np.linalg.norm(Gf[0, :, jt]) > 1e-6 * np.linalg.norm(Gf[0])
+
+
+def test_slope_blocked_where_separable(des):
+    """The road slope is a nuisance of sets 1-3 where it is separable; where it is blocked its
+    transmission is zero too."""
+    model = des.models["longitudinal"]
+    z = np.exp(2j * np.pi * FREQS * des.dt)
+    blocked = des.info["slope_blocked"]
+    for s in LONGITUDINAL_SETS:
+        for target, d in des.designs[s].items():
+            if not blocked[f"set{s}/{target}"]:
+                continue
+            M = internal_form(d, model)
+            Gd = _response(M, "d", z)
+            Gf = _response(M, "f", z)[:, :, M.fault_names.index(target)]
+            assert np.abs(Gd).max() <= 1e-8 * np.abs(Gf).max()
+
+
+def test_parity_equations_closed_form():
+    dt, tau = 0.01, 0.1
+    pe = ParityEquations(dt, tau)
+    T = 50
+    t = np.arange(T) * dt
+    u = np.zeros((1, T, 2))
+    u[0, :, 0] = 12.0
+    u[0, :, 1] = 1.0                 # brake command step at k = 0
+    y = np.zeros((1, T, 2))
+    y[0, :, 0] = 12.0 + 0.7          # throttle sensor bias 0.7
+    sig = Signals(t, np.concatenate([u, y], axis=2), ["throttle", "brake", "throttle_meas", "brake_meas"])
+    r = pe.run(sig)
+    assert np.allclose(r["parity1"][0], 0.7)
+    # brake measurement 0 while the model expects 1 - exp(-k dt / tau)
+    assert np.allclose(r["parity2"][0], -(1.0 - np.exp(-t / tau)), atol=1e-12)
+    pe.reset(1)
+    st = np.array([pe.step(u[0, k], y[0, k])[0] for k in range(T)])
+    assert np.array_equal(st, r.values[0])
+
+
+def test_feature_norms_and_offset_filter_batch_equals_stream(des):
+    rng = np.random.default_rng(0)
+    names = [f"r{i}" for i in range(5)]
+    x = rng.normal(size=(2, 40, 5))
+    fn = FeatureNorms({"a": names[:3], "b": names[3:]}, dt=0.01, tau=0.05)
+    out = fn.run(Signals(np.arange(40) * 0.01, x, names)).values
+    alpha = 1 - np.exp(-0.01 / 0.05)
+    ref = np.zeros((2, 2))
+    for k in range(40):  # independent recursion
+        n = np.stack([np.linalg.norm(x[:, k, :3], axis=1), np.linalg.norm(x[:, k, 3:], axis=1)], 1)
+        ref = ref + alpha * (n - ref)
+        assert np.allclose(out[:, k], ref, rtol=1e-13)
+    fn.reset(2)
+    st = np.stack([fn.step(x[:, k]) for k in range(40)], 1)
+    assert np.array_equal(st, out)
+    d = des.designs[1]["sensor:a_x"]
+    f = OffsetFilter(d, np.full(len(d.u_names), 3.0), np.full(len(d.y_names), -1.0))
+    T = 30
+    v = rng.normal(size=(2, T, len(d.u_names) + len(d.y_names)))
+    sig = Signals(np.arange(T) * d.dt, v, d.u_names + d.y_names)
+    b = f.run(sig).values
+    f.reset(2)
+    s = np.stack([f.step(v[:, k, :len(d.u_names)], v[:, k, len(d.u_names):]) for k in range(T)], 1)
+    assert np.array_equal(b, s)
+    # the offset is a plain shift of the inputs
+    from fdikit.residuals import FaultDetectionFilter
+    sh = v.copy()
+    sh[:, :, :len(d.u_names)] -= 3.0
+    sh[:, :, len(d.u_names):] += 1.0
+    assert np.array_equal(FaultDetectionFilter(d).run(Signals(sig.t, sh, sig.names)).values, b)
+
+
+def _synthetic_monitor(des, block):
+    """A monitor with densities calibrated on synthetic features (no simulation)."""
+    from fdikit.plants.passenger_car.monitor import _generators
+
+    _gens, groups = _generators(des, block)
+    C = len(groups)
+    rng = np.random.default_rng(1)
+    nominal = np.abs(rng.normal(0.2, 0.05, (200, C)))
+    faults = {}
+    for j, name in enumerate(["f0", "f1"]):
+        faults[name] = {m: nominal[:50] + m * np.eye(C)[j] for m in (1.0, 2.0, 3.0)}
+    return build_monitor(des, block, calibrate_densities(nominal, faults), warmup=0.1)
+
+
+@pytest.mark.parametrize("block", ["longitudinal", "lateral"])
+def test_monitor_batch_equals_stream(des, block):
+    from fdikit.faults import Bias
+    from fdikit.plants.passenger_car.driving import simulate_drive
+    from fdikit.plants.passenger_car.monitor import car_signals, sensor_noise
+
+    mon = _synthetic_monitor(des, block)
+    res = simulate_drive("straight", 20.0, duration=0.6, dt=5e-3, runs=2, noise=sensor_noise(),
+                         faults=[Bias("sensor:a_x", [0.0, 0.8], start=0.3)])
+    sig = car_signals(res)
+    b = mon.monitor.run(sig)
+    s = mon.monitor.stream(sig)
+    assert np.array_equal(b.residuals.values, s.residuals.values)
+    assert np.allclose(b.statistics.values, s.statistics.values, rtol=1e-12, atol=1e-14)
+    assert [(e.run, e.k, e.hypothesis) for e in b.events] == [(e.run, e.k, e.hypothesis) for e in s.events]
+    assert len(mon.monitor.residual_names) == (sum(len(d.residual_names) for d in des.filters(
+        LONGITUDINAL_SETS if block == "longitudinal" else LATERAL_SETS)) + (2 if block == "longitudinal" else 0))
+
+
+def test_monitor_hypothesis_counts():
+    """15 longitudinal hypotheses (H0 + 7 faults x small/large), 11 lateral (paper Section IV-E)."""
+    from fdikit.plants.passenger_car.monitor import LATERAL_FAULTS, LONGITUDINAL_FAULTS
+
+    assert 1 + 2 * len(LONGITUDINAL_FAULTS) == 15
+    assert 1 + 2 * len(LATERAL_FAULTS) == 11
+
+
+@pytest.fixture(scope="module")
+def pt(des):
+    return pattern_table(20.0, kind="straight", duration=4.5, onset=2.0)
+
+
+def test_pattern_table_rows_distinct(pt):
+    rows = {k: tuple(v) for k, v in pt["rows"].items() if k != "throttle_actuator"}
+    assert all(any(v) for v in rows.values()), pt["text"]
+    # binary patterns: the longitudinal hypotheses are all distinct
+    lon = ["throttle", "brake_actuator", "brake_sensor", "engine_speed", "accelerometer", "front_wheel_sum",
+           "rear_wheel_sum"]
+    assert len({rows[k] for k in lon}) == len(lon), pt["text"]
+    # graded patterns (the MHSSPT's view): no two hypotheses' responses are parallel; recomputed here
+    j1, j2 = pt["columns"].index("|parity1|"), pt["columns"].index("|parity2|")
+    for k in ("throttle", "throttle_actuator"):
+        assert pt["rows"][k][j1] == 1 and pt["rows"][k][j2] == 0
+    for k in ("brake_actuator", "brake_sensor"):
+        assert pt["rows"][k][j2] == 1 and pt["rows"][k][j1] == 0
+
+
+@pytest.mark.xfail(strict=True, reason="known shortfall: the front and rear wheel-speed-difference "
+                   "faults give nearly parallel lateral residual patterns (cosine ~0.999) with these UIOs")
+def test_lateral_patterns_not_parallel(pt):
+    # (the lateral binary rows of steer/yaw and of the two wheel differences coincide: the
+    # low-gain UIOs respond to every fault they do not block)
+    lat = ["steering_actuator", "lateral_accelerometer", "yaw_rate", "front_wheel_diff", "rear_wheel_diff"]
+    Z = np.array([np.clip(pt["ratio"][k], 0, None) for k in lat])
+    Z /= np.linalg.norm(Z, axis=1, keepdims=True)
+    cos = Z @ Z.T - 2 * np.eye(len(lat))
+    assert cos.max() < 0.99, cos.max()
+
+
+def test_cli_parser():
+    from fdikit.commands.car_monitor import add_monitor_parsers
+
+    p = argparse.ArgumentParser()
+    add_monitor_parsers(p.add_subparsers(dest="car_action"))
+    a = p.parse_args(["scenario", "steering_actuator", "--json", "--plot", "x.png"])
+    assert (a.name, a.json, a.plot) == ("steering_actuator", True, "x.png")
+    assert p.parse_args(["scenario", "--list"]).list
+    assert p.parse_args(["monitor-log", "d", "--inject", "yaw_rate:0.03@20"]).inject == "yaw_rate:0.03@20"
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name,delay", [("steering_actuator", 0.2), ("brake_actuator_short", 0.5)])
+def test_actuator_scenarios(name, delay):
+    from fdikit.plants.passenger_car.scenarios import run_scenario
+
+    s = run_scenario(name)["summary"]
+    assert s["isolated"] == s["fault"], s
+    assert s["detection_delay_s"] is not None and s["detection_delay_s"] <= delay, s
+    assert not s["false_announcements"], s
