@@ -640,9 +640,7 @@ def test_short_payload_is_flagged(ctx, fmt):
 
     path = mutate_frames(ctx, fmt, fn)
     out = check(lambda: read(fmt, path))
-    if fmt == "mf4bus":  # the MDF stores 8 data bytes with a DataLength of 4; asammdf decodes the 8
-        assert out.info[s].n_samples == ctx["clean"][fmt].info[s].n_samples
-        return
+    # (the MDF stores 8 data bytes with DataLength 4: asammdf would decode all 8; the reader must not)
     t = ctx["series"][s][0]
     c = out.names.index(s)
     assert out.info[s].n_undecodable == 1

@@ -198,7 +198,7 @@ def _clean_series(name: str, t: np.ndarray, v: np.ndarray,
     if back.size:
         k = int(back[0]) + 1
         raise DataError(f"{where}: time of signal {name!r} goes backwards at sample {k} "
-                        f"({t[k - 1]!r} s then {t[k]!r} s)")
+                        f"({float(t[k - 1])!r} s then {float(t[k])!r} s)")
     same = np.flatnonzero(d == 0)
     if not same.size:
         return t, v, 0, 0
@@ -466,7 +466,8 @@ def frames_to_signals(
     back = np.flatnonzero(np.diff(ts) < 0)
     if back.size:
         k = int(back[0]) + 1
-        raise DataError(f"{where}: time goes backwards at {_at(k)}: {ts[k - 1]!r} s then {ts[k]!r} s "
+        raise DataError(f"{where}: time goes backwards at {_at(k)}: {float(ts[k - 1])!r} s then "
+                        f"{float(ts[k])!r} s "
                         "(shuffled or corrupt log)")
     t0 = float(ts[0])
     by_msg: dict[int, list[tuple[str, Any, Any]]] = {}
@@ -736,7 +737,8 @@ def _check_table_time(t: np.ndarray, where: str, time_col: str, present: np.ndar
         raise DataError(f"{where}: time column {time_col!r} is empty at row {row}")
     bad = np.flatnonzero(~np.isfinite(t))
     if bad.size:
-        raise DataError(f"{where}: time column {time_col!r} is not finite at row {int(bad[0])} ({t[bad[0]]})")
+        raise DataError(f"{where}: time column {time_col!r} is not finite at row {int(bad[0])} "
+                        f"({float(t[bad[0]])})")
     d = np.diff(t)
     nb = np.flatnonzero(d < 0)
     if nb.size:  # repeated times are allowed (rows of different messages); per channel they merge
@@ -1055,14 +1057,31 @@ def _read_mdf_bus(mdf, p, where, raw_groups, dbc, signals, rate, kw) -> LoadedSi
     import logging
 
     db = _load_dbc(dbc)
-    _resolve(db, signals)  # clear errors (and close matches) before the extraction
+    resolved = _resolve(db, signals)  # clear errors (and close matches) before the extraction
     t_first, t_last, n_frames = np.inf, -np.inf, 0
+    f_t, f_id, f_len = [], [], []
     for g in raw_groups:
         try:
             tm = np.asarray(mdf.get_master(g), float)
+            fid = np.asarray(_mdf_get(mdf, "CAN_DataFrame.ID", where, g)[1], np.int64) & 0x1FFFFFFF
+            names = [c.name for c in mdf.groups[g].channels]
+            if "CAN_DataFrame.DataLength" in names:
+                flen = np.asarray(_mdf_get(mdf, "CAN_DataFrame.DataLength", where, g)[1], np.int64)
+            else:
+                flen = np.asarray(_mdf_get(mdf, "CAN_DataFrame.DLC", where, g)[1], np.int64)
+                fd = np.array([12, 16, 20, 24, 32, 48, 64])
+                flen = np.where(flen <= 8, flen, fd[np.clip(flen - 9, 0, 6)])
+        except DataError:
+            raise
         except Exception as exc:
-            raise DataError(f"{where}: the time of CAN group {g} cannot be read: "
+            raise DataError(f"{where}: the frames of CAN group {g} cannot be read: "
                             f"{type(exc).__name__}: {exc}") from None
+        if not (tm.size == fid.size == flen.size):
+            raise DataError(f"{where}: CAN group {g} has {tm.size} time stamps, {fid.size} ids and "
+                            f"{flen.size} lengths")
+        f_t.append(tm)
+        f_id.append(fid)
+        f_len.append(flen)
         if tm.size:
             if not np.isfinite(tm).all():
                 raise DataError(f"{where}: CAN group {g} has a non-finite time stamp at frame "
@@ -1071,7 +1090,7 @@ def _read_mdf_bus(mdf, p, where, raw_groups, dbc, signals, rate, kw) -> LoadedSi
             if back.size:
                 k = int(back[0]) + 1
                 raise DataError(f"{where}: time of CAN group {g} goes backwards at frame {k} "
-                                f"({tm[k - 1]!r} s then {tm[k]!r} s)")
+                                f"({float(tm[k - 1])!r} s then {float(tm[k])!r} s)")
             t_first, t_last = min(t_first, tm[0]), max(t_last, tm[-1])
             n_frames += tm.size
     if n_frames == 0:
@@ -1097,15 +1116,45 @@ def _read_mdf_bus(mdf, p, where, raw_groups, dbc, signals, rate, kw) -> LoadedSi
             if s not in out.channels_db:
                 raise DataError(f"{where} has no frame of message {s.split('.')[0]!r} needed for {s!r} "
                                 "(or none that the DBC decodes)")
+            if len(out.channels_db[s]) > 1:
+                raise DataError(f"{where}: {s!r} is decoded on more than one CAN bus; split the file by bus")
             g, i = out.channels_db[s][0]
             t, v, unit = _mdf_get(out, s, where, g, i)
             series[s] = (t - t_first, v)
             units_src[s] = unit
     finally:
         out.close()
+    # asammdf decodes the 8 stored data bytes whatever DataLength says, and skips frames silently
+    # if it must: check it decoded every frame of the message, and make a frame too short for
+    # the signal a bad sample (as frames_to_signals does)
+    f_t, f_id, f_len = np.concatenate(f_t), np.concatenate(f_id), np.concatenate(f_len)
+    counts = {}
+    for full, msg, sig in resolved:
+        m = f_id == msg.frame_id
+        t, v = series[full]
+        if m.sum() != t.size or not np.array_equal(f_t[m] - t_first, t):
+            raise DataError(f"{where}: asammdf decoded {t.size} frames of message {msg.name!r} "
+                            f"(id 0x{msg.frame_id:x}) but the file holds {int(m.sum())}")
+        short = f_len[m] < _bytes_needed(msg, sig.name)
+        if short.any():
+            v = v.copy()
+            v[short] = np.nan
+            series[full] = (t, v)
+        counts[full] = {"n_undecodable": int(short.sum())}
     src = SourceReport("mdf", str(p), int(n_frames))
-    return series_to_grid(series, units_src, rate, source=src, where=where,
+    return series_to_grid(series, units_src, rate, source=src, where=where, counts=counts,
                           log_span=(0.0, float(t_last - t_first)), **kw)
+
+
+def _bytes_needed(msg, signal: str) -> int:
+    """Fewest payload bytes from which cantools decodes ``signal`` of ``msg``."""
+    for n in range(0, max(msg.length, 1) + 1):
+        try:
+            if signal in msg.decode(bytes(n), decode_choices=False, allow_truncated=True):
+                return n
+        except Exception:  # a payload this short cannot be decoded at all
+            continue
+    return msg.length
 
 
 # ---------------------------------------------------------------------------------- dispatcher
