@@ -73,8 +73,11 @@ __all__ = [
     "build_monitor",
     "calibrate_monitor",
     "car_signals",
+    "delayed_feedthrough",
     "demo_summary",
     "design_car_monitor",
+    "floor_std",
+    "isolation_study",
     "pattern_table",
 ]
 
@@ -182,21 +185,29 @@ class OffsetFilter(FaultDetectionFilter):
 
 @njit(cache=True)
 def _parity_kernel(u, y, a, state, out):  # pragma: no cover - compiled
-    """u, y (runs, T, 2) = (throttle, brake) commands and measurements; state (runs,) brake model."""
+    """u, y (runs, T, 2) = (throttle, brake) commands and measurements; state (runs, 2) = (brake
+    model, previous throttle command; NaN: take the current one)."""
     for i in range(u.shape[0]):
-        p = state[i]
+        p = state[i, 0]
+        prev = state[i, 1]
         for k in range(u.shape[1]):
-            out[i, k, 0] = y[i, k, 0] - u[i, k, 0]
+            if np.isnan(prev):
+                prev = u[i, k, 0]
+            out[i, k, 0] = y[i, k, 0] - prev
             out[i, k, 1] = y[i, k, 1] - p
             p = a * p + (1.0 - a) * u[i, k, 1]
-        state[i] = p
+            prev = u[i, k, 0]
+        state[i, 0] = p
+        state[i, 1] = prev
 
 
 class ParityEquations(ResidualGenerator):
     """The two parity equations of paper 1, Section IV-D.
 
-    ``parity1[k] = throttle_meas[k] - throttle[k]`` (the throttle actuator follows its command
-    within a sample); ``parity2[k] = brake_meas[k] - p_hat[k]`` with the brake actuator model
+    ``parity1[k] = throttle_meas[k] - throttle[k-1]`` (the throttle actuator follows its command
+    within a sample; the measurement at ``t_k`` sees the command held over the previous sample,
+    ``throttle[k-1]``: the command ``throttle[k]`` is computed from the measurements at ``t_k``);
+    ``parity2[k] = brake_meas[k] - p_hat[k]`` with the brake actuator model
     ``tau_b p' = p_cmd - p`` discretised exactly for a command held over the sample:
     ``p_hat[k+1] = a p_hat[k] + (1 - a) brake[k]``, ``a = exp(-dt / tau_b)``.
 
@@ -215,8 +226,8 @@ class ParityEquations(ResidualGenerator):
     >>> pe.reset(1)
     >>> pe.step([10.0, 1.0], [10.5, 0.0]).round(6).tolist()
     [[0.5, 0.0]]
-    >>> round(float(pe.step([10.0, 1.0], [10.5, 0.0])[0, 1]), 6)   # -(1 - exp(-0.1))
-    -0.095163
+    >>> pe.step([12.0, 1.0], [10.5, 0.0]).round(6).tolist()   # throttle[k-1] = 10; -(1 - exp(-0.1))
+    [[0.5, -0.095163]]
     """
 
     def __init__(self, dt: float, tau_b: float, p0: float = 0.0):
@@ -230,7 +241,7 @@ class ParityEquations(ResidualGenerator):
         self.reset(1)
 
     def reset(self, runs: int = 1) -> None:
-        self._p = np.full(runs, self.p0)
+        self._p = np.column_stack([np.full(runs, self.p0), np.full(runs, np.nan)])
 
     def _step(self, u, y):
         out = np.empty((u.shape[0], 1, 2))
@@ -383,7 +394,7 @@ class CarMonitorDesign:
 
 @functools.lru_cache(maxsize=8)
 def design_car_monitor(speed: float = 20.0, dt: float = 0.01, *, fast_accelerometer: bool = False,
-                       q_weight: float = 1e-6, nl_duration: float = 6.0) -> CarMonitorDesign:
+                       q_weight: float = 1e-6, nl_duration: float = 6.0, reduced: bool = True) -> CarMonitorDesign:
     """Design the six filter sets and the parity equations at ``speed`` (cached in memory).
 
     Parameters
@@ -400,6 +411,9 @@ def design_car_monitor(speed: float = 20.0, dt: float = 0.01, *, fast_accelerome
         measurement weight is the sensor-noise covariance :data:`SENSOR_NOISE_STD`).
     nl_duration : float
         Length (s) of the nominal simulations the nonlinearity direction is estimated from.
+    reduced : bool
+        Design on the reduced models (10 + 6 states, paper Section III) or on the full blocks
+        (14 + 8 states, with the fast wheel-slip and wheel-hop modes).
 
     Returns
     -------
@@ -416,8 +430,8 @@ def design_car_monitor(speed: float = 20.0, dt: float = 0.01, *, fast_accelerome
     t0 = time.perf_counter()
     lin = linearize_car(float(speed))
     nd = nonlinearity_directions(lin, "longitudinal", k=1, duration=nl_duration, dt=2.5e-3)
-    lon = nd.reduced
-    lat = lin.lateral_reduced
+    lon = nd.reduced if reduced else nd.model
+    lat = lin.lateral_reduced if reduced else lin.lateral
     lon_d = lon.discretize(dt)
     lat_d = lat.discretize(dt)
     slope_nuis = ("slope", lon_d.B_of("d"))  # the road slope: an unknown disturbance, blocked
@@ -457,8 +471,39 @@ def design_car_monitor(speed: float = 20.0, dt: float = 0.01, *, fast_accelerome
                             u0d, y0d, float(nd.energy[0]), info)
 
 
+def delayed_feedthrough(design: FilterDesign) -> FilterDesign:
+    """The same filter with its control feedthrough acting on the previous sample's command.
+
+    A sampled plant under a digital controller measures ``y[k] = C x[k] + D u[k-1]`` (the command
+    ``u[k]`` is computed from ``y[k]`` and held over ``[t_k, t_k+1)``; the state update is
+    ``x[k+1] = A x[k] + B u[k]``). The filter's ``Du u[k]`` becomes ``Du u[k-1]`` by carrying the
+    previous command in ``m`` extra states: ``A' = diag(A, 0)``, ``Bu' = [Bu; I]``,
+    ``By' = [By; 0]``, ``C' = [C, Du]``, ``Du' = 0``, ``Dy' = Dy``. Without it the steering
+    feed-forward step at a curve entry gives a one-sample spike of ``Du (u[k] - u[k-1])``.
+
+    Examples
+    --------
+    >>> d = FilterDesign(np.zeros((0, 0)), np.zeros((0, 1)), np.zeros((0, 1)), np.zeros((1, 0)),
+    ...                  np.array([[-2.0]]), np.array([[1.0]]), 0.1, ["u"], ["y"], ["r"])
+    >>> dd = delayed_feedthrough(d)
+    >>> f = FaultDetectionFilter(dd)
+    >>> f.reset(1)
+    >>> [float(f.step([u], [0.0])[0, 0]) for u in (1.0, 3.0, 0.0)]   # -2 u[k-1]
+    [0.0, -2.0, -6.0]
+    """
+    nf, m = design.order, len(design.u_names)
+    A = np.zeros((nf + m, nf + m))
+    A[:nf, :nf] = design.A
+    Bu = np.vstack([design.Bu, np.eye(m)])
+    By = np.vstack([design.By, np.zeros((m, design.By.shape[1]))])
+    C = np.hstack([design.C, design.Du])
+    info = {**design.info, "delayed_feedthrough": True}
+    return FilterDesign(A, Bu, By, C, np.zeros_like(design.Du), design.Dy.copy(), design.dt,
+                        list(design.u_names), list(design.y_names), list(design.residual_names), info)
+
+
 def _filter_generator(des: CarMonitorDesign, sets: Sequence[int]) -> OffsetFilter:
-    st = stack_designs(des.filters(sets))
+    st = delayed_feedthrough(stack_designs(des.filters(sets)))
     return OffsetFilter(st, [des.u0[u] for u in st.u_names], [des.y0[y] for y in st.y_names])
 
 
@@ -515,7 +560,7 @@ class CarMonitor:
         return self.monitor.run(signals)
 
 
-def build_monitor(des: CarMonitorDesign, block: str, calibration, *, tau: float = 0.03, p: float = 1e-3,
+def build_monitor(des: CarMonitorDesign, block: str, calibration, *, tau: float = 0.0, p: float = 1e-3,
                   q: float = 0.0, level: float = 0.95, warmup: float = 2.0) -> CarMonitor:
     """Assemble a :class:`CarMonitor` from a design and a calibration (see :func:`calibrate_monitor`).
 
@@ -533,8 +578,9 @@ def build_monitor(des: CarMonitorDesign, block: str, calibration, *, tau: float 
 
 @functools.lru_cache(maxsize=8)
 def calibrate_monitor(block: str = "longitudinal", speed: float = 20.0, *, kind: str = "curve",
-                      onset: float = 6.0, duration: float = 10.0, settle: float = 0.1, tau: float = 0.03,
-                      p: float = 1e-3, q: float = 0.0, inflate: float = 1.5, dt_sim: float = 2.5e-3,
+                      onset: float = 6.0, duration: float = 10.0, settle: float = 0.1, tau: float = 0.0,
+                      p: float = 1e-3, q: float = 0.0, inflate: float = 1.5, std_floor: float = 0.05,
+                      dt_sim: float = 2.5e-3,
                       fast_accelerometer: bool = False, seed: int = 11) -> CarMonitor:
     """Calibrate the MHSSPT densities of one block by simulating every fault (paper 1, Section IV-E).
 
@@ -542,7 +588,11 @@ def calibrate_monitor(block: str = "longitudinal", speed: float = 20.0, *, kind:
     one run per (fault, magnitude) of :data:`MAGNITUDES` with the fault from ``onset``; the
     features ``settle`` s after the onset to the end give each magnitude's mean and spread
     (:func:`~fdikit.detect.calibrate_densities`, two hypotheses per fault), the nominal run's
-    features from 2 s give H0.
+    features from 2 s give H0 (named ``"none:<block>"``). Every density's standard deviation of a
+    feature is then floored at ``std_floor`` times its upper mean (:func:`floor_std`): the parity
+    residuals are nearly noise-free, and without a floor
+    a sample on the rise of a fault (between two calibrated magnitudes' ranges) would be hundreds
+    of standard deviations from every hypothesis and the winner decided by rounding.
 
     Returns
     -------
@@ -574,7 +624,8 @@ def calibrate_monitor(block: str = "longitudinal", speed: float = 20.0, *, kind:
     by_fault: dict[str, dict[float, np.ndarray]] = {}
     for i, (name, _f, m) in enumerate(runs[1:], start=1):
         by_fault.setdefault(name, {})[m] = X[i, t >= onset + settle]
-    cal = calibrate_densities(nominal, by_fault, inflate=inflate)
+    cal = calibrate_densities(nominal, by_fault, inflate=inflate, no_fault=f"none:{block}")
+    cal = floor_std(cal, std_floor)
     out = build_monitor(des, block, cal, tau=tau, p=p, q=q)
     out.info.update(calibration_runs=R, calibration_kind=kind, speed=speed,
                     feature_means={name: {str(m): by_fault[name][m].mean(0).round(4).tolist()
@@ -582,6 +633,28 @@ def calibrate_monitor(block: str = "longitudinal", speed: float = 20.0, *, kind:
                     nominal_mean=nominal.mean(0).round(4).tolist(),
                     nominal_std=nominal.std(0).round(4).tolist())
     return out
+
+
+def floor_std(cal, frac: float):
+    """Floor every density's per-feature std at ``frac`` times its own upper mean ``high`` (a
+    relative model error: a few per cent of a residual's level), as a new
+    :class:`~fdikit.detect.mhsspt.MHSSPTCalibration`.
+
+    Examples
+    --------
+    >>> from fdikit.detect.mhsspt import MHSSPTCalibration
+    >>> from fdikit.detect import UniformMeanGaussian
+    >>> c = MHSSPTCalibration({"none": UniformMeanGaussian([0.1], [0.1], [0.001]),
+    ...                        "f": UniformMeanGaussian([1.0], [2.0], [0.01])}, {}, {})
+    >>> [floor_std(c, 0.05).densities[h].std.round(6).tolist() for h in ("none", "f")]
+    [[0.005], [0.1]]
+    """
+    from ...detect import UniformMeanGaussian
+    from ...detect.mhsspt import MHSSPTCalibration
+
+    dens = {h: UniformMeanGaussian(d.low, d.high, np.maximum(d.std, frac * np.abs(d.high)))
+            for h, d in cal.densities.items()}
+    return MHSSPTCalibration(dens, dict(cal.groups), dict(cal.ranges))
 
 
 # ---------------------------------------------------------------------------------- pattern table
@@ -663,3 +736,57 @@ def demo_summary() -> dict:
     return {"scenario": s["description"], "detection_delay_s": s["detection_delay_s"],
             "isolated": s["isolated"], "false_announcements": s["false_announcements"],
             "seconds": round(time.perf_counter() - t0, 2)}
+
+
+def isolation_study(block: str = "longitudinal", speed: float = 20.0, *, kind: str = "curve",
+                    onset: float = 6.0, duration: float = 10.0, seed: int = 5, **cal_kw) -> dict[str, Any]:
+    """Detection and isolation of every fault at every calibration magnitude, on fresh noise.
+
+    One vectorised simulation (a nominal run and one run per fault and magnitude of
+    :data:`MAGNITUDES`, noise seed ``seed`` different from the calibration's) through the
+    calibrated monitor (:func:`calibrate_monitor` with ``cal_kw``). A run is *isolated* when at the
+    end its fault's probability is >= 0.95, every other fault's <= 0.05 and no other fault was
+    announced after the warm-up.
+
+    Returns
+    -------
+    dict
+        ``runs``: per fault and magnitude ``{isolated, delay_s, final_own, final_max_other,
+        wrong}``; ``smallest_isolated``: per fault the smallest magnitude isolated (None if none);
+        ``nominal_wrong`` and ``nominal_max_probability`` for the nominal run.
+    """
+    mon = calibrate_monitor(block, speed, kind=kind, **cal_kw)
+    table = LONGITUDINAL_FAULTS if block == "longitudinal" else LATERAL_FAULTS
+    runs = [("nominal", None, 0.0)] + [(name, f, m) for name, f in table.items() for m in MAGNITUDES[f]]
+    R = len(runs)
+    faults = []
+    for f in dict.fromkeys(r[1] for r in runs[1:]):
+        mags = np.array([r[2] if r[1] == f else 0.0 for r in runs])
+        faults.append(Bias(f, mags, start=onset))
+    res = simulate_drive(kind, speed, duration=duration, faults=faults, runs=R, seed=seed, dt=2.5e-3,
+                         noise=sensor_noise())
+    sig = car_signals(res)
+    out = mon.run(sig)
+    t = sig.t
+    P = np.stack([out.statistics[f"P:{f}"] for f in mon.faults], axis=-1)  # (R, T, F)
+    report: dict[str, Any] = {"runs": {}, "smallest_isolated": {}}
+    for i, (name, _f, m) in enumerate(runs):
+        ev = [e for e in out.events if e.run == i]
+        if name == "nominal":
+            report["nominal_wrong"] = [(round(e.t, 3), e.hypothesis) for e in ev]
+            report["nominal_max_probability"] = round(float(P[i].max()), 4)
+            continue
+        j = mon.faults.index(name)
+        others = [k for k in range(len(mon.faults)) if k != j]
+        wrong = [(round(e.t, 3), e.hypothesis) for e in ev if e.hypothesis != name]
+        own = np.flatnonzero((t >= onset) & (P[i, :, j] >= 0.95))
+        iso = bool(P[i, -1, j] >= 0.95 and P[i, -1, others].max() <= 0.05 and not wrong)
+        report["runs"].setdefault(name, {})[str(m)] = {
+            "isolated": iso, "delay_s": round(float(t[own[0]] - onset), 3) if own.size else None,
+            "final_own": round(float(P[i, -1, j]), 4),
+            "final_max_other": round(float(P[i, -1, others].max()), 4),
+            "wrong": wrong}
+    for name, by in report["runs"].items():
+        ok = [float(m) for m, r in by.items() if r["isolated"]]
+        report["smallest_isolated"][name] = min(ok) if ok else None
+    return report
