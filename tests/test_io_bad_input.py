@@ -31,7 +31,7 @@ from fdikit.io.formats import LoadedSignals, read_log, series_to_grid
 hypothesis = pytest.importorskip("hypothesis")
 # asammdf's MDF4.__del__ complains about a file it failed to open (after raising); that noise is not ours
 pytestmark = pytest.mark.filterwarnings("ignore::pytest.PytestUnraisableExceptionWarning")
-from hypothesis import HealthCheck, given, settings  # noqa: E402
+from hypothesis import HealthCheck, event, given, settings  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402
 
 DATA = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "rav4-highway"
@@ -809,8 +809,9 @@ def _brute_grid(t, v, grid, max_gap, method):
     return val
 
 
-_values = st.one_of(st.floats(-1e3, 1e3, allow_nan=False), st.just(np.nan), st.just(np.inf),
-                    st.just(-np.inf))
+_values = st.one_of(st.floats(-1e3, 1e3, allow_nan=False), st.floats(-1e3, 1e3, allow_nan=False),
+                    st.floats(-1e3, 1e3, allow_nan=False), st.floats(-1e3, 1e3, allow_nan=False),
+                    st.just(np.nan), st.just(np.inf), st.just(-np.inf))
 
 
 @st.composite
@@ -831,6 +832,7 @@ def test_hypothesis_series_to_grid_equals_brute_force(ser, rate, max_gap, method
     call = lambda: series_to_grid({"x": (t, v)}, {"x": ""}, rate, max_gap=max_gap,  # noqa: E731
                                   method=method, span="log")
     tm, vm = _merge(t, v)
+    event(f"nonfinite={not np.isfinite(v).all()}, repeats={bool(np.any(np.diff(t) == 0))}")
     out = check(call)
     ref = _brute_grid(tm, vm, out.t, max_gap, method)
     assert np.array_equal(np.isfinite(ref), out.valid[0, :, 0])
@@ -844,10 +846,11 @@ _SPEED = 0xB4
 @st.composite
 def _candump(draw):
     n = draw(st.integers(1, 30))
+    back = draw(st.integers(0, 3)) == 0  # time may go backwards in about 1 example of 4
     lines, frames = [], []
     t = 1000.0
     for _ in range(n):
-        t = round(t + draw(st.sampled_from([0.0, 0.01, 0.01, 0.024, 0.2, -0.01])), 6)
+        t = round(t + draw(st.sampled_from([0.0, 0.01, 0.01, 0.024, 0.2] + ([-0.01] if back else []))), 6)
         data = bytes(draw(st.lists(st.integers(0, 255), min_size=0, max_size=8)))
         fid = draw(st.sampled_from([_SPEED, _SPEED, _SPEED, 0x24]))
         lines.append(f"({t:.6f}) can0 {fid:03X}#{data.hex().upper()} R\n")
@@ -863,6 +866,7 @@ def test_hypothesis_candump_lines(tmp_path_factory, gen):
     p.write_text(text)
     ts = np.array([f[0] for f in frames])
     sp = [f for f in frames if f[1] == _SPEED]
+    event("backwards" if np.any(np.diff(ts) < 0) else ("no SPEED" if not sp else "data"))
     if np.any(np.diff(ts) < 0):
         check(lambda: read_log(p, DBC, ["SPEED.SPEED"], rate=50.0), error="goes backwards")
         return
@@ -881,12 +885,28 @@ def test_hypothesis_candump_lines(tmp_path_factory, gen):
     assert out.info["SPEED.SPEED"].n_undecodable == sum(len(d) < 7 for _, _, d in sp)
 
 
-_cells = st.sampled_from(["", "1.5", "-2", "3e2", "nan", "inf", "-inf", "abc", "0x10", " 7 "])
+_good_cells = st.sampled_from(["", "1.5", "-2", "3e2", " 7 ", "0.25", "nan", "inf", "-inf"])
+_bad_cells = st.sampled_from(["abc", "0x10", "1;5", "--1"])
+
+
+@st.composite
+def _csv_rows(draw):
+    """Rows (time step, cell a, cell b, number of fields); each kind of damage in about 1 example of 4."""
+    n = draw(st.integers(1, 25))
+    back, bad_cell, bad_fields = (draw(st.integers(0, 3)) == 0 for _ in range(3))
+    rows = []
+    for _ in range(n):
+        dt = draw(st.sampled_from([0.0, 0.01, 0.02] + ([-0.01] if back else [])))
+        a, b = draw(_good_cells), draw(_good_cells)
+        if bad_cell and draw(st.integers(0, 2)) == 0:
+            a = draw(_bad_cells)
+        nf = draw(st.sampled_from([2, 4])) if bad_fields and draw(st.integers(0, 5)) == 0 else 3
+        rows.append((dt, a, b, nf))
+    return rows
 
 
 @HYP
-@given(st.lists(st.tuples(st.sampled_from([0.0, 0.01, 0.02, -0.01]), _cells, _cells,
-                          st.integers(2, 4)), min_size=1, max_size=25))
+@given(_csv_rows())
 def test_hypothesis_csv_tables(tmp_path_factory, rows):
     lines = ["t,a,b"]
     t = 0.0
@@ -901,18 +921,21 @@ def test_hypothesis_csv_tables(tmp_path_factory, rows):
             expect_error = rf"line {i + 2} has {len(fields)} fields"
     p = tmp_path_factory.mktemp("hyp") / "h.csv"
     p.write_text("\n".join(lines) + "\n")
-    if expect_error is None:
-        for i, (_, a, b, _) in enumerate(rows):
-            for name, x in (("a", a), ("b", b)):
-                if x.strip() and x.strip() not in ("nan", "inf", "-inf") and not re.fullmatch(
-                        r"-?\d+(\.\d+)?(e\d+)?", x.strip()):
-                    expect_error = expect_error or rf"line {i + 2}, column '{name}'"
+    # the reader checks: field counts, then the time column, then the channels' cells
     if expect_error is None and np.any(np.diff(times) < 0):
-        expect_error = "goes backwards"
+        k = int(np.flatnonzero(np.diff(times) < 0)[0]) + 1
+        expect_error = rf"goes backwards at row {k} \(line {k + 2}\)"
+    if expect_error is None:
+        for j, name in enumerate("ab"):
+            for i, r in enumerate(rows):
+                x = r[1 + j].strip()
+                if x and x not in ("nan", "inf", "-inf") and not re.fullmatch(r"-?\d+(\.\d+)?(e\d+)?", x):
+                    expect_error = expect_error or rf"line {i + 2}, column '{name}'"
     cells = {n: [(times[i], r[1 + j].strip()) for i, r in enumerate(rows) if r[1 + j].strip()]
              for j, n in enumerate("ab")}
     if expect_error is None and not all(cells.values()):
         expect_error = "has no samples"
+    event("error: " + expect_error.split(" ")[-1] if expect_error else "data")
     if expect_error is not None:
         check(lambda: read_log(p, signals=["a", "b"], rate=20.0, span="log"), error=expect_error)
         return
@@ -937,6 +960,7 @@ def test_hypothesis_parquet_nulls_and_nonfinite(tmp_path_factory, rows):
     p = tmp_path_factory.mktemp("hyp") / "h.parquet"
     pq.write_table(pa.table({"t": pa.array(t), "x": pa.array(vals, type=pa.float64())}), p)
     present = [x is not None for x in vals]
+    event(f"nonfinite={sum(x is not None and not np.isfinite(x) for x in vals) > 0}")
     if not any(present):
         check(lambda: read_log(p, signals=["x"], rate=20.0), error="has no samples")
         return

@@ -731,19 +731,26 @@ def _pick_columns(columns: Sequence[str], time_col: str, signals, where: str) ->
     return signals
 
 
-def _check_table_time(t: np.ndarray, where: str, time_col: str, present: np.ndarray | None = None):
+def _check_table_time(t: np.ndarray, where: str, time_col: str, present: np.ndarray | None = None,
+                      line_offset: int | None = None):
+    """Time of a table: present, finite, non-decreasing. Rows count from 0 (data rows);
+    ``line_offset`` adds the text line number (CSV: row + 2)."""
+
+    def at(k: int) -> str:
+        return f"row {k}" + (f" (line {k + line_offset})" if line_offset is not None else "")
+
     if present is not None and not present.all():
-        row = int(np.flatnonzero(~present)[0])
-        raise DataError(f"{where}: time column {time_col!r} is empty at row {row}")
+        k = int(np.flatnonzero(~present)[0])
+        raise DataError(f"{where}: time column {time_col!r} is empty at {at(k)}")
     bad = np.flatnonzero(~np.isfinite(t))
     if bad.size:
-        raise DataError(f"{where}: time column {time_col!r} is not finite at row {int(bad[0])} "
+        raise DataError(f"{where}: time column {time_col!r} is not finite at {at(int(bad[0]))} "
                         f"({float(t[bad[0]])})")
     d = np.diff(t)
     nb = np.flatnonzero(d < 0)
     if nb.size:  # repeated times are allowed (rows of different messages); per channel they merge
         k = int(nb[0]) + 1
-        raise DataError(f"{where}: time column {time_col!r} goes backwards at row {k} "
+        raise DataError(f"{where}: time column {time_col!r} goes backwards at {at(k)} "
                         f"({float(t[k - 1])!r} then {float(t[k])!r}); it must be non-decreasing")
 
 
@@ -904,7 +911,7 @@ def read_table_csv(path, signals=None, rate=None, *, time: str | None = None,
         return out, pres
 
     t, tp = parse(header.index(time_col), time_col)
-    _check_table_time(t, where, time_col, tp)
+    _check_table_time(t, where, time_col, tp, line_offset=2)
     values = np.empty((t.size, len(cols)))
     present = np.empty((t.size, len(cols)), bool)
     for j, c in enumerate(cols):
