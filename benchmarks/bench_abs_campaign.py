@@ -74,7 +74,8 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--runs", type=int, default=5000, help="runs per fault class (paper 5000)")
     ap.add_argument("--nominal-runs", type=int, default=None, help="nominal runs (default 2 x runs)")
-    ap.add_argument("--pfa", type=float, default=1e-3)
+    ap.add_argument("--pfa", type=float, default=0.0,
+                    help="target per-run false-alarm probability (default 0: above every design run)")
     ap.add_argument("--table-v", action="store_true", help="also Table V at 17/20/23 dB (W = 40, min sizes)")
     ap.add_argument("--grid", action="store_true", help="also Fig. 15 (G_P1 Pd vs SNR and W)")
     ap.add_argument("--grid-runs", type=int, default=1000)

@@ -51,8 +51,9 @@ def add_campaign_parser(abs_subparsers) -> argparse.ArgumentParser:
                    help="one GLRT window for all tests (Table V uses 40; default Table III's 50/10)")
     p.add_argument("--magnitudes", choices=["draw", "min"], default="draw",
                    help="fault sizes: drawn per run inside each class, or each class's minimum (Table V)")
-    p.add_argument("--pfa", type=float, default=1e-3,
-                   help="target per-run false-alarm probability of each test (default 1e-3)")
+    p.add_argument("--pfa", type=float, default=0.0,
+                   help="target per-run false-alarm probability of each test (default 0: thresholds "
+                   "above every nominal design run, plus the margin)")
     p.add_argument("--margin", type=float, default=0.1, help="relative threshold margin (default 0.1)")
     p.add_argument("--gate", type=float, default=0.5, help="gate time T of G_O_T1/G_O_T2, s (default 0.5)")
     p.add_argument("--progress", action="store_true", help="show a progress bar (stderr)")

@@ -284,7 +284,7 @@ def _simulate_residuals(fault: str, magnitude, runs: int, seed: int, snr_db, bat
 
 
 def design_tests(specs: Sequence[TestSpec] | None = None, *, design_runs: int = 2000, snr_db=23.0,
-                 seed: int = 0, pfa: float = 1e-3, margin: float = 0.1, batch: int = 1000, skip: int = 0,
+                 seed: int = 0, pfa: float = 0.0, margin: float = 0.1, batch: int = 1000, skip: int = 0,
                  progress=None) -> TestBank:
     """Calibrate mu0/sigma^2 and design every threshold from nominal runs.
 
@@ -446,7 +446,7 @@ class CampaignResult:
 
 def run_campaign(runs: int = 200, *, nominal_runs: int | None = None, design_runs: int | None = None,
                  snr_db: float | None = 23.0, seed: int = 0, W: int | None = None, gate: float = 0.5,
-                 magnitudes: str = "draw", pfa: float = 1e-3, margin: float = 0.1, batch: int = 1000,
+                 magnitudes: str = "draw", pfa: float = 0.0, margin: float = 0.1, batch: int = 1000,
                  t_detect: float = 7.0, progress: bool = False,
                  bank: TestBank | None = None) -> CampaignResult:
     """Monte Carlo campaign over the fault universe: Pd/Pf, D-matrix, sensitivity, specificity.
@@ -469,7 +469,10 @@ def run_campaign(runs: int = 200, *, nominal_runs: int | None = None, design_run
         ``"draw"``: magnitudes drawn per run inside each class (F3/F4 on the paper's 1 % grid);
         ``"min"``: the smallest fault of each class (Table V).
     pfa, margin : float
-        Threshold design (:func:`design_tests`).
+        Threshold design (:func:`design_tests`). The default ``pfa = 0`` is the paper's
+        "zero false-alarm" design: each threshold lies ``margin`` above the largest nominal
+        critical value of the design runs (measured at full size: no false alarm of any test in
+        10000 fresh nominal runs at 17, 20 and 23 dB).
     t_detect : float
         Horizon for "Pd within t_detect seconds" (7 s in the paper).
     progress : bool
