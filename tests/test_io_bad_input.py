@@ -785,7 +785,9 @@ def _brute_grid(t, v, grid, max_gap, method):
     period = float(np.median(np.diff(t))) if n > 1 else np.inf
     lim = max_gap * period
     val = np.full(grid.size, np.nan)
-    for g_i, g in enumerate(grid):
+    tol = 1e-9 * max(1.0, abs(grid[-1]))  # documented: 1 ns outside the samples is the end sample
+    for g_i, g0 in enumerate(grid):
+        g = t[-1] if 0 < g0 - t[-1] <= tol else (t[0] if 0 < t[0] - g0 <= tol else g0)
         prev = [i for i in range(n) if t[i] <= g]
         if not prev:
             continue

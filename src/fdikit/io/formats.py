@@ -316,7 +316,7 @@ def series_to_grid(
     if span == "common":
         a = max(clean[n][0][0] for n in names)
         b = min(clean[n][0][-1] for n in names)
-        if b < a or (b == a and len(names) > 1 and any(clean[n][0].size > 1 for n in names)):
+        if b < a:
             raise DataError(f"{where}: the requested signals share no common time span "
                             f"({a:.6f} s .. {b:.6f} s)")
     elif log_span is not None:
@@ -350,6 +350,16 @@ def series_to_grid(
         ok &= ~_touches_bad(t, fin, grid, method)  # an interpolation that uses a bad sample is bad
         with np.errstate(invalid="ignore", over="ignore"):
             ok &= np.isfinite(vals)
+        # a grid time a rounding error (<= 1 ns) outside the samples (times made relative by a
+        # subtraction) is the end sample itself, not a sample outside the data
+        tol = 1e-9 * max(1.0, abs(float(grid[-1])))
+        after, before = grid > t[-1], grid < t[0]
+        edge = ~ok & ((after & (grid - t[-1] <= tol)) | (before & (t[0] - grid <= tol)))
+        if edge.any():
+            end = np.where(after, v[-1], v[0])
+            edge &= np.isfinite(end)
+            vals[edge] = end[edge]
+            ok |= edge
         vals[~ok] = np.nan
         values[:, c] = vals
         valid[:, c] = ok
@@ -655,7 +665,7 @@ def read_asc(path, dbc, signals, rate=None, *, strict: bool = True, **kw) -> Loa
 
 
 def read_candump(path, dbc, signals, rate=None, **kw) -> LoadedSignals:
-    """Read a candump ``-L`` log (python-can ``CanutilsLogReader``) decoded with a DBC onto one grid.
+    r"""Read a candump ``-L`` log (python-can ``CanutilsLogReader``) decoded with a DBC onto one grid.
 
     Parameters
     ----------
@@ -670,7 +680,15 @@ def read_candump(path, dbc, signals, rate=None, **kw) -> LoadedSignals:
 
     Examples
     --------
-    >>> s = read_candump("drive.log", "toyota_rav4.dbc", ["SPEED.SPEED"])  # doctest: +SKIP
+    >>> import pathlib, tempfile, cantools
+    >>> db = cantools.database.load_string('VERSION ""\nBO_ 180 SPEED: 8 XXX\n'
+    ...     ' SG_ SPEED : 47|16@0+ (0.01,0) [0|250] "km/h" XXX\n', database_format="dbc")
+    >>> log = pathlib.Path(tempfile.mkdtemp()) / "drive.log"
+    >>> _ = log.write_text("(100.000000) can0 0B4#000000000003E800 R\n"    # 10.00 km/h
+    ...                    "(100.100000) can0 0B4#000000000007D000 R\n")   # 20.00 km/h
+    >>> s = read_candump(log, db, ["SPEED.SPEED"], rate=20)
+    >>> s.t.tolist(), s["SPEED.SPEED"].round(6).tolist(), s.source.n_records
+    ([0.0, 0.05, 0.1], [[10.0, 15.0, 20.0]], 2)
     """
     ts, ids, data, lines, src = _read_text_frames(path, "candump", strict=True)
     return frames_to_signals(ts, ids, data, dbc, signals, rate, lines=lines, source=src,
@@ -848,7 +866,7 @@ def read_parquet(path, signals=None, rate=None, *, time: str | None = None,
 
 def read_table_csv(path, signals=None, rate=None, *, time: str | None = None,
                    source_units: Mapping[str, str] | None = None, **kw) -> LoadedSignals:
-    """Read a CSV table of decoded signals onto one grid, with the Parquet reader's conventions.
+    r"""Read a CSV table of decoded signals onto one grid, with the Parquet reader's conventions.
 
     An empty cell is "no sample here"; ``nan`` / ``inf`` text is a bad sample (flagged); any
     other non-numeric cell, or a row with the wrong number of fields (a truncated or corrupt
@@ -867,8 +885,15 @@ def read_table_csv(path, signals=None, rate=None, *, time: str | None = None,
 
     Examples
     --------
-    >>> s = read_table_csv("decoded.csv", ["SPEED.SPEED"], rate=50,
-    ...                    source_units={"SPEED.SPEED": "km/h"})  # doctest: +SKIP
+    >>> import pathlib, tempfile
+    >>> p = pathlib.Path(tempfile.mkdtemp()) / "decoded.csv"
+    >>> _ = p.write_text("t,speed,yaw\n0.0,36,\n0.05,,0.5\n0.1,nan,\n0.15,,0.7\n0.2,72,\n")
+    >>> s = read_table_csv(p, rate=20, span="log", source_units={"speed": "km/h"},
+    ...                    units={"speed": "m/s"})
+    >>> s.valid[0].astype(int).T.tolist()   # speed: its nan spoils 0.05 .. 0.15; yaw: only 0.05 .. 0.15
+    [[1, 0, 0, 0, 1], [0, 1, 1, 1, 0]]
+    >>> s["yaw"][0, 1:4].round(6).tolist(), s.info["speed"].n_nonfinite
+    ([0.5, 0.6, 0.7], 1)
     """
     p = _check_file(path, "CSV file")
     where = f"CSV file {p.name!r}"
@@ -1245,6 +1270,10 @@ def read_log(path, dbc=None, signals=None, rate=None, *, format: str | None = No
     --------
     >>> from fdikit.io.formats import read_log
     >>> s = read_log("drive.asc", "toyota_rav4.dbc", ["SPEED.SPEED"], rate=50)  # doctest: +SKIP
+    >>> read_log("drive.vsb", "toyota_rav4.dbc", ["SPEED.SPEED"])
+    Traceback (most recent call last):
+    ...
+    fdikit.errors.DataError: log 'drive.vsb' does not exist
     """
     if format is None:
         fmt = detect_format(path)
