@@ -222,3 +222,18 @@ def test_bad_input_errors(short_runs):
         ParityR1(0.01, window=3)
     with pytest.raises(DataError, match="variant"):
         ParityR1(0.01, variant="acausal")
+
+
+def test_generators_compose_in_a_monitor_batch_equals_streaming(short_runs):
+    from fdikit.detect import GLRT, Hold
+    from fdikit.monitor import Monitor
+
+    mon = Monitor([ParityR1(0.01), ABSObserver(0.01)],
+                  [GLRT(["r1", "r3", "r4"], [0.05, -0.03, -0.03], [0.18, 0.008, 0.005], 10),
+                   Hold(["r1:glrt", "r3:glrt", "r4:glrt"], [50.0, 40.0, 20.0], 5, absolute=False)])
+    b = mon.run(short_runs)
+    s = mon.stream(short_runs)
+    np.testing.assert_allclose(s.residuals.values, b.residuals.values, rtol=1e-9, atol=1e-9)
+    sv, bv = s.statistics.values, b.statistics.values
+    np.testing.assert_allclose(sv[:, :, :3], bv[:, :, :3], rtol=1e-7, atol=1e-9)
+    np.testing.assert_array_equal(s.statistics.values[:, :, 3:], b.statistics.values[:, :, 3:])
