@@ -474,6 +474,12 @@ def test_unit_conventions(ctx, tmp_path):
           error="units must be 'si' or a mapping")
     check(lambda: read_log(tmp_path / "mph.parquet", signals=["speed"], source_units={"nope": "m"}),
           error="'nope', which is not a column")
+    # a table without units: a requested conversion cannot be guessed
+    check(lambda: read("csv", ctx["files"]["csv"], ["SPEED.SPEED"], units={"SPEED.SPEED": "m/s"}),
+          error=r"cannot convert channel 'SPEED.SPEED' from unit '' to 'm/s'")
+    # an option of another format is refused by name, not a TypeError
+    check(lambda: read("candump", ctx["files"]["candump"], time="t"),
+          error=r"option\(s\) \['time'\] do not apply to a candump log")
 
 
 # ================================================================== H. truncated, corrupt, empty, not a log

@@ -1235,6 +1235,11 @@ def detect_format(path) -> str:
                     f"{head[:16]!r} are not BLF, Parquet, MDF, ASC or candump")
 
 
+_COMMON_OPTIONS = ("units", "max_gap", "method", "span", "stuck_after")
+_FORMAT_OPTIONS = {"blf": (), "asc": ("strict",), "candump": (), "parquet": ("time", "source_units"),
+                   "csv": ("time", "source_units"), "mdf": ()}
+
+
 def read_log(path, dbc=None, signals=None, rate=None, *, format: str | None = None, **kw) -> LoadedSignals:
     """Read any supported log onto one grid: the one entry point of :mod:`fdikit.io`.
 
@@ -1281,6 +1286,11 @@ def read_log(path, dbc=None, signals=None, rate=None, *, format: str | None = No
         if format not in FORMATS:
             raise DataError(f"unknown log format {format!r}; known formats: {sorted(FORMATS)}")
         fmt = format
+    allowed = set(_COMMON_OPTIONS) | set(_FORMAT_OPTIONS[fmt])
+    unknown = sorted(set(kw) - allowed)
+    if unknown:
+        raise DataError(f"option(s) {unknown} do not apply to a {fmt} log {Path(path).name!r}; "
+                        f"its options are {sorted(allowed)}")
     if fmt in _FRAME_FORMATS:
         if dbc is None:
             raise DataError(f"{Path(path).name!r} is a {fmt} CAN frame log: pass dbc= to decode it")
