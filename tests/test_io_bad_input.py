@@ -558,7 +558,7 @@ def test_not_a_log(ctx, case, tmp_path):
         text = Path(ctx["files"]["asc"]).read_text().splitlines(keepends=True)
         text.insert(3, "// Fahrt über die Brücke\n")
         p.write_bytes("".join(text).encode("latin-1"))
-        error = "not text: undecodable byte"
+        error = r"not utf-8 text: undecodable byte b'\\xfc' at offset \d+, line 4"
     elif case == "header-only.csv":
         p.write_text("t,SPEED.SPEED\n")
         error = "no rows"
@@ -577,6 +577,9 @@ def test_not_a_log(ctx, case, tmp_path):
         error = "not numeric"
     dbc = DBC if Path(case).suffix in (".asc", ".log", ".blf", ".mf4") else None
     check(lambda: read_log(p, dbc, ["SPEED.SPEED"], rate=RATE), error=error)
+    if case == "latin1.asc":  # with its encoding named, the same file reads
+        s = check(lambda: read_log(p, dbc, ["SPEED.SPEED"], rate=RATE, encoding="latin-1"))
+        assert s.equals(read("asc", ctx["files"]["asc"], ["SPEED.SPEED"]))
 
 
 @needs_data

@@ -534,8 +534,8 @@ def _check_file(path, what: str) -> Path:
 class _Lines:
     """A text file as an iterator of lines that remembers the current line number."""
 
-    def __init__(self, path: Path):
-        self._f = open(path, encoding="utf-8", errors="strict", newline=None)
+    def __init__(self, path: Path, encoding: str = "utf-8"):
+        self._f = open(path, encoding=encoding, errors="strict", newline=None)
         self.lineno = 0
         self.line = ""
         self.history: list[tuple[int, str]] = []
@@ -567,13 +567,16 @@ _ASC_BENIGN = re.compile(
 )
 
 
-def _read_text_frames(path, fmt: str, *, strict: bool = True):
+def _read_text_frames(path, fmt: str, *, strict: bool = True, encoding: str = "utf-8"):
     """Frames of an ASC or candump file via python-can, with line accounting."""
     import can
 
     what = {"asc": "ASC log", "candump": "candump log"}[fmt]
     p = _check_file(path, what)
-    lines = _Lines(p)
+    try:
+        lines = _Lines(p, encoding)
+    except LookupError:
+        raise DataError(f"unknown text encoding {encoding!r}") from None
     reader_cls = can.ASCReader if fmt == "asc" else can.CanutilsLogReader
     ts: list[float] = []
     ids: list[int] = []
@@ -614,10 +617,18 @@ def _read_text_frames(path, fmt: str, *, strict: bool = True):
     except DataError:
         lines.close()
         raise
-    except UnicodeDecodeError as exc:
+    except UnicodeDecodeError:
         lines.close()
-        raise DataError(f"{what} {p.name!r} is not text: undecodable byte after line {lines.lineno} "
-                        f"({exc.reason})") from None
+        raw = p.read_bytes()
+        try:
+            raw.decode(encoding)
+            pos, reason = -1, "?"
+        except UnicodeDecodeError as exc:
+            pos, reason = exc.start, exc.reason
+        line_no = raw.count(b"\n", 0, pos) + 1
+        raise DataError(f"{what} {p.name!r} is not {encoding} text: undecodable byte {raw[pos:pos + 1]!r} "
+                        f"at offset {pos}, line {line_no} ({reason}; a Windows-written ASC may need "
+                        "encoding='cp1252')") from None
     except (ValueError, IndexError, KeyError, TypeError, OverflowError, AttributeError) as exc:
         lines.close()
         raise DataError(f"{what} {p.name!r} line {lines.lineno} cannot be parsed "
@@ -632,7 +643,8 @@ def _read_text_frames(path, fmt: str, *, strict: bool = True):
     return np.asarray(ts, float), np.asarray(ids, np.int64), data, np.asarray(where), src
 
 
-def read_asc(path, dbc, signals, rate=None, *, strict: bool = True, **kw) -> LoadedSignals:
+def read_asc(path, dbc, signals, rate=None, *, strict: bool = True, encoding: str = "utf-8",
+             **kw) -> LoadedSignals:
     """Read a Vector ASC log (python-can ``ASCReader``) decoded with a DBC onto one grid.
 
     Parameters
@@ -647,6 +659,8 @@ def read_asc(path, dbc, signals, rate=None, *, strict: bool = True, **kw) -> Loa
         Refuse a line that is neither a frame nor a known ASC event, and a file without its
         closing ``End TriggerBlock`` (truncated); with ``False`` such lines are skipped and
         listed in ``result.source.skipped``.
+    encoding : str
+        Text encoding of the file (Vector tools on Windows may write ``"cp1252"``).
     **kw
         ``units``, ``max_gap``, ``method``, ``span``, ``stuck_after`` (see :func:`series_to_grid`).
 
@@ -659,7 +673,7 @@ def read_asc(path, dbc, signals, rate=None, *, strict: bool = True, **kw) -> Loa
     --------
     >>> s = read_asc("drive.asc", "toyota_rav4.dbc", ["SPEED.SPEED"], rate=50)  # doctest: +SKIP
     """
-    ts, ids, data, lines, src = _read_text_frames(path, "asc", strict=strict)
+    ts, ids, data, lines, src = _read_text_frames(path, "asc", strict=strict, encoding=encoding)
     return frames_to_signals(ts, ids, data, dbc, signals, rate, lines=lines, source=src,
                              where=f"ASC log {Path(path).name!r}", **kw)
 
@@ -1236,8 +1250,8 @@ def detect_format(path) -> str:
 
 
 _COMMON_OPTIONS = ("units", "max_gap", "method", "span", "stuck_after")
-_FORMAT_OPTIONS = {"blf": (), "asc": ("strict",), "candump": (), "parquet": ("time", "source_units"),
-                   "csv": ("time", "source_units"), "mdf": ()}
+_FORMAT_OPTIONS = {"blf": (), "asc": ("strict", "encoding"), "candump": (),
+                   "parquet": ("time", "source_units"), "csv": ("time", "source_units"), "mdf": ()}
 
 
 def read_log(path, dbc=None, signals=None, rate=None, *, format: str | None = None, **kw) -> LoadedSignals:
