@@ -204,6 +204,16 @@ def test_mf4_bus_logging_decoded_by_asammdf_matches_cantools(conv):
     assert s.valid.all()
     with pytest.raises(DataError, match="raw CAN frames.*pass dbc="):
         read_mdf(conv["dir"] / "bus.mf4", SIGNALS)
+    # the decoded file that asammdf writes (display names "MESSAGE.SIGNAL") reads as decoded channels
+    from asammdf import MDF
+
+    with MDF(str(conv["dir"] / "bus.mf4")) as raw:
+        ext = raw.extract_bus_logging({"CAN": [(str(DBC), 0)]})
+        ext.save(str(conv["dir"] / "extracted.mf4"), overwrite=True)
+        ext.close()
+    e = read_mdf(conv["dir"] / "extracted.mf4", SIGNALS, rate=RATE)
+    assert e.units == ref.units and np.array_equal(e.t, ref.t)
+    np.testing.assert_allclose(e.values, ref.values, rtol=1e-12, atol=1e-12)
 
 
 @needs_data
