@@ -168,6 +168,9 @@ def test_blf_through_read_log_is_read_can_log(conv):
         assert s.info[n].n_samples == ref.info[n].n_samples
         assert s.info[n].n_nonfinite == s.info[n].n_undecodable == s.info[n].n_conflicts == 0
     assert s.source.format == "blf" and s.source.n_records == 53_800  # README: 53,800 frames
+    part = s.select(["SPEED.SPEED"]).window(10.0, 20.0)
+    assert isinstance(part, LoadedSignals) and part.source is s.source
+    assert isinstance(part.info["SPEED.SPEED"], SignalQuality) and part.t[0] >= 10.0 and part.t[-1] <= 20.0
 
 
 @needs_data

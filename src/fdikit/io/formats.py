@@ -152,6 +152,15 @@ class LoadedSignals(LogSignals):
         super().__init__(t, values, names, units, valid=valid, info=info)
         self.source = source
 
+    def _keep_source(self, s: LogSignals) -> LoadedSignals:
+        return LoadedSignals(s.t, s.values, s.names, s.units, valid=s.valid, info=s.info, source=self.source)
+
+    def select(self, names) -> LoadedSignals:
+        return self._keep_source(super().select(names))
+
+    def window(self, t0: float | None = None, t1: float | None = None) -> LoadedSignals:
+        return self._keep_source(super().window(t0, t1))
+
 
 # ---------------------------------------------------------------------------------- common core
 def _longest_constant(t: np.ndarray, v: np.ndarray) -> float:
