@@ -56,13 +56,17 @@ def add_campaign_parser(abs_subparsers) -> argparse.ArgumentParser:
                    "above every nominal design run, plus the margin)")
     p.add_argument("--margin", type=float, default=0.1, help="relative threshold margin (default 0.1)")
     p.add_argument("--gate", type=float, default=0.5, help="gate time T of G_O_T1/G_O_T2, s (default 0.5)")
-    p.add_argument("--progress", action="store_true", help="show a progress bar (stderr)")
+    p.add_argument("--progress", dest="progress", action="store_true", default=None,
+                   help="show a progress bar on stderr (default: when stderr is a terminal)")
+    p.add_argument("--no-progress", dest="progress", action="store_false", help="no progress bar")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=_campaign)
     return p
 
 
 def _campaign(args) -> int:
+    import sys
+
     from ..cli import print_json
     from ..evaluate import run_campaign
 
@@ -72,7 +76,8 @@ def _campaign(args) -> int:
         raise DataError(f"--window must be >= 1, got {args.window}")
     res = run_campaign(args.runs, nominal_runs=args.nominal_runs, design_runs=args.design_runs,
                        snr_db=args.snr, seed=args.seed, W=args.window, gate=args.gate,
-                       magnitudes=args.magnitudes, pfa=args.pfa, margin=args.margin, progress=args.progress)
+                       magnitudes=args.magnitudes, pfa=args.pfa, margin=args.margin,
+                       progress=sys.stderr.isatty() if args.progress is None else args.progress)
     out = res.to_dict()
     if args.json:
         print_json(out)
