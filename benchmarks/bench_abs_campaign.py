@@ -65,6 +65,10 @@ def _table(res) -> None:
           f"F2.2 {w7['F2.2']['G_P1']:.4f} (paper 0.979); G_P1 Pf {d['pf']['G_P1']:.5f} (paper 0)")
     print(f"sensitivity {100 * d['sensitivity']:.2f} % (exact class {100 * d['sensitivity_exact']:.2f} %), "
           f"specificity {100 * d['specificity']:.2f} %, detection rate {100 * d['detection_rate']:.2f} %")
+    tr = d["tree"]
+    print(f"optimal diagnostic tree (AO*, learned D-matrix): sensitivity {100 * tr['sensitivity']:.2f} % "
+          f"(up to leaf groups), specificity {100 * tr['specificity']:.2f} %")
+    print(tr["text"])
     print("confusion (true -> diagnosed):")
     for c, row in d["confusion"].items():
         print(f"  {c:5s} {row}")
@@ -107,6 +111,7 @@ def main(argv=None) -> int:
         "dmatrix": d["dmatrix"]["d"], "ambiguity_groups": d["dmatrix"]["ambiguity_groups"],
         "sensitivity": d["sensitivity"], "sensitivity_exact": d["sensitivity_exact"],
         "specificity": d["specificity"], "detection_time_histogram_G_P1": d["detection_time_histogram"],
+        "tree": {k: d["tree"][k] for k in ("sensitivity", "specificity", "go_path")},
     })
     if args.table_v:
         tv = {}
@@ -116,11 +121,15 @@ def main(argv=None) -> int:
             _table(r)
             tv[str(snr)] = {"sensitivity": r.sensitivity, "sensitivity_exact": r.sensitivity_exact,
                             "specificity": r.specificity, "detection_rate": r.detection_rate,
+                            "tree_sensitivity": r.tree_metrics["sensitivity"],
+                            "tree_specificity": r.tree_metrics["specificity"],
                             "pd": r.pd, "pf": r.pf, "paper": PAPER_TABLE_V[snr],
                             "wall_seconds": r.wall_seconds}
-        print("\nTable V (W = 40, minimum fault sizes): SNR  sensitivity  specificity  | paper")
+        print("\nTable V (W = 40, minimum fault sizes): SNR  sensitivity  specificity  (tree: sens., spec.)"
+              "  | paper")
         for snr, v in tv.items():
-            print(f"  {snr:>5s} dB  {100 * v['sensitivity']:7.2f} %  {100 * v['specificity']:7.2f} %   | "
+            print(f"  {snr:>5s} dB  {100 * v['sensitivity']:7.2f} %  {100 * v['specificity']:7.2f} %   "
+                  f"({100 * v['tree_sensitivity']:.2f} %, {100 * v['tree_specificity']:.2f} %)  | "
                   f"{v['paper'][0]} %, {v['paper'][1]} %")
         out["table_v"] = tv
     if args.grid:

@@ -115,6 +115,11 @@ def test_small_campaign_detects_gross_faults_without_false_alarms():
     assert 0 <= out.sensitivity_exact <= out.sensitivity <= 1
     # the paper's Table IV has the same tests
     assert list(PAPER_TABLE_IV) == dm.faults
+    # the optimal tree on the learned D-matrix: every leaf group is a set of identical rows
+    for leaf in out.tree.leaves():
+        rows = {tuple(dm.row(f).tolist()) for f in leaf.group}
+        assert len(rows) == 1
+    assert out.tree_metrics["specificity"] >= 0.95
 
 
 def test_bad_input():

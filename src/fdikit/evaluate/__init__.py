@@ -10,6 +10,7 @@ from .campaign import (
     abs_residuals,
     design_tests,
     diagnose_ml,
+    diagnose_tree,
     gp1_grid,
     min_magnitudes,
     paper_tests,
@@ -17,5 +18,5 @@ from .campaign import (
 )
 
 __all__ = ["PAPER_TABLE_III", "PAPER_TABLE_IV", "PAPER_TABLE_V", "CampaignResult", "TestBank", "TestSpec",
-           "abs_residuals", "design_tests", "diagnose_ml", "gp1_grid", "min_magnitudes", "paper_tests",
-           "run_campaign"]
+           "abs_residuals", "design_tests", "diagnose_ml", "diagnose_tree", "gp1_grid", "min_magnitudes",
+           "paper_tests", "run_campaign"]
