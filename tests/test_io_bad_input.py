@@ -64,7 +64,7 @@ def write_frames(fmt, msgs, path):
                        ("CAN_DataFrame.IDE", "u1"), ("CAN_DataFrame.DLC", "u1"),
                        ("CAN_DataFrame.DataLength", "u1"), ("CAN_DataFrame.DataBytes", "u1", (8,))])
         rec = np.zeros(n, dt)
-        rec["CAN_DataFrame.BusChannel"] = 1
+        rec["CAN_DataFrame.BusChannel"] = [(m.channel or 0) + 1 for m in msgs]
         rec["CAN_DataFrame.ID"] = [m.arbitration_id for m in msgs]
         rec["CAN_DataFrame.DLC"] = [len(m.data) for m in msgs]
         rec["CAN_DataFrame.DataLength"] = [len(m.data) for m in msgs]
@@ -654,6 +654,27 @@ def test_short_payload_is_flagged(ctx, fmt):
     c = out.names.index(s)
     assert out.info[s].n_undecodable == 1
     assert np.array_equal(~out.valid[0, :, c], (out.t > t[k - 1]) & (out.t < t[k + 1]))
+
+
+# ================================================================== J2. two buses in one log
+@needs_data
+@pytest.mark.parametrize("fmt", ["asc", "candump", "mf4bus"])
+def test_two_buses_are_never_mixed(ctx, fmt):
+    both = sorted([_copy_msg(m, channel=0) for m in ctx["msgs"]]
+                  + [_copy_msg(m, channel=1, timestamp=m.timestamp + 1e-4) for m in ctx["msgs"]],
+                  key=lambda m: m.timestamp)
+    path = write_frames(fmt, both, newpath(ctx, fmt))
+    check(lambda: read(fmt, path), error=r"on (several|more than one CAN) bus.*pass channel=")
+    first = {"asc": 1, "candump": "can0", "mf4bus": 1}[fmt]
+    second = {"asc": 2, "candump": "can1", "mf4bus": 2}[fmt]
+    a = check(lambda: read(fmt, path, channel=first))
+    assert np.array_equal(a.values, ctx["clean"][fmt].values) and np.array_equal(a.t, ctx["clean"][fmt].t)
+    b = check(lambda: read(fmt, path, channel=second))
+    for n in SIG:  # the second bus: same frames 0.1 ms later
+        assert b.info[n].n_samples == a.info[n].n_samples
+        assert b.info[n].t_first == pytest.approx(a.info[n].t_first + 1e-4, abs=1e-6)
+    if fmt != "mf4bus":
+        check(lambda: read(fmt, path, channel="can7"), error="no frame on channel 'can7'")
 
 
 # ================================================================== K. bad arguments

@@ -339,7 +339,8 @@ def test_stuck_signal_reported_not_refused(conv, tmp_path):
     for m in msgs:  # freeze KINEMATICS (0x24) from 30 s to 35 s: the sensor repeats one payload
         if m.arbitration_id == 0x24 and 30.0 <= m.timestamp - t0 <= 35.0:
             frozen = frozen or bytes(m.data)
-            m = can.Message(timestamp=m.timestamp, arbitration_id=0x24, data=frozen, is_extended_id=False)
+            m = can.Message(timestamp=m.timestamp, arbitration_id=0x24, data=frozen, is_extended_id=False,
+                            channel=m.channel)
         out.append(m)
     write_candump(out, tmp_path / "stuck.log")
     sig = ["KINEMATICS.YAW_RATE", "SPEED.SPEED"]

@@ -417,6 +417,8 @@ def frames_to_signals(
     span: str = "common",
     stuck_after: float = 2.0,
     lines: np.ndarray | None = None,
+    channels: Sequence[str] | None = None,
+    channel: str | int | None = None,
     source: SourceReport | None = None,
     where: str = "CAN log",
 ) -> LoadedSignals:
@@ -440,6 +442,12 @@ def frames_to_signals(
         As in :func:`series_to_grid`.
     lines : ndarray of int, shape (N,), optional
         Line number of each frame in a text log (for error messages).
+    channels : sequence of str, length N, optional
+        The bus (channel) of each frame, as the log names it. When given, a message seen on
+        more than one bus is refused unless ``channel`` picks one: frames of two buses are
+        never mixed into one signal.
+    channel : str or int, optional
+        Keep only the frames of this bus (compared as text with ``channels``).
     source : SourceReport, optional
     where : str
         Name of the source in error messages.
@@ -488,7 +496,22 @@ def frames_to_signals(
         raise DataError(f"{where}: time goes backwards at {_at(k)}: {float(ts[k - 1])!r} s then "
                         f"{float(ts[k])!r} s "
                         "(shuffled or corrupt log)")
-    t0 = float(ts[0])
+    t0, t_end = float(ts[0]), float(ts[-1])
+    chan = None
+    if channels is not None:
+        chan = np.asarray([str(c) for c in channels])
+        if chan.size != ts.size:
+            raise DataError(f"{where}: {chan.size} channels for {ts.size} frames")
+    if channel is not None:
+        if chan is None:
+            raise DataError(f"{where} does not record the bus of its frames; channel= cannot be used")
+        keep = chan == str(channel)
+        if not keep.any():
+            raise DataError(f"{where} has no frame on channel {str(channel)!r}; its channels are "
+                            f"{sorted(set(chan.tolist()))}")
+        ts, ids, chan = ts[keep], ids[keep], chan[keep]
+        data = [data[k] for k in np.flatnonzero(keep)]
+        lines = None if lines is None else np.asarray(lines)[keep]
     by_msg: dict[int, list[tuple[str, Any, Any]]] = {}
     for full, msg, sig in resolved:
         by_msg.setdefault(msg.frame_id, []).append((full, msg, sig))
@@ -501,6 +524,9 @@ def frames_to_signals(
         if idx.size == 0:
             raise DataError(f"{where} has no frame of message {msg.name!r} (id 0x{fid:x}) needed for "
                             f"{[w[0] for w in wanted]}")
+        if chan is not None and channel is None and np.unique(chan[idx]).size > 1:
+            raise DataError(f"{where}: message {msg.name!r} (id 0x{fid:x}) is on several buses "
+                            f"{sorted(set(chan[idx].tolist()))}; pass channel= to choose one")
         snames = [w[2].name for w in wanted]
         cols = np.full((idx.size, len(snames)), np.nan)
         n_bad = np.zeros(len(snames), int)
@@ -524,7 +550,7 @@ def frames_to_signals(
             counts[full] = {"n_undecodable": int(n_bad[c])}
     series = {s: series[s] for s in signals}
     return series_to_grid(series, src_units, rate, units=units, max_gap=max_gap, method=method, span=span,
-                          log_span=(0.0, float(ts[-1] - t0)), stuck_after=stuck_after, counts=counts,
+                          log_span=(0.0, t_end - t0), stuck_after=stuck_after, counts=counts,
                           source=source, where=where)
 
 
@@ -591,6 +617,7 @@ def _read_text_frames(path, fmt: str, *, strict: bool = True, encoding: str = "u
     ids: list[int] = []
     data: list[bytes] = []
     where: list[int] = []
+    chans: list[str] = []
     skipped: list[tuple[int, str]] = []
     seen_end = False
 
@@ -622,6 +649,9 @@ def _read_text_frames(path, fmt: str, *, strict: bool = True, encoding: str = "u
             ids.append(int(msg.arbitration_id))
             data.append(bytes(msg.data or b""))
             where.append(lines.lineno)
+            # the bus as the file writes it (python-can numbers ASC channels from 0; the file from 1)
+            ch = msg.channel
+            chans.append(str(ch + 1) if fmt == "asc" and isinstance(ch, int) else str(ch))
         account(upto=0)
     except DataError:
         lines.close()
@@ -649,7 +679,7 @@ def _read_text_frames(path, fmt: str, *, strict: bool = True, encoding: str = "u
     if not ts:
         raise DataError(f"{what} {p.name!r} holds no CAN data frames ({lines.lineno} lines)")
     src = SourceReport(fmt, str(p), len(ts), tuple(skipped))
-    return np.asarray(ts, float), np.asarray(ids, np.int64), data, np.asarray(where), src
+    return np.asarray(ts, float), np.asarray(ids, np.int64), data, np.asarray(where), chans, src
 
 
 def read_asc(path, dbc, signals, rate=None, *, strict: bool = True, encoding: str = "utf-8",
@@ -671,7 +701,9 @@ def read_asc(path, dbc, signals, rate=None, *, strict: bool = True, encoding: st
     encoding : str
         Text encoding of the file (Vector tools on Windows may write ``"cp1252"``).
     **kw
-        ``units``, ``max_gap``, ``method``, ``span``, ``stuck_after`` (see :func:`series_to_grid`).
+        ``channel`` (the bus as the file numbers it, ``1``, ``2``, ...; needed when a requested
+        message is on several buses), ``units``, ``max_gap``, ``method``, ``span``,
+        ``stuck_after`` (see :func:`series_to_grid`).
 
     Returns
     -------
@@ -682,8 +714,8 @@ def read_asc(path, dbc, signals, rate=None, *, strict: bool = True, encoding: st
     --------
     >>> s = read_asc("drive.asc", "toyota_rav4.dbc", ["SPEED.SPEED"], rate=50)  # doctest: +SKIP
     """
-    ts, ids, data, lines, src = _read_text_frames(path, "asc", strict=strict, encoding=encoding)
-    return frames_to_signals(ts, ids, data, dbc, signals, rate, lines=lines, source=src,
+    ts, ids, data, lines, chans, src = _read_text_frames(path, "asc", strict=strict, encoding=encoding)
+    return frames_to_signals(ts, ids, data, dbc, signals, rate, lines=lines, channels=chans, source=src,
                              where=f"ASC log {Path(path).name!r}", **kw)
 
 
@@ -695,7 +727,7 @@ def read_candump(path, dbc, signals, rate=None, **kw) -> LoadedSignals:
     path : path-like
         Lines like ``(1.000000) can0 0B4#0000000000000000``.
     dbc, signals, rate, **kw
-        As in :func:`read_asc`.
+        As in :func:`read_asc` (``channel`` is the interface name, e.g. ``"can0"``).
 
     Returns
     -------
@@ -713,8 +745,8 @@ def read_candump(path, dbc, signals, rate=None, **kw) -> LoadedSignals:
     >>> s.t.tolist(), s["SPEED.SPEED"].round(6).tolist(), s.source.n_records
     ([0.0, 0.05, 0.1], [[10.0, 15.0, 20.0]], 2)
     """
-    ts, ids, data, lines, src = _read_text_frames(path, "candump", strict=True)
-    return frames_to_signals(ts, ids, data, dbc, signals, rate, lines=lines, source=src,
+    ts, ids, data, lines, chans, src = _read_text_frames(path, "candump", strict=True)
+    return frames_to_signals(ts, ids, data, dbc, signals, rate, lines=lines, channels=chans, source=src,
                              where=f"candump log {Path(path).name!r}", **kw)
 
 
@@ -1047,7 +1079,7 @@ def _mdf_raw_can_groups(mdf) -> list[int]:
     return out
 
 
-def read_mdf(path, signals=None, rate=None, *, dbc=None, **kw) -> LoadedSignals:
+def read_mdf(path, signals=None, rate=None, *, dbc=None, channel: int | None = None, **kw) -> LoadedSignals:
     """Read an MDF4 file: decoded signal channels, or raw CAN frames decoded with a DBC.
 
     * With ``dbc`` and bus-logging groups (``CAN_DataFrame`` channels) in the file, the frames
@@ -1065,6 +1097,8 @@ def read_mdf(path, signals=None, rate=None, *, dbc=None, **kw) -> LoadedSignals:
         Grid rate (Hz).
     dbc : path-like or cantools Database, optional
         Needed for raw CAN frames.
+    channel : int, optional
+        Bus (``CAN_DataFrame.BusChannel``) to decode, when a message is on several buses.
     **kw
         ``units``, ``max_gap``, ``method``, ``span``, ``stuck_after`` (see :func:`series_to_grid`).
 
@@ -1083,7 +1117,10 @@ def read_mdf(path, signals=None, rate=None, *, dbc=None, **kw) -> LoadedSignals:
     try:
         raw_groups = _mdf_raw_can_groups(mdf)
         if dbc is not None and raw_groups:
-            return _read_mdf_bus(mdf, p, where, raw_groups, dbc, signals, rate, kw)
+            return _read_mdf_bus(mdf, p, where, raw_groups, dbc, signals, rate, kw, channel)
+        if channel is not None:
+            hint = "pass dbc= to decode them" if raw_groups else "this file holds decoded channels"
+            raise DataError(f"{where}: channel= selects a bus of raw CAN frames; {hint}")
         if raw_groups and not any(s in mdf.channels_db for s in signals):
             raise DataError(f"{where} holds raw CAN frames (bus logging); pass dbc= to decode {signals}")
         series, units_src = {}, {}
@@ -1108,17 +1145,18 @@ def read_mdf(path, signals=None, rate=None, *, dbc=None, **kw) -> LoadedSignals:
         mdf.close()
 
 
-def _read_mdf_bus(mdf, p, where, raw_groups, dbc, signals, rate, kw) -> LoadedSignals:
+def _read_mdf_bus(mdf, p, where, raw_groups, dbc, signals, rate, kw, channel=None) -> LoadedSignals:
     import logging
 
     db = _load_dbc(dbc)
     resolved = _resolve(db, signals)  # clear errors (and close matches) before the extraction
     t_first, t_last, n_frames = np.inf, -np.inf, 0
-    f_t, f_id, f_len = [], [], []
+    f_t, f_id, f_len, f_bus = [], [], [], []
     for g in raw_groups:
         try:
             tm = np.asarray(mdf.get_master(g), float)
             fid = np.asarray(_mdf_get(mdf, "CAN_DataFrame.ID", where, g)[1], np.int64) & 0x1FFFFFFF
+            fbus = np.asarray(_mdf_get(mdf, "CAN_DataFrame.BusChannel", where, g)[1], np.int64)
             names = [c.name for c in mdf.groups[g].channels]
             if "CAN_DataFrame.DataLength" in names:
                 flen = np.asarray(_mdf_get(mdf, "CAN_DataFrame.DataLength", where, g)[1], np.int64)
@@ -1131,12 +1169,13 @@ def _read_mdf_bus(mdf, p, where, raw_groups, dbc, signals, rate, kw) -> LoadedSi
         except Exception as exc:
             raise DataError(f"{where}: the frames of CAN group {g} cannot be read: "
                             f"{type(exc).__name__}: {exc}") from None
-        if not (tm.size == fid.size == flen.size):
+        if not (tm.size == fid.size == flen.size == fbus.size):
             raise DataError(f"{where}: CAN group {g} has {tm.size} time stamps, {fid.size} ids and "
                             f"{flen.size} lengths")
         f_t.append(tm)
         f_id.append(fid)
         f_len.append(flen)
+        f_bus.append(fbus)
         if tm.size:
             if not np.isfinite(tm).all():
                 raise DataError(f"{where}: CAN group {g} has a non-finite time stamp at frame "
@@ -1159,7 +1198,7 @@ def _read_mdf_bus(mdf, p, where, raw_groups, dbc, signals, rate, kw) -> LoadedSi
         prev = logging.getLogger("asammdf").level
         logging.getLogger("asammdf").setLevel(logging.ERROR)
         try:
-            out = mdf.extract_bus_logging({"CAN": [(dbc_path, 0)]})
+            out = mdf.extract_bus_logging({"CAN": [(dbc_path, int(channel or 0))]})
         except Exception as exc:
             raise DataError(f"{where}: the CAN frames cannot be decoded with {Path(dbc_path).name!r}: "
                             f"{type(exc).__name__}: {str(exc)[:200]}") from None
@@ -1172,7 +1211,7 @@ def _read_mdf_bus(mdf, p, where, raw_groups, dbc, signals, rate, kw) -> LoadedSi
                 raise DataError(f"{where} has no frame of message {s.split('.')[0]!r} needed for {s!r} "
                                 "(or none that the DBC decodes)")
             if len(out.channels_db[s]) > 1:
-                raise DataError(f"{where}: {s!r} is decoded on more than one CAN bus; split the file by bus")
+                raise DataError(f"{where}: {s!r} is on more than one CAN bus; pass channel= to choose one")
             g, i = out.channels_db[s][0]
             t, v, unit = _mdf_get(out, s, where, g, i)
             series[s] = (t - t_first, v)
@@ -1183,6 +1222,9 @@ def _read_mdf_bus(mdf, p, where, raw_groups, dbc, signals, rate, kw) -> LoadedSi
     # if it must: check it decoded every frame of the message, and make a frame too short for
     # the signal a bad sample (as frames_to_signals does)
     f_t, f_id, f_len = np.concatenate(f_t), np.concatenate(f_id), np.concatenate(f_len)
+    if channel:
+        on_bus = np.concatenate(f_bus) == int(channel)
+        f_t, f_id, f_len = f_t[on_bus], f_id[on_bus], f_len[on_bus]
     counts = {}
     for full, msg, sig in resolved:
         m = f_id == msg.frame_id
@@ -1259,8 +1301,8 @@ def detect_format(path) -> str:
 
 
 _COMMON_OPTIONS = ("units", "max_gap", "method", "span", "stuck_after")
-_FORMAT_OPTIONS = {"blf": (), "asc": ("strict", "encoding"), "candump": (),
-                   "parquet": ("time", "source_units"), "csv": ("time", "source_units"), "mdf": ()}
+_FORMAT_OPTIONS = {"blf": (), "asc": ("strict", "encoding", "channel"), "candump": ("channel",),
+                   "parquet": ("time", "source_units"), "csv": ("time", "source_units"), "mdf": ("channel",)}
 
 
 def read_log(path, dbc=None, signals=None, rate=None, *, format: str | None = None, **kw) -> LoadedSignals:
