@@ -17,8 +17,10 @@ Bad-input policy (never crash, never lie)
 -----------------------------------------
 * What cannot be trusted before processing -- a missing, truncated or corrupt file, an unknown
   format, a time axis that goes backwards, a missing channel, a DBC without a requested signal,
-  an impossible unit conversion, a text line that is neither a frame nor a known event -- raises
-  :class:`~fdikit.errors.DataError` naming the file, line / row / frame and the values.
+  an impossible unit conversion, a text line that is neither a frame nor a known event, a
+  message seen on several CAN buses without ``channel=`` (ASC, candump, MDF4; the BLF frame
+  reader does not report buses) -- raises :class:`~fdikit.errors.DataError` naming the file,
+  line / row / frame and the values.
 * Bad *samples* are kept as NaN source samples, so every grid sample whose interpolation touches
   them is flagged ``valid == False``: NaN or inf values, frames too short for a signal or that
   cannot be decoded, two frames of one message at the same time with different payloads.
@@ -1324,7 +1326,9 @@ def read_log(path, dbc=None, signals=None, rate=None, *, format: str | None = No
         Force a format (a key of :data:`FORMATS`) instead of detecting it.
     **kw
         Passed to the reader: ``units``, ``max_gap``, ``method``, ``span``, ``stuck_after``;
-        ``time`` and ``source_units`` for tables; ``strict`` for ASC.
+        ``time`` and ``source_units`` for tables; ``strict`` and ``encoding`` for ASC;
+        ``channel`` for ASC, candump and MDF4 bus logging. An option that does not apply to
+        the detected format is a :class:`~fdikit.errors.DataError`.
 
     Returns
     -------
