@@ -792,7 +792,7 @@ def test_fuzzed_file(ctx, fmt, op, seed):
 
 
 # ================================================================== M. hypothesis-generated inputs
-HYP = settings(max_examples=60, deadline=None, derandomize=True,
+HYP = settings(max_examples=60, deadline=None, derandomize=True, database=None,
                suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
 
 
