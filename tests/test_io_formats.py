@@ -417,3 +417,14 @@ def test_csv_table_matches_plain_read_csv_on_the_imu():
     assert np.array_equal(a.t, b.t)
     np.testing.assert_allclose(a.values, b.values, rtol=1e-12)
     assert np.array_equal(a.valid, b.valid)
+
+
+def test_parquet_datetime_time_column(tmp_path):
+    import pandas as pd
+
+    start = pd.to_datetime("2026-01-01 12:00:00").tz_localize("UTC")
+    t = start + pd.to_timedelta(np.arange(5) * 0.1, unit="s")
+    pd.DataFrame({"time": t, "x": [0.0, 1.0, 2.0, 3.0, 4.0]}).to_parquet(tmp_path / "dt.parquet")
+    s = read_log(tmp_path / "dt.parquet", signals=["x"], rate=20.0)
+    np.testing.assert_allclose(s.t, np.arange(9) * 0.05, atol=1e-12)  # seconds from the first row
+    np.testing.assert_allclose(s["x"][0], np.arange(9) * 0.5, atol=1e-12)
