@@ -653,7 +653,8 @@ def calibrate_monitor(block: str = "longitudinal", speed: float = 20.0, *, kind:
 
 def floor_std(cal, frac: float):
     """Floor every density's per-feature std at ``frac`` times its own upper mean ``high`` (a
-    relative model error: a few per cent of a residual's level), as a new
+    relative model error: a few per cent of a residual's level) and at the no-fault (first)
+    hypothesis's std (a fault adds to the noise, it does not remove it), as a new
     :class:`~fdikit.detect.mhsspt.MHSSPTCalibration`.
 
     Examples
@@ -668,7 +669,9 @@ def floor_std(cal, frac: float):
     from ...detect import UniformMeanGaussian
     from ...detect.mhsspt import MHSSPTCalibration
 
-    dens = {h: UniformMeanGaussian(d.low, d.high, np.maximum(d.std, frac * np.abs(d.high)))
+    h0 = next(iter(cal.densities.values())).std
+    # a fault does not remove the noise: no hypothesis is narrower than the no-fault one
+    dens = {h: UniformMeanGaussian(d.low, d.high, np.maximum(np.maximum(d.std, frac * np.abs(d.high)), h0))
             for h, d in cal.densities.items()}
     return MHSSPTCalibration(dens, dict(cal.groups), dict(cal.ranges))
 

@@ -174,9 +174,9 @@ class _DesignRecord:
     """The part of a CarMonitorDesign that :func:`build_monitor` reads."""
 
 
-def _features(gen_design, groups, dt, sig: Signals) -> np.ndarray:
+def _features(gen_design, groups, dt, sig: Signals, tau: float = 0.0) -> np.ndarray:
     gen = OffsetFilter(gen_design, np.zeros(len(gen_design.u_names)), np.zeros(len(gen_design.y_names)))
-    return Monitor([gen], [FeatureNorms(groups, dt, 0.0)]).run(sig).statistics.values
+    return Monitor([gen], [FeatureNorms(groups, dt, tau)]).run(sig).statistics.values
 
 
 def inject(sig: Signals, faults: list[tuple[str, float, float]]) -> Signals:
@@ -194,8 +194,8 @@ def inject(sig: Signals, faults: list[tuple[str, float, float]]) -> Signals:
 
 
 @functools.lru_cache(maxsize=2)
-def rav4_monitor(path: str | None = None, *, rate: float = 50.0, q_weight: float = 1e-6, p: float = 1e-4,
-                 inflate: float = 2.5, hold: int = 3) -> Rav4Monitor:
+def rav4_monitor(path: str | None = None, *, rate: float = 50.0, q_weight: float = 1e-6, p: float = 1e-5,
+                 inflate: float = 2.5, hold: int = 10, tau: float = 0.0) -> Rav4Monitor:
     """Design and calibrate the RAV4 lateral monitor on the first half of the real minute.
 
     Examples
@@ -236,7 +236,7 @@ def rav4_monitor(path: str | None = None, *, rate: float = 50.0, q_weight: float
     for i, (name, m) in enumerate(runs):
         if name is not None:
             vals[i, calib.t >= onset, CHANNELS.index(RAV4_FAULTS[name][0])] += m
-    X = _features(gd, groups, dt, Signals(calib.t, vals, calib.names, check=False))
+    X = _features(gd, groups, dt, Signals(calib.t, vals, calib.names, check=False), tau)
     tc = calib.t
     nominal = X[0, tc >= 2.0]
     by: dict[str, dict[float, np.ndarray]] = {}
@@ -250,7 +250,7 @@ def rav4_monitor(path: str | None = None, *, rate: float = 50.0, q_weight: float
     des.y0 = dict.fromkeys(CHANNELS[1:], 0.0)
     des.filters = lambda sets: members
     des.residual_groups = lambda sets: groups
-    cm = build_monitor(des, "lateral", cal, tau=0.0, p=p, hold=hold)
+    cm = build_monitor(des, "lateral", cal, tau=tau, p=p, hold=hold)
     rec["filter_methods"] = {f"set{s}/{t}": d.info.get("method") for s, ds in designs.items()
                              for t, d in ds.items()}
     return Rav4Monitor(cm, md, designs, sig, rec)
@@ -277,7 +277,7 @@ def parse_inject(spec: str) -> list[tuple[str, float, float]]:
     return out
 
 
-def run_rav4_log(path: str | None = None, inject_spec: str = "none") -> dict[str, Any]:
+def run_rav4_log(path: str | None = None, inject_spec: str = "none", **design_kw) -> dict[str, Any]:
     """Run the RAV4 lateral monitor on the real minute with the faults of ``inject_spec``.
 
     Returns
@@ -286,7 +286,7 @@ def run_rav4_log(path: str | None = None, inject_spec: str = "none") -> dict[str
         Announcements (time, fault), detection delay and isolated fault of the first injected
         fault, peak probability of every fault after the warm-up, split of the data.
     """
-    mon = rav4_monitor(str(path) if path is not None else None)
+    mon = rav4_monitor(str(path) if path is not None else None, **design_kw)
     faults = parse_inject(inject_spec)
     sig = inject(mon.signals, faults)
     out = mon.car_monitor.run(sig)
