@@ -651,10 +651,10 @@ def calibrate_monitor(block: str = "longitudinal", speed: float = 20.0, *, kind:
     return out
 
 
-def floor_std(cal, frac: float):
+def floor_std(cal, frac: float, *, h0_floor: bool = False):
     """Floor every density's per-feature std at ``frac`` times its own upper mean ``high`` (a
-    relative model error: a few per cent of a residual's level) and at the no-fault (first)
-    hypothesis's std (a fault adds to the noise, it does not remove it), as a new
+    relative model error: a few per cent of a residual's level) and, with ``h0_floor``, at the
+    no-fault (first) hypothesis's std (a fault adds to the noise, it does not remove it), as a new
     :class:`~fdikit.detect.mhsspt.MHSSPTCalibration`.
 
     Examples
@@ -665,12 +665,14 @@ def floor_std(cal, frac: float):
     ...                        "f": UniformMeanGaussian([1.0], [2.0], [0.01])}, {}, {})
     >>> [floor_std(c, 0.05).densities[h].std.round(6).tolist() for h in ("none", "f")]
     [[0.005], [0.1]]
+    >>> floor_std(c, 0.0, h0_floor=True).densities["f"].std.tolist()
+    [0.01]
     """
     from ...detect import UniformMeanGaussian
     from ...detect.mhsspt import MHSSPTCalibration
 
-    h0 = next(iter(cal.densities.values())).std
-    # a fault does not remove the noise: no hypothesis is narrower than the no-fault one
+    h0 = next(iter(cal.densities.values())).std if h0_floor else 0.0
+    # a fault does not remove the noise: no hypothesis narrower than the no-fault one (h0_floor)
     dens = {h: UniformMeanGaussian(d.low, d.high, np.maximum(np.maximum(d.std, frac * np.abs(d.high)), h0))
             for h, d in cal.densities.items()}
     return MHSSPTCalibration(dens, dict(cal.groups), dict(cal.ranges))

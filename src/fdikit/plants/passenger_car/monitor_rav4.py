@@ -194,8 +194,8 @@ def inject(sig: Signals, faults: list[tuple[str, float, float]]) -> Signals:
 
 
 @functools.lru_cache(maxsize=2)
-def rav4_monitor(path: str | None = None, *, rate: float = 50.0, q_weight: float = 1e-6, p: float = 1e-5,
-                 inflate: float = 2.5, hold: int = 10, tau: float = 0.0) -> Rav4Monitor:
+def rav4_monitor(path: str | None = None, *, rate: float = 50.0, q_weight: float = 1e-8, p: float = 1e-5,
+                 inflate: float = 2.5, hold: int = 10, tau: float = 0.2) -> Rav4Monitor:
     """Design and calibrate the RAV4 lateral monitor on the first half of the real minute.
 
     Examples
@@ -242,7 +242,7 @@ def rav4_monitor(path: str | None = None, *, rate: float = 50.0, q_weight: float
     by: dict[str, dict[float, np.ndarray]] = {}
     for i, (name, m) in enumerate(runs[1:], start=1):
         by.setdefault(name, {})[m] = X[i, tc >= onset + 0.1]
-    cal = floor_std(calibrate_densities(nominal, by, inflate=inflate, no_fault="none:rav4"), 0.05)
+    cal = floor_std(calibrate_densities(nominal, by, inflate=inflate, no_fault="none:rav4"), 0.05, h0_floor=True)
 
     des = _DesignRecord()
     des.dt = dt
