@@ -242,7 +242,8 @@ def rav4_monitor(path: str | None = None, *, rate: float = 50.0, q_weight: float
     by: dict[str, dict[float, np.ndarray]] = {}
     for i, (name, m) in enumerate(runs[1:], start=1):
         by.setdefault(name, {})[m] = X[i, tc >= onset + 0.1]
-    cal = floor_std(calibrate_densities(nominal, by, inflate=inflate, no_fault="none:rav4"), 0.05, h0_floor=True)
+    cal = calibrate_densities(nominal, by, inflate=inflate, no_fault="none:rav4")
+    cal = floor_std(cal, 0.05, h0_floor=True)
 
     des = _DesignRecord()
     des.dt = dt
