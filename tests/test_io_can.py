@@ -213,7 +213,7 @@ def test_not_a_log(tmp_path):
         read_can_log(fake, DBC, ["SPEED.SPEED"])
     other = tmp_path / "data.xyz"
     other.write_text("1,2,3\n")
-    with pytest.raises(DataError, match="not a CAN log"):
+    with pytest.raises(DataError, match="unknown log format"):
         read_can_log(other, DBC, ["SPEED.SPEED"])
     with pytest.raises(DataError, match="does not exist"):
         read_can_log(tmp_path / "missing.blf", DBC, ["SPEED.SPEED"])

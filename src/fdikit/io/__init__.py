@@ -1,14 +1,56 @@
-"""Loaders for recorded vehicle data.
+"""Loaders for recorded vehicle data, all onto the same :class:`~fdikit.Signals` grid.
 
-* :func:`read_can_log` — a CAN log (Vector BLF, ASC, ...) decoded with a DBC onto one time grid;
-* :func:`read_csv` — a CSV recording.
+* :func:`read_log` — any supported log, chosen by extension or content: Vector BLF and ASC,
+  candump, MDF4 (decoded channels, or raw CAN frames decoded with a DBC), Parquet and CSV tables;
+* :func:`read_can_log` — a CAN log decoded with a DBC onto one time grid;
+* :func:`read_csv` — a CSV recording;
+* per-format readers :func:`read_blf`, :func:`read_asc`, :func:`read_candump`, :func:`read_mdf`,
+  :func:`read_parquet`, :func:`read_table_csv`.
 
-Both return :class:`LogSignals`, a :class:`~fdikit.Signals` whose values may hold NaN where the
-source had a gap; ``LogSignals.valid`` marks the samples that hold data (see
-:mod:`fdikit.io.can` for the convention). Gaps are never interpolated across.
+They return :class:`LogSignals` (or its subclass :class:`LoadedSignals`), a Signals whose values
+may hold NaN where the source had a gap or a bad sample; ``valid`` marks the samples that hold
+data and ``info`` reports per-signal quality (rates, gaps, duplicates, stuck stretches). Gaps
+are never interpolated across (see :mod:`fdikit.io.can`).
 """
 
 from .can import LogSignals, SignalInfo, convert_units, read_can_log, resample_to_grid
 from .csv import read_csv
+from .formats import (
+    FORMATS,
+    LoadedSignals,
+    SignalQuality,
+    SourceReport,
+    detect_format,
+    frames_to_signals,
+    read_asc,
+    read_blf,
+    read_candump,
+    read_log,
+    read_mdf,
+    read_parquet,
+    read_table_csv,
+    series_to_grid,
+)
 
-__all__ = ["LogSignals", "SignalInfo", "convert_units", "read_can_log", "read_csv", "resample_to_grid"]
+__all__ = [
+    "FORMATS",
+    "LoadedSignals",
+    "LogSignals",
+    "SignalInfo",
+    "SignalQuality",
+    "SourceReport",
+    "convert_units",
+    "detect_format",
+    "frames_to_signals",
+    "read_asc",
+    "read_blf",
+    "read_can_log",
+    "read_candump",
+    "read_csv",
+    "read_log",
+    "read_mdf",
+    "read_parquet",
+    "read_table_csv",
+    "resample_to_grid",
+    "series_to_grid",
+]

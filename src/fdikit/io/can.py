@@ -432,89 +432,11 @@ def read_can_log(
         raise DataError(f"span must be 'common' or 'log', got {span!r}")
     if max_gap <= 0:
         raise DataError(f"max_gap must be positive, got {max_gap}")
-    db = _load_dbc(dbc)
-    resolved = _resolve(db, signals)
-    path = Path(path)
-    ts, ids, data = _read_frames(path)
-    t0 = float(ts[0])
+    # one frame-to-grid path for every log format: fdikit.io.formats (stricter bad-input policy:
+    # short payloads are flagged, never zero-padded; conflicting duplicates are flagged; a
+    # corrupt container is a DataError)
+    from .formats import read_log
 
-    # decode per message (each needed arbitration id once, every frame of it)
-    by_msg: dict[int, list[tuple[str, Any]]] = {}
-    for full, msg, _sig in resolved:
-        by_msg.setdefault(msg.frame_id, []).append((full, msg))
-    series: dict[str, tuple[np.ndarray, np.ndarray]] = {}
-    for fid, wanted in by_msg.items():
-        msg = wanted[0][1]
-        idx = np.flatnonzero(ids == fid)
-        if idx.size == 0:
-            raise DataError(f"the log {path.name!r} has no frame of message {msg.name!r} "
-                            f"(id 0x{fid:x}) needed for {[w[0] for w in wanted]}")
-        names = [w[0].split(".")[1] for w in wanted]
-        cols = np.empty((idx.size, len(names)))
-        decode = msg.decode
-        need = msg.length
-        for j, k in enumerate(idx):
-            d = data[k]
-            if len(d) < need:
-                d = d + bytes(need - len(d))
-            try:
-                dec = decode(d, decode_choices=False, scaling=True, allow_truncated=True)
-            except Exception as exc:
-                raise DataError(f"cannot decode frame {int(k)} (t = {ts[k] - t0:.6f} s) of message "
-                                f"{msg.name!r}: {exc}") from None
-            for c, s in enumerate(names):
-                cols[j, c] = float(dec.get(s, np.nan))
-        tm = ts[idx] - t0
-        # frames with identical timestamps (rare logger artefact): keep the last one
-        keep = np.r_[np.diff(tm) > 0, True]
-        for c, (full, _msg) in enumerate(wanted):
-            series[full] = (tm[keep], cols[keep, c])
+    return read_log(path, dbc, signals, rate, units=units, max_gap=max_gap, method=method, span=span)
 
-    infos_src = {}
-    for full, _msg, _sig in resolved:
-        tm, _ = series[full]
-        per = float(np.median(np.diff(tm))) if tm.size > 1 else np.inf
-        infos_src[full] = per
-    if rate is None:
-        rate = float(np.round(1.0 / min(infos_src.values()), 3))
-    rate = float(rate)
-    if not np.isfinite(rate) or rate <= 0:
-        raise DataError(f"grid rate must be a positive number of Hz, got {rate}")
-    if span == "common":
-        a = max(series[s][0][0] for s in signals)
-        b = min(series[s][0][-1] for s in signals)
-        if b <= a:
-            raise DataError(f"the requested signals share no common time span ({a:.3f} s .. {b:.3f} s)")
-    else:
-        a, b = 0.0, float(ts[-1] - t0)
-    n = int(np.floor((b - a) * rate + 1e-9)) + 1
-    grid = a + np.arange(n) / rate
 
-    values = np.empty((n, len(signals)))
-    valid = np.empty((n, len(signals)), bool)
-    out_units: list[str] = []
-    info: dict[str, SignalInfo] = {}
-    for c, (full, _msg, sig) in enumerate(resolved):
-        tm, v = series[full]
-        src_unit = sig.unit or ""
-        target = src_unit
-        if isinstance(units, str):
-            if units.lower() != "si":
-                raise DataError(f"units must be 'si' or a mapping of signal -> unit, got {units!r}")
-            target = _SI.get(_norm_unit(src_unit), src_unit)
-        elif units is not None:
-            for k in units:
-                if k not in signals:
-                    raise DataError(f"unit conversion given for {k!r}, which is not a requested signal")
-            target = units.get(full, src_unit)
-        if target != src_unit:
-            v = convert_units(v, src_unit, target, channel=full)
-        vals, ok = resample_to_grid(tm, v, grid, max_gap=max_gap, method=method, period=infos_src[full])
-        values[:, c] = vals
-        valid[:, c] = ok
-        out_units.append(target)
-        gaps = int(np.sum(np.diff(tm) > max_gap * infos_src[full]))
-        mean_rate = float((tm.size - 1) / (tm[-1] - tm[0])) if tm.size > 1 else float("nan")
-        info[full] = SignalInfo(full, src_unit, target, int(tm.size), mean_rate, infos_src[full],
-                                float(tm[0]), float(tm[-1]), gaps, int((~ok).sum()))
-    return LogSignals(grid, values, signals, out_units, valid=valid, info=info)

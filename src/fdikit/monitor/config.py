@@ -226,20 +226,23 @@ def build_monitor(cfg: MonitorConfig) -> Monitor:
 
 
 def read_log(cfg: MonitorConfig, path: str | Path) -> Signals:
-    """Read a recorded log as the config's ``[log]`` table says (the source channels only)."""
+    """Read a recorded log as the config's ``[log]`` table says (the source channels only).
+
+    A ``.csv`` file (or ``format = "csv"``) is a table of signals with the time column
+    ``[log].time``; anything else goes to :func:`fdikit.io.read_log` (BLF, ASC, candump, MDF4,
+    Parquet), with ``[log].dbc`` for raw CAN frames.
+    """
     from .. import io
 
     path = Path(path)
     fmt = cfg.log.get("format", "auto")
-    if fmt == "auto":
-        fmt = "csv" if path.suffix.lower() == ".csv" else "can"
     sources = list(dict.fromkeys(c.source for c in cfg.channels))
-    if fmt == "csv":
+    if fmt == "csv" or (fmt == "auto" and path.suffix.lower() == ".csv"):
         return io.read_csv(path, time=cfg.log.get("time", "t"), columns=sources, rate=cfg.log.get("rate"))
     dbc = cfg.log.get("dbc")
-    if not dbc:
+    if fmt == "can" and not dbc:
         raise DataError(f"{cfg.path}: a CAN log needs [log].dbc")
-    return io.read_can_log(path, cfg.path.parent / dbc, sources, rate=cfg.log.get("rate"))
+    return io.read_log(path, cfg.path.parent / dbc if dbc else None, sources, cfg.log.get("rate"))
 
 
 def map_channels(cfg: MonitorConfig, log: Signals) -> Signals:
