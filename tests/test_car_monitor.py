@@ -307,3 +307,56 @@ def test_accelerometer_delay_falls_with_the_bias():
     assert all(s["isolated"] == "accelerometer" and not s["false_announcements"] for s in d), d
     delays = [s["detection_delay_s"] for s in d]
     assert delays[0] > delays[1] > delays[2], delays
+
+
+# ---------------------------------------------------------------------------------- real RAV4 minute
+def _rav4_available():
+    from fdikit.plants.passenger_car.rav4 import default_data_path
+
+    return (default_data_path() / "drive.blf").exists()
+
+
+rav4 = pytest.mark.skipif(not _rav4_available(), reason="RAV4 data not found")
+
+
+@rav4
+def test_rav4_filters_block_their_nuisance():
+    """The noise-scaled designs, folded back to the measurement units, still block their nuisance
+    exactly: internal form against the UNSCALED fitted model, DC to 5 Hz."""
+    from fdikit.plants.passenger_car.monitor_rav4 import rav4_monitor
+
+    mon = rav4_monitor()
+    model = mon.model
+    z = np.exp(2j * np.pi * FREQS * mon.record["dt"])
+    for s, ds in mon.designs.items():
+        for target, d in ds.items():
+            M = internal_form(d, model)
+            Gf = _response(M, "f", z)
+            jt = M.fault_names.index(target)
+            jn = [M.fault_names.index(o) for o in FILTER_SETS[s] if o != target]
+            tgt = np.abs(Gf[:, :, jt]).max()
+            assert tgt > 0
+            assert np.abs(Gf[:, :, jn]).max() <= 1e-8 * tgt, (s, target)
+
+
+@rav4
+@pytest.mark.parametrize("spec,fault", [("wheel_rl:0.6@40", "rear_wheel_diff"),
+                                        ("yaw_rate:0.03@40", "yaw_rate")])
+def test_rav4_injected_faults_isolated(spec, fault):
+    """Faults injected into the held-out half of the real minute are announced and isolated."""
+    from fdikit.plants.passenger_car.monitor_rav4 import run_rav4_log
+
+    r = run_rav4_log(None, spec)
+    assert r["isolated"] == fault, r
+    assert r["detection_delay_s"] is not None and r["detection_delay_s"] <= 0.5, r
+    after = [a for a in r["announcements"] if a["t"] >= 40.0]
+    assert after and after[0]["fault"] == fault, r
+
+
+@rav4
+@pytest.mark.xfail(strict=True, reason="known shortfall: the real lateral accelerometer residual (model "
+                   "mismatch over 8-20 m/s with filters designed at 17 m/s) is announced a few times")
+def test_rav4_no_false_announcements():
+    from fdikit.plants.passenger_car.monitor_rav4 import run_rav4_log
+
+    assert run_rav4_log(None, "none")["announcements"] == []
