@@ -354,8 +354,8 @@ def test_rav4_injected_faults_isolated(spec, fault):
 
 
 @rav4
-@pytest.mark.xfail(strict=True, reason="known shortfall: the real lateral accelerometer residual (model "
-                   "mismatch over 8-20 m/s with filters designed at 17 m/s) is announced a few times")
+@pytest.mark.xfail(strict=True, reason="known shortfall: real lateral-accelerometer events the fitted model "
+                   "does not explain are announced as accelerometer faults (3 times in the minute)")
 def test_rav4_no_false_announcements():
     from fdikit.plants.passenger_car.monitor_rav4 import run_rav4_log
 

@@ -533,6 +533,11 @@ def _tau_b() -> float:
     return float(DEFAULT_PARAMS["tau_b"])
 
 
+def _generators_and_features(des, block, tau):
+    gens, groups = _generators(des, block)
+    return gens, [FeatureNorms(groups, des.dt, tau)]
+
+
 def car_signals(res) -> Signals:
     """Monitor input signals from a :func:`simulate_drive` result: commands ``throttle, brake,
     steer`` followed by every measurement."""
@@ -569,14 +574,20 @@ class CarMonitor:
 
 
 def build_monitor(des: CarMonitorDesign, block: str, calibration, *, tau: float = 0.0, p: float = 1e-3,
-                  q: float = 0.0, level: float = 0.95, warmup: float = 2.0, hold: int = 3) -> CarMonitor:
+                  q: float = 0.0, level: float = 0.95, warmup: float = 2.0, hold: int = 3,
+                  generators: Sequence[ResidualGenerator] | None = None,
+                  groups: Mapping[str, Sequence[str]] | None = None) -> CarMonitor:
     """Assemble a :class:`CarMonitor` from a design and a calibration (see :func:`calibrate_monitor`).
 
     ``q`` is the MHSSPT's return probability (``q > 0`` tracks intermittent faults); the test
     starts after ``warmup`` seconds (:class:`WarmupMHSSPT`); a fault is announced when its
     probability has been >= ``level`` for ``hold`` consecutive samples
-    (:class:`~fdikit.detect.Hold`)."""
-    gens, groups = _generators(des, block)
+    (:class:`~fdikit.detect.Hold`). ``generators`` and ``groups`` (feature -> residual channels)
+    replace the design's filters and parity equations when given (e.g. a speed-scheduled filter)."""
+    if generators is None:
+        gens, groups = _generators(des, block)
+    else:
+        gens, groups = list(generators), dict(groups or {})
     feats = FeatureNorms(groups, des.dt, tau)
     faults = list(calibration.groups)
     test = WarmupMHSSPT(feats.output_names, calibration.densities, p=p, q=q, groups=calibration.groups,
@@ -594,6 +605,7 @@ def calibrate_monitor(block: str = "longitudinal", speed: float = 20.0, *, kind:
                       onset: float = 6.0, duration: float = 10.0, settle: float = 0.1, tau: float = 0.0,
                       p: float | None = None, q: float = 0.0, inflate: float | None = None,
                       std_floor: float = 0.05, hold: int = 3, dt_sim: float = 2.5e-3,
+                      nominal_kinds: tuple[str, ...] = (),
                       fast_accelerometer: bool = False, seed: int = 11) -> CarMonitor:
     """Calibrate the MHSSPT densities of one block by simulating every fault (paper 1, Section IV-E).
 
@@ -601,7 +613,8 @@ def calibrate_monitor(block: str = "longitudinal", speed: float = 20.0, *, kind:
     one run per (fault, magnitude) of :data:`MAGNITUDES` with the fault from ``onset``; the
     features ``settle`` s after the onset to the end give each magnitude's mean and spread
     (:func:`~fdikit.detect.calibrate_densities`, two hypotheses per fault), the nominal run's
-    features from 2 s give H0 (named ``"none:<block>"``). ``p`` (change probability per sample)
+    features from 2 s give H0 (named ``"none:<block>"``), together with those of fault-free drives
+    of the kinds ``nominal_kinds`` (e.g. ``("speed_change",)``). ``p`` (change probability per sample)
     and ``inflate`` (std factor) default to :data:`BLOCK_SETTINGS`. Every density's standard deviation of a
     feature is then floored at ``std_floor`` times its upper mean (:func:`floor_std`): the parity
     residuals are nearly noise-free, and without a floor
@@ -637,6 +650,13 @@ def calibrate_monitor(block: str = "longitudinal", speed: float = 20.0, *, kind:
     X = mon.run(sig).statistics.values  # (R, T, C)
     t = sig.t
     nominal = X[0, t >= 2.0]
+    for extra in nominal_kinds:
+        # more fault-free manoeuvres in H0 (e.g. the speed steps the linear filters see as
+        # nonlinearity): simulated separately, same noise model
+        r2 = simulate_drive(extra, speed, duration=duration, runs=1, seed=seed + 1, dt=dt_sim,
+                            noise=sensor_noise())
+        X2 = Monitor(*_generators_and_features(des, block, tau)).run(car_signals(r2)).statistics.values
+        nominal = np.concatenate([nominal, X2[0, r2.y.t >= 2.0]])
     by_fault: dict[str, dict[float, np.ndarray]] = {}
     for i, (name, _f, m) in enumerate(runs[1:], start=1):
         by_fault.setdefault(name, {})[m] = X[i, t >= onset + settle]

@@ -33,8 +33,8 @@ import numpy as np
 from ...detect.mhsspt import calibrate_densities
 from ...errors import DataError
 from ...model.linear import GROUPS, LinearFaultModel
-from ...monitor.core import Monitor
-from ...residuals import fault_detection_filter, stack_designs
+from ...monitor.core import Monitor, ResidualGenerator
+from ...residuals import FaultDetectionFilter, fault_detection_filter, stack_designs
 from ...signals import Signals
 from .monitor import (
     FILTER_SETS,
@@ -47,7 +47,7 @@ from .monitor import (
 )
 from .rav4 import RAV4, default_data_path
 
-__all__ = ["RAV4_FAULTS", "Rav4Monitor", "parse_inject", "rav4_monitor", "run_rav4_log"]
+__all__ = ["RAV4_FAULTS", "Rav4Monitor", "ScheduledFilter", "parse_inject", "rav4_monitor", "run_rav4_log"]
 
 #: Monitored faults of the RAV4 lateral monitor -> (channel the fault is injected on, magnitudes).
 RAV4_FAULTS: dict[str, tuple[str, tuple[float, ...]]] = {
@@ -140,13 +140,13 @@ def load_rav4_lateral(path: str | Path | None = None, rate: float = 50.0, fit=No
     X = np.column_stack([yaw, U])[half]
     kf, cf = np.linalg.lstsq(X, fd[half], rcond=None)[0]
     kr, cr = np.linalg.lstsq(X, rd[half], rcond=None)[0]
-    vals = np.column_stack([steer, ay, yaw, fd - cf * U, rd - cr * U])
+    vals = np.column_stack([steer, ay, yaw, fd - cf * U, rd - cr * U, U])
     # measurement noise: white part from first differences (sigma^2 = var(diff) / 2)
     noise = {n: float(np.std(np.diff(vals[half, i])) / np.sqrt(2)) for i, n in enumerate(CHANNELS)}
     rec = {"U_mean": float(U.mean()), "U_range": [float(U.min()), float(U.max())], "k_f": float(kf),
            "k_r": float(kr), "c_f": float(cf), "c_r": float(cr), "noise": noise, "fit": dict(p),
            "ay_sign": float(fit.ay_sign), "dt": float(np.mean(np.diff(s.t))), "half_s": float(s.t[-1] / 2)}
-    return Signals(s.t - s.t[0], vals[None], CHANNELS, check=False), rec
+    return Signals(s.t - s.t[0], vals[None], [*CHANNELS, "speed"], check=False), rec
 
 
 class Rav4Monitor:
@@ -168,6 +168,104 @@ class Rav4Monitor:
     def __init__(self, car_monitor, model, designs, signals, record):
         self.car_monitor, self.model, self.designs, self.signals, self.record = (
             car_monitor, model, designs, signals, record)
+
+
+class ScheduledFilter(ResidualGenerator):
+    """A bank of filters designed at several speeds, run in parallel; the residual is the linear
+    interpolation, in the measured speed, between the two filters designed at the nearest speeds
+    (gain scheduling by residual blending; every filter runs all the time, so its state is
+    always current).
+
+    Parameters
+    ----------
+    speeds : sequence of float
+        Design speeds (m/s), increasing.
+    designs : sequence of FilterDesign
+        One per speed, the same channels and residual names.
+
+    Examples
+    --------
+    >>> from fdikit.residuals import FilterDesign
+    >>> mk = lambda g: FilterDesign(np.zeros((0, 0)), np.zeros((0, 1)), np.zeros((0, 1)), np.zeros((1, 0)),
+    ...                             np.zeros((1, 1)), np.array([[g]]), 0.1, ["u"], ["y"], ["r"])
+    >>> f = ScheduledFilter([10.0, 20.0], [mk(1.0), mk(3.0)])
+    >>> f.reset(1)
+    >>> float(f.step([0.0, 15.0], [1.0])[0, 0])       # halfway: (1 + 3) / 2
+    2.0
+    """
+
+    def __init__(self, speeds, designs):
+        self.speeds = np.asarray(speeds, float)
+        if self.speeds.ndim != 1 or self.speeds.size < 1 or np.any(np.diff(self.speeds) <= 0):
+            raise DataError(f"speeds must be increasing, got {speeds}")
+        self.filters = [FaultDetectionFilter(d) for d in designs]
+        d0 = designs[0]
+        for d in designs:
+            if d.u_names != d0.u_names or d.y_names != d0.y_names or d.residual_names != d0.residual_names:
+                raise DataError("scheduled designs must read and produce the same channels")
+        self.u_names = [*d0.u_names, "speed"]
+        self.y_names = list(d0.y_names)
+        self.output_names = list(d0.residual_names)
+        self.reset(1)
+
+    def reset(self, runs: int = 1) -> None:
+        for f in self.filters:
+            f.reset(runs)
+
+    def _weights(self, U: np.ndarray) -> np.ndarray:
+        """(..., K) interpolation weights."""
+        K = self.speeds.size
+        W = np.zeros((*U.shape, K))
+        if K == 1:
+            W[..., 0] = 1.0
+            return W
+        Uc = np.clip(U, self.speeds[0], self.speeds[-1])
+        i = np.clip(np.searchsorted(self.speeds, Uc, side="right") - 1, 0, K - 2)
+        w = (Uc - self.speeds[i]) / (self.speeds[i + 1] - self.speeds[i])
+        np.put_along_axis(W, i[..., None], (1.0 - w)[..., None], axis=-1)
+        np.put_along_axis(W, (i + 1)[..., None], w[..., None], axis=-1)
+        return W
+
+    def _blend(self, R: list[np.ndarray], U: np.ndarray) -> np.ndarray:
+        W = self._weights(U)
+        out = np.zeros_like(R[0])
+        for k, r in enumerate(R):
+            out += W[..., k, None] * r
+        return out
+
+    def _step(self, u, y):
+        R = [f._step(u[:, :-1], y) for f in self.filters]
+        return self._blend(R, u[:, -1])
+
+    def run(self, signals: Signals) -> Signals:
+        R = [f.run(signals).values for f in self.filters]
+        U = signals.values[:, :, signals.index(["speed"])[0]]
+        self.reset(signals.runs)
+        return Signals(signals.t, self._blend(R, U), self.output_names, check=False)
+
+
+def _design_sets(model: LinearFaultModel, dt: float, noise: dict[str, float], q_weight: float):
+    """Sets 4-6 on ``model`` (discretised at ``dt``).
+
+    Designed on outputs scaled by their noise (unit measurement noise, R = I in whatever output
+    space the design projects to: yaw rate and wheel-speed differences are all multiples of r
+    here, so rank C = 2 and the sensor faults are partly removed by projection); the scaling is
+    then folded into the filter's measurement gains: filter(y) = filter_scaled(S y).
+    """
+    md = model.discretize(dt)
+    S = np.array([1.0 / max(noise[y], 1e-9) for y in md.outputs])
+    ms = md.with_matrices(md.A, S[:, None] * md.C, {g: (md.B_of(g), S[:, None] * md.D_of(g)) for g in GROUPS})
+    designs: dict[int, dict[str, Any]] = {}
+    for s in LATERAL_SETS:
+        designs[s] = {}
+        for t in FILTER_SETS[s]:
+            others = [o for o in FILTER_SETS[s] if o != t]
+            d = fault_detection_filter(ms, t, others, name=f"set{s}/{t}", Q=q_weight * np.eye(md.n_states))
+            iy = [md.outputs.index(y) for y in d.y_names]
+            d.By, d.Dy = d.By * S[iy], d.Dy * S[iy]
+            d.internal = None  # against the scaled model; recompute with internal_form(d, model)
+            designs[s][t] = d
+    return md, designs
 
 
 class _DesignRecord:
@@ -195,8 +293,12 @@ def inject(sig: Signals, faults: list[tuple[str, float, float]]) -> Signals:
 
 @functools.lru_cache(maxsize=2)
 def rav4_monitor(path: str | None = None, *, rate: float = 50.0, q_weight: float = 1e-8, p: float = 1e-5,
-                 inflate: float = 2.5, hold: int = 10, tau: float = 0.2) -> Rav4Monitor:
+                 inflate: float = 2.5, hold: int = 10, tau: float = 0.2, n_speeds: int = 4) -> Rav4Monitor:
     """Design and calibrate the RAV4 lateral monitor on the first half of the real minute.
+
+    The filter sets are designed at ``n_speeds`` speeds spanning the minute's speed range and
+    blended by the measured speed (:class:`ScheduledFilter`; ``n_speeds = 1``: one design at the
+    mean speed).
 
     Examples
     --------
@@ -206,27 +308,21 @@ def rav4_monitor(path: str | None = None, *, rate: float = 50.0, q_weight: float
     """
     sig, rec = load_rav4_lateral(path, rate)
     dt = rec["dt"]
-    model = _linear_model(rec["fit"], rec["U_mean"], rec["ay_sign"], rec["k_f"], rec["k_r"], rec["noise"])
-    md = model.discretize(dt)
-    # design on outputs scaled by their noise (unit measurement noise, R = I in whatever output
-    # space the design projects to: yaw rate and wheel-speed differences are all multiples of r
-    # here, so rank C = 2 and the sensor faults are partly removed by projection), then fold the
-    # scaling into the filter's measurement gains: filter(y) = filter_scaled(S y)
-    S = np.array([1.0 / max(rec["noise"][y], 1e-9) for y in md.outputs])
-    ms = md.with_matrices(md.A, S[:, None] * md.C, {g: (md.B_of(g), S[:, None] * md.D_of(g)) for g in GROUPS})
-    designs = {}
-    for s in LATERAL_SETS:
-        designs[s] = {}
-        for t in FILTER_SETS[s]:
-            others = [o for o in FILTER_SETS[s] if o != t]
-            d = fault_detection_filter(ms, t, others, name=f"set{s}/{t}", Q=q_weight * np.eye(md.n_states))
-            iy = [md.outputs.index(y) for y in d.y_names]
-            d.By, d.Dy = d.By * S[iy], d.Dy * S[iy]
-            d.internal = None  # against the scaled model; recompute with internal_form(d, model)
-            designs[s][t] = d
-    members = [d for s in LATERAL_SETS for d in designs[s].values()]
-    gd = delayed_feedthrough(stack_designs(members))
+    lo, hi = rec["U_range"]
+    speeds = [rec["U_mean"]] if n_speeds <= 1 else list(np.linspace(lo, hi, n_speeds))
+    bank = []
+    for U0 in speeds:
+        model = _linear_model(rec["fit"], U0, rec["ay_sign"], rec["k_f"], rec["k_r"], rec["noise"])
+        md, designs = _design_sets(model, dt, rec["noise"], q_weight)
+        bank.append((md, designs))
+    # the record's model and designs: those nearest the mean speed
+    md, designs = bank[int(np.argmin(np.abs(np.asarray(speeds) - rec["U_mean"])))]
+    members_at = [[d for s in LATERAL_SETS for d in ds[s].values()] for _m, ds in bank]
+    members = members_at[0]
+    gds = [delayed_feedthrough(stack_designs(m)) for m in members_at]
+    gen = ScheduledFilter(speeds, gds)
     groups = {f"|{d.residual_names[0].rsplit(':', 1)[0]}|": list(d.residual_names) for d in members}
+    rec["design_speeds"] = [float(u) for u in speeds]
     t = sig.t
     half = rec["half_s"]
     calib = Signals(t[t <= half], sig.values[:, t <= half], sig.names, check=False)
@@ -236,7 +332,8 @@ def rav4_monitor(path: str | None = None, *, rate: float = 50.0, q_weight: float
     for i, (name, m) in enumerate(runs):
         if name is not None:
             vals[i, calib.t >= onset, CHANNELS.index(RAV4_FAULTS[name][0])] += m
-    X = _features(gd, groups, dt, Signals(calib.t, vals, calib.names, check=False), tau)
+    X = Monitor([gen], [FeatureNorms(groups, dt, tau)]).run(Signals(calib.t, vals, calib.names,
+                                                                      check=False)).statistics.values
     tc = calib.t
     nominal = X[0, tc >= 2.0]
     by: dict[str, dict[float, np.ndarray]] = {}
@@ -247,11 +344,7 @@ def rav4_monitor(path: str | None = None, *, rate: float = 50.0, q_weight: float
 
     des = _DesignRecord()
     des.dt = dt
-    des.u0 = {"steer": 0.0}
-    des.y0 = dict.fromkeys(CHANNELS[1:], 0.0)
-    des.filters = lambda sets: members
-    des.residual_groups = lambda sets: groups
-    cm = build_monitor(des, "lateral", cal, tau=tau, p=p, hold=hold)
+    cm = build_monitor(des, "lateral", cal, tau=tau, p=p, hold=hold, generators=[gen], groups=groups)
     rec["filter_methods"] = {f"set{s}/{t}": d.info.get("method") for s, ds in designs.items()
                              for t, d in ds.items()}
     return Rav4Monitor(cm, md, designs, sig, rec)
