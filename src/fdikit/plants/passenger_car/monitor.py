@@ -605,7 +605,7 @@ def calibrate_monitor(block: str = "longitudinal", speed: float = 20.0, *, kind:
                       onset: float = 6.0, duration: float = 10.0, settle: float = 0.1, tau: float = 0.0,
                       p: float | None = None, q: float = 0.0, inflate: float | None = None,
                       std_floor: float = 0.05, hold: int = 3, dt_sim: float = 2.5e-3,
-                      nominal_kinds: tuple[str, ...] = (),
+                      nominal_kinds: tuple[str, ...] = ("speed_change",),
                       fast_accelerometer: bool = False, seed: int = 11) -> CarMonitor:
     """Calibrate the MHSSPT densities of one block by simulating every fault (paper 1, Section IV-E).
 
