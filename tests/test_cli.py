@@ -28,3 +28,14 @@ def test_demo_linear_json_detects_the_sensor_bias():
     assert summary["detected"] == "sensor:pos2"
     assert summary["false_alarms_before_onset"] == 0
     assert 0 < summary["delay_s"] < 1.0
+
+
+def test_abs_campaign_is_wired_and_prints_one_json_object():
+    out = fdikit_cmd("abs", "campaign", "--runs", "20", "--seed", "3", "--json", "--no-progress")
+    assert out.returncode == 0, out.stderr
+    lines = [ln for ln in out.stdout.splitlines() if ln.strip()]
+    assert len(lines) == 1
+    d = json.loads(lines[0])
+    for key in ("pd", "pf", "dmatrix", "sensitivity", "specificity", "wall_seconds"):
+        assert key in d, key
+    assert 0.0 <= d["specificity"] <= 1.0

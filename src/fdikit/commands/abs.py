@@ -54,6 +54,9 @@ def register(subparsers) -> argparse.ArgumentParser:
     s.add_argument("--json", action="store_true", help="print one JSON object")
     s.add_argument("--plot", metavar="FILE", default=None, help="write a figure like Fig. 3 (first run)")
     s.set_defaults(func=_simulate)
+    from .abs_campaign import add_campaign_parser
+
+    add_campaign_parser(actions)
     return actions
 
 
