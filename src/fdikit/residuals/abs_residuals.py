@@ -148,6 +148,8 @@ class ParityR1(ResidualGenerator):
         self._der = CausalDerivative(self.window, self.dt, self.lam, 1)
         self.reset(1)
 
+    _state_attrs = ("_lp", "_der")
+
     def reset(self, runs: int = 1) -> None:
         self._lp.reset(runs, 2)
         self._der.reset(runs, 1)
@@ -317,6 +319,8 @@ class ParityR2(ResidualGenerator):
         from ..plants.abs import mu, slip
 
         return self.p["R_w"] * self.p["N_v"] * mu(slip(y1f, y2f)) - self.p["I_w"] * dy1
+
+    _state_attrs = ("_r1", "_d", "_x5")
 
     def reset(self, runs: int = 1) -> None:
         self._r1.reset(runs)
@@ -569,6 +573,8 @@ class ABSObserver(ResidualGenerator):
         self.output_names = ["r3", "r4"]
         self.output_units = ["rad/s", "rad/s"]
         self.reset(1)
+
+    _state_attrs = ("_x", "_started")
 
     def reset(self, runs: int = 1) -> None:
         self._x = np.zeros((runs, 5))

@@ -40,6 +40,7 @@ from scipy.interpolate import make_smoothing_spline
 from scipy.signal import butter, sosfilt, sosfilt_zi, sosfiltfilt
 
 from ..errors import DataError
+from ..monitor.state import Stateful
 
 __all__ = [
     "CausalDerivative",
@@ -129,7 +130,7 @@ def lowpass(x, sos: np.ndarray, *, axis: int = -1, zero_phase: bool = False) -> 
     return np.moveaxis(y, -1, axis)
 
 
-class CausalLowPass:
+class CausalLowPass(Stateful):
     """Streaming form of :func:`lowpass` (causal): one sample of shape ``(runs, channels)`` per step.
 
     Examples
@@ -146,6 +147,8 @@ class CausalLowPass:
         self.sos = np.asarray(sos, float)
         self._zi_unit = sosfilt_zi(self.sos)
         self._z: np.ndarray | None = None
+
+    _state_attrs = ("_z", "_shape")
 
     def reset(self, runs: int = 1, channels: int = 1) -> None:
         self._z = None
@@ -252,7 +255,7 @@ def causal_spline_derivative(x, dt: float, *, window: int, lam: float, order: in
     return np.moveaxis(out, -1, axis)
 
 
-class CausalDerivative:
+class CausalDerivative(Stateful):
     """Streaming form of :func:`causal_spline_derivative`: ``step(x_k (runs, channels))``.
 
     Examples
@@ -269,6 +272,8 @@ class CausalDerivative:
         self.w = spline_derivative_weights(window, dt, lam, order)
         self.window = int(window)
         self._buf: np.ndarray | None = None
+
+    _state_attrs = ("_buf", "_shape")
 
     def reset(self, runs: int = 1, channels: int = 1) -> None:
         self._buf = None
