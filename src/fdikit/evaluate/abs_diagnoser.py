@@ -494,6 +494,9 @@ def complete_campaign(runs: int = 200, *, nominal_runs: int | None = None, bank:
     nominal runs ending in the F0 leaf (Section VII). Estimation: for the first ``estimate_runs``
     runs of each parametric class, the subset estimate of the class's parameter (isolation taken
     as correct, as in Table VI), mean relative error ``|theta_hat - theta| / theta`` in percent.
+    ``diagnoser``: the complete :class:`ABSDiagnoser` (tree, SVM, and the severity estimate that
+    splits the F1.1/F1.2 and F2.1/F2.2 leaves by the class ranges) on the same runs, its exact
+    sensitivity and confusion.
 
     Returns
     -------
@@ -560,7 +563,19 @@ def complete_campaign(runs: int = 200, *, nominal_runs: int | None = None, bank:
         est[c] = {"param": param, "runs": m, "mean_relative_error_pct": float(np.mean(errs)),
                   "max_relative_error_pct": float(np.max(errs)), "mean_change_error_pp": float(np.mean(dchg)),
                   "seconds_mean": float(np.mean(secs))}
+    # the full diagnoser (tree + SVM + estimate resolving the F1.x / F2.x groups) on the same subset
+    full_ok = full_n = 0
+    full_conf: dict[str, dict[str, int]] = {}
+    for c in FAULT_CLASSES:
+        m = min(estimate_runs, sigs[c].runs)
+        got = [dg.diagnose(sigs[c], k)["fault"] for k in range(m)]
+        full_conf[c] = {str(k): int(v) for k, v in zip(*np.unique(got, return_counts=True))} if got else {}
+        if c != "F0":
+            full_ok += sum(g == c for g in got)
+            full_n += m
     return {"sensitivity": ok / nf, "sensitivity_exact": exact / nf, "specificity": spec,
+            "diagnoser": {"sensitivity_exact": full_ok / full_n if full_n else float("nan"),
+                          "runs_per_class": int(estimate_runs), "confusion": full_conf},
             "svm_error": rates["error"], "svm_rates": rates["rate"], "svm_test_patterns": rates["n"],
             "dmatrix": {"faults": dm.faults, "tests": dm.tests, "d": dm.d.astype(int).tolist()},
             "tree": abs_tree_report(tree), "confusion": confusion, "estimation": est,
