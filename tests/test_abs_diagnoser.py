@@ -153,3 +153,29 @@ def test_complete_campaign_metrics_are_consistent_with_its_confusion():
     assert out["specificity"] == pytest.approx(spec)
     assert 0.0 <= out["svm_error"] <= 1.0
     assert set(out["estimation"]) == {"F1.1", "F1.2", "F2.1", "F2.2", "F3", "F4", "F5"}
+
+
+def test_cli_campaign_complete_json():
+    import argparse
+    import io
+    import json
+    from contextlib import redirect_stdout
+
+    from fdikit.commands.abs_campaign import add_campaign_parser
+
+    top = argparse.ArgumentParser()
+    add_campaign_parser(top.add_subparsers())
+    args = top.parse_args(["campaign", "--runs", "4", "--design-runs", "30", "--complete", "--svm-per-size",
+                           "1", "--estimate-runs", "1", "--json", "--no-progress"])
+    buf = io.StringIO()
+    with redirect_stdout(buf):
+        assert args.func(args) == 0
+    lines = buf.getvalue().strip().splitlines()
+    assert len(lines) == 1
+    c = json.loads(lines[0])["complete"]
+    for key in ("sensitivity", "specificity", "svm_error", "estimation", "tree", "diagnoser"):
+        assert key in c
+    assert c["runs"]["F3"] == 4 and c["runs"]["F0"] == 8
+    assert c["estimation"]["F3"]["param"] == "K_f"
+    # every run is diagnosed: the complete tree's leaves hold all runs of each class
+    assert all(sum(v.values()) == c["runs"][k] for k, v in c["confusion"].items())

@@ -3,8 +3,9 @@
 Designs the five GLRT tests (G_P1, G_O1, G_O2, G_O_T1, G_O_T2) for a target false-alarm
 probability from nominal runs, runs ``--runs`` simulations of every fault class (twice as many
 nominal ones), and reports per-test Pd and Pf, the learned D-matrix, the diagnosis sensitivity
-and specificity and the wall time. Wire it into ``fdikit abs`` with
-``add_campaign_parser(abs_actions)``.
+and specificity and the wall time. ``--complete`` adds the complete diagnoser (tree with the SVM
+tests S_Kf/S_Iw, SVM error, severity-estimation errors; :mod:`fdikit.evaluate.abs_diagnoser`).
+Wire it into ``fdikit abs`` with ``add_campaign_parser(abs_actions)``.
 """
 
 from __future__ import annotations
@@ -59,6 +60,14 @@ def add_campaign_parser(abs_subparsers) -> argparse.ArgumentParser:
     p.add_argument("--progress", dest="progress", action="store_true", default=None,
                    help="show a progress bar on stderr (default: when stderr is a terminal)")
     p.add_argument("--no-progress", dest="progress", action="store_false", help="no progress bar")
+    p.add_argument("--complete", action="store_true",
+                   help="also evaluate the complete diagnoser: tree with the SVM tests S_Kf/S_Iw "
+                   "(sensitivity, specificity), svm_error and the severity estimation errors (JSON key "
+                   "'complete')")
+    p.add_argument("--svm-per-size", type=int, default=20,
+                   help="SVM training patterns per fault size with --complete (default 20: 720 patterns)")
+    p.add_argument("--estimate-runs", type=int, default=10,
+                   help="runs per class estimated/diagnosed in full with --complete (default 10)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=_campaign)
     return p
@@ -79,6 +88,15 @@ def _campaign(args) -> int:
                        magnitudes=args.magnitudes, pfa=args.pfa, margin=args.margin,
                        progress=sys.stderr.isatty() if args.progress is None else args.progress)
     out = res.to_dict()
+    if args.complete:
+        from ..evaluate import complete_campaign
+
+        if args.svm_per_size < 1 or args.estimate_runs < 0:
+            raise DataError(f"--svm-per-size must be >= 1 and --estimate-runs >= 0, got {args.svm_per_size}, "
+                            f"{args.estimate_runs}")
+        out["complete"] = complete_campaign(args.runs, nominal_runs=args.nominal_runs, bank=res.bank,
+                                            snr_db=args.snr, seed=args.seed, magnitudes=args.magnitudes,
+                                            svm_per_size=args.svm_per_size, estimate_runs=args.estimate_runs)
     if args.json:
         print_json(out)
         return 0
@@ -88,4 +106,14 @@ def _campaign(args) -> int:
     print(res.dmatrix)
     sens, exact, spec = (100 * out[k] for k in ("sensitivity", "sensitivity_exact", "specificity"))
     print(f"sensitivity {sens:.2f} % (exact class {exact:.2f} %), specificity {spec:.2f} %")
+    if args.complete:
+        c = out["complete"]
+        print(c["tree"]["listing"])
+        print(f"complete tree: sensitivity {100 * c['sensitivity']:.2f} % (exact leaf "
+              f"{100 * c['sensitivity_exact']:.2f} %), specificity {100 * c['specificity']:.2f} %, "
+              f"SVM error {100 * c['svm_error']:.2f} %, full diagnoser exact "
+              f"{100 * c['diagnoser']['sensitivity_exact']:.2f} %")
+        for k, v in c["estimation"].items():
+            print(f"  {k}: {v['param']} mean relative error {v['mean_relative_error_pct']:.3f} % "
+                  f"({v['runs']} runs)")
     return 0
