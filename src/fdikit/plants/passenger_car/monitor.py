@@ -605,7 +605,7 @@ def calibrate_monitor(block: str = "longitudinal", speed: float = 20.0, *, kind:
                       onset: float = 6.0, duration: float = 10.0, settle: float = 0.1, tau: float = 0.0,
                       p: float | None = None, q: float = 0.0, inflate: float | None = None,
                       std_floor: float = 0.05, hold: int = 3, dt_sim: float = 2.5e-3,
-                      nominal_kinds: tuple[str, ...] = ("speed_change",),
+                      nominal_kinds: tuple[str, ...] = ("speed_change",), h0_floor: bool = True,
                       fast_accelerometer: bool = False, seed: int = 11) -> CarMonitor:
     """Calibrate the MHSSPT densities of one block by simulating every fault (paper 1, Section IV-E).
 
@@ -616,7 +616,9 @@ def calibrate_monitor(block: str = "longitudinal", speed: float = 20.0, *, kind:
     features from 2 s give H0 (named ``"none:<block>"``), together with those of fault-free drives
     of the kinds ``nominal_kinds`` (e.g. ``("speed_change",)``). ``p`` (change probability per sample)
     and ``inflate`` (std factor) default to :data:`BLOCK_SETTINGS`. Every density's standard deviation of a
-    feature is then floored at ``std_floor`` times its upper mean (:func:`floor_std`): the parity
+    feature is then floored at ``std_floor`` times its upper mean and, with ``h0_floor``, at the
+    no-fault std (:func:`floor_std`; a fault adds to the noise, and a fault hypothesis narrower
+    than H0 would out-score H0 at the no-fault mean itself): the parity
     residuals are nearly noise-free, and without a floor
     a sample on the rise of a fault (between two calibrated magnitudes' ranges) would be hundreds
     of standard deviations from every hypothesis and the winner decided by rounding.
@@ -661,7 +663,7 @@ def calibrate_monitor(block: str = "longitudinal", speed: float = 20.0, *, kind:
     for i, (name, _f, m) in enumerate(runs[1:], start=1):
         by_fault.setdefault(name, {})[m] = X[i, t >= onset + settle]
     cal = calibrate_densities(nominal, by_fault, inflate=inflate, no_fault=f"none:{block}")
-    cal = floor_std(cal, std_floor)
+    cal = floor_std(cal, std_floor, h0_floor=h0_floor)
     out = build_monitor(des, block, cal, tau=tau, p=p, q=q, hold=hold)
     out.info.update(calibration_runs=R, calibration_kind=kind, speed=speed,
                     feature_means={name: {str(m): by_fault[name][m].mean(0).round(4).tolist()
