@@ -204,10 +204,11 @@ def nominal_drive(minutes: float = 10.0, *, speeds=(20.0, 24.0), kinds=("straigh
             # the curved track is a half circle after a 100 m straight: split every segment into
             # runs of at most `max_run` s (vectorised, independent noise) so that no run leaves it
             n = int(np.ceil(per / max_run))
-            res = simulate_drive(kind, speed, duration=per / n, runs=n, seed=seed, dt=2.5e-3,
+            dur = round(per / n, 2)  # a whole number of 10 ms samples
+            res = simulate_drive(kind, speed, duration=dur, runs=n, seed=seed, dt=2.5e-3,
                                  noise=sensor_noise())
             sig = car_signals(res)
-            seg = {"kind": kind, "speed": speed, "seconds": per, "runs": n, "announcements": [],
+            seg = {"kind": kind, "speed": speed, "seconds": dur * n, "runs": n, "announcements": [],
                    "max_probability": {}}
             for m in mons:
                 out = m.run(sig)
@@ -220,4 +221,4 @@ def nominal_drive(minutes: float = 10.0, *, speeds=(20.0, 24.0), kinds=("straigh
             total += len(seg["announcements"])
             segs.append(seg)
     return {"segments": segs, "false_announcements": total, "max_fault_probability": round(worst, 5),
-            "simulated_s": per * len(segs)}
+            "simulated_s": round(sum(g["seconds"] for g in segs), 2)}
