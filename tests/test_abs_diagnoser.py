@@ -179,3 +179,17 @@ def test_cli_campaign_complete_json():
     assert c["estimation"]["F3"]["param"] == "K_f"
     # every run is diagnosed: the complete tree's leaves hold all runs of each class
     assert all(sum(v.values()) == c["runs"][k] for k, v in c["confusion"].items())
+
+
+def test_unreliable_tree_on_learned_pd_pf(dg):
+    tree = abs_tree(dg.dmatrix, tests_model="unreliable", misdiagnosis_cost=100.0)
+    ev = tree.evaluate()  # recomputed from the tree alone, by propagating each fault's Pd/Pf
+    assert ev["objective"] == pytest.approx(tree.expected_cost, rel=1e-9)
+    # more than the perfect-test tree's cost: the unreliable model pays for misdiagnoses too
+    assert tree.expected_cost > abs_tree(dg.dmatrix).expected_cost
+    f = compile_python(tree)
+    for bits in itertools.product([False, True], repeat=len(dg.dmatrix.tests)):
+        o = dict(zip(dg.dmatrix.tests, bits))
+        assert f(o) == tree.diagnose(o)
+    with pytest.raises(DataError, match="tests_model"):
+        abs_tree(dg.dmatrix, tests_model="noisy")

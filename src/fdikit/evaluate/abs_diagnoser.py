@@ -216,8 +216,14 @@ def extend_with_svm(dm, rates: Mapping[str, Mapping[str, float]] | None = None):
                    pd=np.hstack([dpd, pd]), pf=np.hstack([dm.pf, pf]))
 
 
-def abs_tree(dm, prior: Mapping[str, float] | None = None, cost=None):
-    """AO* diagnostic tree of an extended ABS D-matrix, paper's priors and unit costs (perfect tests).
+def abs_tree(dm, prior: Mapping[str, float] | None = None, cost=None, *, tests_model: str = "perfect",
+             misdiagnosis_cost: float = 100.0):
+    """AO* diagnostic tree of an extended ABS D-matrix, paper's priors and unit costs.
+
+    ``tests_model="perfect"`` (default, Fig. 14) uses the binary matrix; ``"unreliable"`` uses
+    the learned Pd/Pf of every (fault, test) pair with Bayes-updated beliefs and stops when a
+    further test costs more than ``misdiagnosis_cost`` times the error it removes
+    (:func:`fdikit.isolate.ao_star`).
 
     Examples
     --------
@@ -235,7 +241,13 @@ def abs_tree(dm, prior: Mapping[str, float] | None = None, cost=None):
     if missing:
         raise DataError(f"no prior probability for fault states {missing}")
     p = np.array([prior[f] for f in dm.faults], float)
-    return ao_star(DMatrix(dm.faults, dm.tests, dm.d), prior=p / p.sum(), cost=cost, tests_model="perfect")
+    if tests_model == "perfect":
+        return ao_star(DMatrix(dm.faults, dm.tests, dm.d), prior=p / p.sum(), cost=cost,
+                       tests_model="perfect")
+    if tests_model == "unreliable":
+        return ao_star(dm, prior=p / p.sum(), cost=cost, tests_model="unreliable",
+                       misdiagnosis_cost=misdiagnosis_cost)
+    raise DataError(f"tests_model must be 'perfect' or 'unreliable', got {tests_model!r}")
 
 
 def abs_tree_report(tree) -> dict[str, Any]:
@@ -503,7 +515,8 @@ class ABSDiagnoser:
 def complete_campaign(runs: int = 200, *, nominal_runs: int | None = None, bank: TestBank | None = None,
                       design_runs: int | None = None, snr_db: float | None = 23.0, seed: int = 0,
                       magnitudes: str = "draw", svm_per_size: int = 20, svm: str = "improved",
-                      estimate_runs: int = 10, scan: int = 11, level: float = 0.1) -> dict[str, Any]:
+                      estimate_runs: int = 10, scan: int = 11, level: float = 0.1,
+                      misdiagnosis_cost: float = 100.0) -> dict[str, Any]:
     """Sensitivity/specificity of the complete tree (GLRT + SVM tests), SVM error, estimation errors.
 
     The GLRT D-matrix is learned from the same runs (seeds of :func:`run_campaign`), extended
@@ -514,6 +527,8 @@ def complete_campaign(runs: int = 200, *, nominal_runs: int | None = None, bank:
     nominal runs ending in the F0 leaf (Section VII). Estimation: for the first ``estimate_runs``
     runs of each parametric class, the subset estimate of the class's parameter (isolation taken
     as correct, as in Table VI), mean relative error ``|theta_hat - theta| / theta`` in percent.
+    ``tree_unreliable``: the same for the AO* tree with the learned Pd/Pf (unreliable tests,
+    misdiagnosis cost ``misdiagnosis_cost``, leaves = maximum-posterior class).
     ``diagnoser``: the complete :class:`ABSDiagnoser` (tree, SVM, and the severity estimate that
     splits the F1.1/F1.2 and F2.1/F2.2 leaves by the class ranges) on the same runs, its exact
     sensitivity and confusion.
@@ -554,11 +569,19 @@ def complete_campaign(runs: int = 200, *, nominal_runs: int | None = None, bank:
     ok = exact = nf = 0
     spec = float("nan")
     confusion = {}
+    rows = {c: np.hstack([fired[c], svm_outcomes(fired[c], label[c])]) for c in FAULT_CLASSES}
+    utree = abs_tree(dm, tests_model="unreliable", misdiagnosis_cost=misdiagnosis_cost)
+    u_ok = u_n = 0
+    u_spec = float("nan")
     for c in FAULT_CLASSES:
-        leaves = []
-        for k in range(fired[c].shape[0]):
-            row = np.r_[fired[c][k], svm_outcomes(fired[c][k:k + 1], label[c][k:k + 1])[0]]
-            leaves.append(tree.diagnose(dict(zip(names, row.tolist()))))
+        ul = [utree.diagnose(dict(zip(names, r.tolist()))) for r in rows[c]]
+        if c == "F0":
+            u_spec = float(np.mean(["F0" in g for g in ul]))
+        else:
+            u_ok += sum(c in g and "F0" not in g for g in ul)
+            u_n += len(ul)
+    for c in FAULT_CLASSES:
+        leaves = [tree.diagnose(dict(zip(names, r.tolist()))) for r in rows[c]]
         keys = ["|".join(g) for g in leaves]
         confusion[c] = {str(k): int(v) for k, v in zip(*np.unique(keys, return_counts=True))}
         if c == "F0":
@@ -597,6 +620,9 @@ def complete_campaign(runs: int = 200, *, nominal_runs: int | None = None, bank:
             "diagnoser": {"sensitivity_exact": full_ok / full_n if full_n else float("nan"),
                           "runs_per_class": int(estimate_runs), "confusion": full_conf},
             "svm_error": rates["error"], "svm_rates": rates["rate"], "svm_test_patterns": rates["n"],
+            "tree_unreliable": {"sensitivity": u_ok / u_n, "specificity": u_spec,
+                                "misdiagnosis_cost": misdiagnosis_cost, "go_path": utree.go_path,
+                                "redundant": utree.redundant_tests, **utree.evaluate()},
             "dmatrix": {"faults": dm.faults, "tests": dm.tests, "d": dm.d.astype(int).tolist()},
             "tree": abs_tree_report(tree), "confusion": confusion, "estimation": est,
             "runs": {c: int(fired[c].shape[0]) for c in fired}, "wall_seconds": time.perf_counter() - t0}
