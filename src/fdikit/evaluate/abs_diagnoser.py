@@ -45,7 +45,8 @@ sample and the R_w fault only after braking, so the gated G_O_T1 tells R_w from 
 GLRT test in this plant: F5 shares the "system OK" leaf. Measured with the same runs: complete
 tree sensitivity 67.5 % up to the leaf groups (15.3 % exact leaf), specificity 100 % (400
 nominal runs); full diagnoser (with the estimate splitting the groups) 68.6 % exact on 20 runs
-per faulty class; SVM error 0.14 % (1 of 720 fresh patterns, improved pipeline). Table V's
+per faulty class; SVM error 0.14 % (1 of 720 fresh patterns, improved pipeline); the
+unreliable-test tree on the learned Pd/Pf (misdiagnosis cost 100) 60.0 % / 100 %, Go-path G_O1. Table V's
 99.9 % is out of reach because F5 is undetected and the small I_w (+2..10 %, and -2..-5 %),
 K_f and R_w faults drawn in their classes do not fire G_O1 (F4: 142 of 200 runs missed).
 Subset estimation (oracle isolation, 20 runs per class, mean relative error): k_ws 0.24 / 0.13 %
