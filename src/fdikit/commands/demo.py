@@ -65,6 +65,7 @@ def sections() -> dict[str, Callable[[], dict]]:
     out: dict[str, Callable[[], dict]] = {"linear": section_linear}
     for name, module in (("reconstruct", "fdikit.commands.reconstruct"),
                          ("abs", "fdikit.plants.abs"),
+                         ("abs_diagnosis", "fdikit.evaluate.abs_diagnoser"),
                          ("car", "fdikit.plants.passenger_car")):
         f = _external(module)
         if f is not None:
@@ -103,6 +104,9 @@ def _print_section(name: str, out: dict) -> None:
             v = f"{v:.4g}"
         elif isinstance(v, dict):
             v = ", ".join(f"{a}={b:.4g}" if isinstance(b, float) else f"{a}={b}" for a, b in v.items())
+        elif isinstance(v, list) and v and isinstance(v[0], dict):
+            v = "\n".join(", ".join(f"{a}={b:.4g}" if isinstance(b, float) else f"{a}={b}"
+                                    for a, b in item.items()) for item in v)
         table.add_row(k, str(v))
     Console().print(table)
 
