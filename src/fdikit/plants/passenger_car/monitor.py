@@ -38,6 +38,7 @@ equation of its reference [13], which is not reproduced here.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import time
 from collections.abc import Mapping, Sequence
@@ -70,6 +71,7 @@ __all__ = [
     "FeatureNorms",
     "OffsetFilter",
     "ParityEquations",
+    "ScheduledCarFilter",
     "WarmupMHSSPT",
     "build_monitor",
     "calibrate_monitor",
@@ -517,8 +519,14 @@ def _filter_generator(des: CarMonitorDesign, sets: Sequence[int]) -> OffsetFilte
 
 def _generators(des: CarMonitorDesign, block: str) -> tuple[list[ResidualGenerator], dict[str, list[str]]]:
     if block == "longitudinal":
-        gens: list[ResidualGenerator] = [_filter_generator(des, LONGITUDINAL_SETS),
-                                         ParityEquations(des.dt, _tau_b())]
+        fg: ResidualGenerator = _filter_generator(des, LONGITUDINAL_SETS)
+        sched = des.info.get("schedule") or []
+        if sched:
+            speeds = sorted({des.speed, *sched})
+            fs = [fg if v == des.speed else
+                  _filter_generator(design_car_monitor(v, des.dt), LONGITUDINAL_SETS) for v in speeds]
+            fg = ScheduledCarFilter(speeds, fs, DEFAULT_PARAMS["r_w"])
+        gens: list[ResidualGenerator] = [fg, ParityEquations(des.dt, _tau_b())]
         groups = des.residual_groups(LONGITUDINAL_SETS)
         groups.update({"|parity1|": ["parity1"], "|parity2|": ["parity2"]})
     elif block == "lateral":
@@ -527,6 +535,67 @@ def _generators(des: CarMonitorDesign, block: str) -> tuple[list[ResidualGenerat
     else:
         raise ModelError(f"block must be 'longitudinal' or 'lateral', got {block!r}")
     return gens, groups
+
+
+class ScheduledCarFilter(ResidualGenerator):
+    """Filters of the same sets designed at several speeds (each about its own trim), run in
+    parallel; the residual is the linear interpolation between the two designs nearest the speed
+    measured by the rear (undriven) wheels, ``v = r_w w_rear_sum / 2`` (gain scheduling by
+    residual blending; every filter runs all the time, so its state is always current).
+
+    Parameters
+    ----------
+    speeds : sequence of float
+        Design speeds (m/s), increasing.
+    filters : sequence of OffsetFilter
+        One per speed, same channels and residual names; ``w_rear_sum`` among the measurements.
+    r_w : float
+        Wheel rolling radius (m).
+    """
+
+    def __init__(self, speeds: Sequence[float], filters: Sequence[OffsetFilter], r_w: float):
+        self.speeds = np.asarray(speeds, float)
+        if self.speeds.ndim != 1 or np.any(np.diff(self.speeds) <= 0):
+            raise DataError(f"speeds must be increasing, got {speeds}")
+        self.filters = list(filters)
+        f0 = self.filters[0]
+        for f in self.filters:
+            if (f.u_names, f.y_names, f.output_names) != (f0.u_names, f0.y_names, f0.output_names):
+                raise DataError("scheduled filters must read and produce the same channels")
+        if "w_rear_sum" not in f0.y_names:
+            raise DataError("the speed schedule needs the rear wheel-speed sum among the measurements")
+        self.u_names, self.y_names = list(f0.u_names), list(f0.y_names)
+        self.output_names = list(f0.output_names)
+        self._iv = self.y_names.index("w_rear_sum")
+        self.r_w = float(r_w)
+        self.reset(1)
+
+    def reset(self, runs: int = 1) -> None:
+        for f in self.filters:
+            f.reset(runs)
+
+    def _blend(self, R, v):
+        K = self.speeds.size
+        out = np.zeros_like(R[0])
+        if K == 1:
+            return out + R[0]
+        vc = np.clip(v, self.speeds[0], self.speeds[-1])
+        i = np.clip(np.searchsorted(self.speeds, vc, side="right") - 1, 0, K - 2)
+        w = (vc - self.speeds[i]) / (self.speeds[i + 1] - self.speeds[i])
+        for k, r in enumerate(R):
+            wk = np.where(i == k, 1.0 - w, 0.0) + np.where(i + 1 == k, w, 0.0)
+            out += wk[..., None] * r
+        return out
+
+    def _step(self, u, y):
+        R = [f._step(u, y) for f in self.filters]
+        return self._blend(R, self.r_w * y[:, self._iv] / 2.0)
+
+    def run(self, signals: Signals) -> Signals:
+        R = [f.run(signals).values for f in self.filters]
+        v = self.r_w * signals.values[:, :, signals.index(["w_rear_sum"])[0]] / 2.0
+        self.reset(signals.runs)
+        return Signals(signals.t, self._blend(R, v), self.output_names, check=False)
 
 
 def _tau_b() -> float:
@@ -606,6 +675,7 @@ def calibrate_monitor(block: str = "longitudinal", speed: float = 20.0, *, kind:
                       p: float | None = None, q: float = 0.0, inflate: float | None = None,
                       std_floor: float = 0.05, hold: int = 3, dt_sim: float = 2.5e-3,
                       nominal_kinds: tuple[str, ...] = ("speed_change",), h0_floor: bool = True,
+                      schedule: tuple[float, ...] | None = None,
                       fast_accelerometer: bool = False, seed: int = 11) -> CarMonitor:
     """Calibrate the MHSSPT densities of one block by simulating every fault (paper 1, Section IV-E).
 
@@ -615,13 +685,15 @@ def calibrate_monitor(block: str = "longitudinal", speed: float = 20.0, *, kind:
     (:func:`~fdikit.detect.calibrate_densities`, two hypotheses per fault), the nominal run's
     features from 2 s give H0 (named ``"none:<block>"``), together with those of fault-free drives
     of the kinds ``nominal_kinds`` (e.g. ``("speed_change",)``). ``p`` (change probability per sample)
-    and ``inflate`` (std factor) default to :data:`BLOCK_SETTINGS`. Every density's standard deviation of a
-    feature is then floored at ``std_floor`` times its upper mean and, with ``h0_floor``, at the
-    no-fault std (:func:`floor_std`; a fault adds to the noise, and a fault hypothesis narrower
-    than H0 would out-score H0 at the no-fault mean itself): the parity
-    residuals are nearly noise-free, and without a floor
-    a sample on the rise of a fault (between two calibrated magnitudes' ranges) would be hundreds
-    of standard deviations from every hypothesis and the winner decided by rounding.
+    and ``inflate`` (std factor) default to :data:`BLOCK_SETTINGS`. The longitudinal filters are
+    also designed at the speeds ``schedule`` (default ``speed + 4``, the scenarios' speed steps)
+    and blended by the measured speed (:class:`ScheduledCarFilter`); ``()`` for one design.
+    Every density's standard deviation of a feature is then floored at ``std_floor`` times its
+    upper mean and, with ``h0_floor``, at the no-fault std (:func:`floor_std`; a fault adds to the
+    noise, and a fault hypothesis narrower than H0 would out-score H0 at the no-fault mean
+    itself): the parity residuals are nearly noise-free, and without a floor a sample on the rise
+    of a fault (between two calibrated magnitudes' ranges) would be hundreds of standard
+    deviations from every hypothesis and the winner decided by rounding.
 
     Returns
     -------
@@ -634,6 +706,11 @@ def calibrate_monitor(block: str = "longitudinal", speed: float = 20.0, *, kind:
     ['steering_actuator', 'lateral_accelerometer']
     """
     des = design_car_monitor(speed, fast_accelerometer=fast_accelerometer)
+    if schedule is None:
+        schedule = (speed + 4.0,)  # the scenarios' speed steps: +4 m/s
+    if schedule and block == "longitudinal":
+        # speed-scheduled longitudinal filters (designs at these speeds too, blended by speed)
+        des = dataclasses.replace(des, info={**des.info, "schedule": [float(v) for v in schedule]})
     table = LONGITUDINAL_FAULTS if block == "longitudinal" else LATERAL_FAULTS
     p = BLOCK_SETTINGS[block]["p"] if p is None else p
     inflate = BLOCK_SETTINGS[block]["inflate"] if inflate is None else inflate
