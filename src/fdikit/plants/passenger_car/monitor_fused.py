@@ -250,6 +250,10 @@ class FusedCarMonitor:
             tests.append(cm.monitor.processors[1])
             holds.append(cm.monitor.processors[2])
             gens += g
+        other = [type(g).__name__ for g in gens if not isinstance(g, (OffsetFilter, ParityEquations))]
+        if other:
+            raise DataError(f"FusedCarMonitor fuses fixed-speed filters and the parity equations only; got "
+                            f"{other} (build the monitor without a speed schedule)")
         filters = [g for g in gens if isinstance(g, OffsetFilter)]
         parity = [g for g in gens if isinstance(g, ParityEquations)]
         if len(parity) > 1:
