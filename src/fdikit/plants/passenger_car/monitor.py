@@ -522,10 +522,20 @@ def _generators(des: CarMonitorDesign, block: str) -> tuple[list[ResidualGenerat
         fg: ResidualGenerator = _filter_generator(des, LONGITUDINAL_SETS)
         sched = des.info.get("schedule") or []
         if sched:
-            speeds = sorted({des.speed, *sched})
-            fs = [fg if v == des.speed else
-                  _filter_generator(design_car_monitor(v, des.dt), LONGITUDINAL_SETS) for v in speeds]
-            fg = ScheduledCarFilter(speeds, fs, DEFAULT_PARAMS["r_w"])
+            speeds, fs = [des.speed], [fg]
+            for v in sorted(set(sched) - {des.speed}):
+                for dv in (0.0, -0.5, -1.0, -1.5, -2.0):  # the reduction may fail at a speed (split pair)
+                    try:
+                        other = design_car_monitor(v + dv, des.dt)
+                        break
+                    except ModelError:
+                        other = None
+                if other is None:
+                    raise ModelError(f"no design for the speed schedule near {v} m/s")
+                speeds.append(other.speed)
+                fs.append(_filter_generator(other, LONGITUDINAL_SETS))
+            order = np.argsort(speeds)
+            fg = ScheduledCarFilter([speeds[i] for i in order], [fs[i] for i in order], DEFAULT_PARAMS["r_w"])
         gens: list[ResidualGenerator] = [fg, ParityEquations(des.dt, _tau_b())]
         groups = des.residual_groups(LONGITUDINAL_SETS)
         groups.update({"|parity1|": ["parity1"], "|parity2|": ["parity2"]})
