@@ -71,11 +71,21 @@ FIT_PARAMS = [
 
 
 def default_data_path() -> Path:
-    """``<repository>/../shared/data/rav4-highway`` (or ``$FDIKIT_RAV4`` if set)."""
+    """Where the RAV4 minute is looked for when no path is given.
+
+    ``$FDIKIT_RAV4`` if set; else ``../shared/data/rav4-highway`` relative to the working
+    directory (a checkout's root, as in CI) or to the source tree (an editable install). The
+    first that exists is returned (the working-directory one when none does).
+    """
     env = os.environ.get("FDIKIT_RAV4")
     if env:
         return Path(env)
-    return Path(__file__).resolve().parents[4] / ".." / "shared" / "data" / "rav4-highway"
+    rel = Path("..") / "shared" / "data" / "rav4-highway"
+    candidates = [Path.cwd() / rel, Path(__file__).resolve().parents[4] / rel]
+    for c in candidates:
+        if c.is_dir():
+            return c
+    return candidates[0]
 
 
 def load_rav4(path: str | os.PathLike | None = None, rate: float = 50.0):
