@@ -360,3 +360,14 @@ def test_rav4_no_false_announcements():
     from fdikit.plants.passenger_car.monitor_rav4 import run_rav4_log
 
     assert run_rav4_log(None, "none")["announcements"] == []
+
+
+@pytest.mark.slow
+def test_ten_minute_nominal_drive_no_false_announcement():
+    """Issue 8, item 7: 10 minutes over the scenarios' speed profiles (straight, speed steps, curve;
+    20 and 24 m/s), both monitors: no announcement."""
+    from fdikit.plants.passenger_car.scenarios import nominal_drive
+
+    r = nominal_drive(10.0)
+    assert abs(r["simulated_s"] - 600.0) < 1.0
+    assert r["false_announcements"] == 0, r["segments"]
