@@ -48,6 +48,9 @@ def register(subparsers) -> argparse.ArgumentParser:
                    help="weight of the lateral-acceleration residual (default 0.5)")
     f.add_argument("--json", action="store_true", help="print one JSON object")
     f.set_defaults(func=_fit)
+    from .car_monitor import add_monitor_parsers
+
+    add_monitor_parsers(actions)
     return actions
 
 

@@ -66,7 +66,8 @@ def sections() -> dict[str, Callable[[], dict]]:
     for name, module in (("reconstruct", "fdikit.commands.reconstruct"),
                          ("abs", "fdikit.plants.abs"),
                          ("abs_diagnosis", "fdikit.evaluate.abs_diagnoser"),
-                         ("car", "fdikit.plants.passenger_car")):
+                         ("car", "fdikit.plants.passenger_car"),
+                         ("car_monitor", "fdikit.plants.passenger_car.monitor")):
         f = _external(module)
         if f is not None:
             out[name] = f
