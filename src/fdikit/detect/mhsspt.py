@@ -28,7 +28,8 @@ from ..errors import DataError
 from ..monitor.core import ResidualProcessor
 from ..signals import Signals
 
-__all__ = ["MHSSPT", "MHSSPTCalibration", "UniformMeanGaussian", "calibrate_densities"]
+__all__ = ["MHSSPT", "MHSSPTCalibration", "UniformMeanGaussian", "calibrate_densities",
+           "umg_component_logpdf"]
 
 _LOG_SQRT_2PI = 0.5 * np.log(2 * np.pi)
 
@@ -57,32 +58,39 @@ def _log_ndtr_nb(x):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
+def umg_component_logpdf(x, low, high, std, point, logw):  # pragma: no cover - compiled
+    """Log density of one uniform-mean Gaussian component at a scalar ``x`` (compiled).
+
+    ``point``: the mean range is a point (plain Gaussian); ``logw = log(high - low)``.
+    """
+    if point:
+        z = (x - low) / std
+        return -0.5 * z * z - math.log(std) - 0.5 * math.log(2.0 * math.pi)
+    u = (x - low) / std
+    v = (x - high) / std
+    if v > 0.0:  # upper tail: Phi(u) - Phi(v) = Phi(-v) - Phi(-u)
+        hi, lo = -v, -u
+    else:
+        hi, lo = u, v
+    lhi = _log_ndtr_nb(hi)
+    d = _log_ndtr_nb(lo) - lhi
+    if d > 0.0:
+        d = 0.0
+    return lhi + math.log1p(-math.exp(d)) - logw
+
+
+@njit(cache=True)
 def _loglik_umg(x, low, high, std, point, logw, out):  # pragma: no cover - compiled
     """Log densities of uniform-mean Gaussians: x (R, T, C) -> out (R, T, H)."""
     R, T, C = x.shape
     H = low.shape[0]
-    half_log_2pi = 0.5 * math.log(2.0 * math.pi)
     for r in range(R):
         for k in range(T):
             for j in range(H):
                 acc = 0.0
                 for c in range(C):
-                    s = std[j, c]
-                    if point[j, c]:
-                        z = (x[r, k, c] - low[j, c]) / s
-                        acc += -0.5 * z * z - math.log(s) - half_log_2pi
-                    else:
-                        u = (x[r, k, c] - low[j, c]) / s
-                        v = (x[r, k, c] - high[j, c]) / s
-                        if v > 0.0:  # upper tail: Phi(u) - Phi(v) = Phi(-v) - Phi(-u)
-                            hi, lo = -v, -u
-                        else:
-                            hi, lo = u, v
-                        lhi = _log_ndtr_nb(hi)
-                        d = _log_ndtr_nb(lo) - lhi
-                        if d > 0.0:
-                            d = 0.0
-                        acc += lhi + math.log1p(-math.exp(d)) - logw[j, c]
+                    acc += umg_component_logpdf(x[r, k, c], low[j, c], high[j, c], std[j, c],
+                                                point[j, c], logw[j, c])
                 out[r, k, j] = acc
 
 

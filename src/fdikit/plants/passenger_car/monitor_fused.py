@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 from numba import njit
 
-from ...detect.mhsspt import UniformMeanGaussian, _log_ndtr_nb
+from ...detect.mhsspt import UniformMeanGaussian, umg_component_logpdf
 from ...errors import DataError
 from ...residuals import stack_designs
 from ...signals import Signals
@@ -48,22 +48,7 @@ def _exact_component(x: np.ndarray, low: float, high: float, std: float, point: 
         -0.5 * ((x - low) / std) ** 2 - math.log(std) - _HALF_LOG_2PI
 
 
-@njit(cache=True)
-def _exact_nb(x, low, high, std, point, logw):  # pragma: no cover - compiled
-    if point:
-        z = (x - low) / std
-        return -0.5 * z * z - math.log(std) - 0.5 * math.log(2.0 * math.pi)
-    u = (x - low) / std
-    v = (x - high) / std
-    if v > 0.0:
-        hi, lo = -v, -u
-    else:
-        hi, lo = u, v
-    lhi = _log_ndtr_nb(hi)
-    d = _log_ndtr_nb(lo) - lhi
-    if d > 0.0:
-        d = 0.0
-    return lhi + math.log1p(-math.exp(d)) - logw
+_exact_nb = umg_component_logpdf  # one compiled component density, shared with detect.MHSSPT
 
 
 @njit(cache=True)
