@@ -421,17 +421,6 @@ def read_can_log(
     >>> s.units  # doctest: +SKIP
     ['rad/s', 'm/s']
     """
-    if isinstance(signals, str):
-        signals = [signals]
-    signals = list(signals)
-    if not signals:
-        raise DataError("no signals requested")
-    if len(set(signals)) != len(signals):
-        raise DataError(f"signals requested twice: {sorted({s for s in signals if signals.count(s) > 1})}")
-    if span not in ("common", "log"):
-        raise DataError(f"span must be 'common' or 'log', got {span!r}")
-    if max_gap <= 0:
-        raise DataError(f"max_gap must be positive, got {max_gap}")
     # one frame-to-grid path for every log format: fdikit.io.formats (stricter bad-input policy:
     # short payloads are flagged, never zero-padded; conflicting duplicates are flagged; a
     # corrupt container is a DataError)
