@@ -13,17 +13,9 @@ from __future__ import annotations
 import argparse
 
 from ..errors import DataError
+from .abs import _snr
 
 __all__ = ["add_campaign_parser"]
-
-
-def _snr(text: str) -> float | None:
-    if text.lower() in ("none", "off", "inf"):
-        return None
-    try:
-        return float(text)
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(f"--snr expects a number of dB or 'none', got {text!r}") from exc
 
 
 def add_campaign_parser(abs_subparsers) -> argparse.ArgumentParser:
