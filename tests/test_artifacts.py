@@ -102,8 +102,16 @@ def test_refusals(tmp_path, plant):
         load_artifact(tmp_path / "junk.json")
     with pytest.raises(DataError, match="no such artifact"):
         load_artifact(tmp_path / "missing.json")
-    with pytest.raises(DataError, match="not a registered artifact kind"):
+    with pytest.raises(DataError, match="object is not an artifact kind"):
         save_artifact(tmp_path / "x", object())
+    # a manifest cannot make the loader import code from outside fdikit
+    m = json.loads(p.read_text())
+    m["format"] = "fdikit-artifact/1"
+    for target in ("os:system", "fdikit_evil:Thing", "fdikit.residuals.fdf:NoSuchClass"):
+        m["kind"], m["class"] = "Sneaky", target
+        p.write_text(json.dumps(m))
+        with pytest.raises(DataError, match="Sneaky"):
+            load_artifact(p)
     # every registered kind resolves to a class with to_dict / from_dict
     from fdikit.monitor.artifacts import _resolve
 

@@ -10,9 +10,13 @@ changing the diagnostic software. An artifact is two files with one stem:
 * ``NAME.npz`` -- the design's NumPy arrays, when its ``to_dict`` returns any (loaded with
   ``allow_pickle=False``).
 
+A kind is any class of fdikit with ``to_dict()`` and ``from_dict(d)``: the manifest records its
+``module:qualname`` (only modules inside ``fdikit`` are ever imported on loading); the short names
+in :data:`KINDS` are kept for readability and for artifacts written before the class path was
+recorded.
+
 JSON keeps an artifact readable, diffable and editable by an engineer; NPZ keeps large arrays
-(e.g. support vectors) compact and exact. A kind is any class with ``to_dict()`` and
-``from_dict(d)`` registered in :data:`KINDS` (or passed explicitly). Loading checks the format
+(e.g. support vectors) compact and exact. Loading checks the format
 version and, when asked, the channel names, and refuses a mismatch with a clear message.
 """
 
@@ -50,11 +54,39 @@ KINDS: dict[str, str] = {
 }
 
 
-def _resolve(kind: str) -> type:
-    if kind not in KINDS:
+def _class_path(obj: Any) -> str | None:
+    """``module:qualname`` of a design class defined inside fdikit with to_dict/from_dict, else None."""
+    cls = type(obj)
+    if cls.__name__ in KINDS:
+        return KINDS[cls.__name__]
+    if (cls.__module__.split(".")[0] == "fdikit" and callable(getattr(cls, "to_dict", None))
+            and callable(getattr(cls, "from_dict", None))):
+        return f"{cls.__module__}:{cls.__qualname__}"
+    return None
+
+
+def _resolve(kind: str, where: str | None = None) -> type:
+    """The class of an artifact: a registered kind, or the fdikit class path the manifest records.
+
+    Only modules inside the ``fdikit`` package are ever imported (an artifact cannot name code
+    from elsewhere), and the class must provide ``from_dict``.
+    """
+    target = KINDS.get(kind) or where
+    if not target:
         raise DataError(f"unknown artifact kind {kind!r}; known kinds: {sorted(KINDS)}")
-    mod, _, attr = KINDS[kind].partition(":")
-    return getattr(importlib.import_module(mod), attr)
+    mod, _, attr = str(target).partition(":")
+    if mod.split(".")[0] != "fdikit" or not attr:
+        raise DataError(f"artifact kind {kind!r}: class {target!r} is not an fdikit design class; "
+                        "refusing to import it")
+    try:
+        obj: Any = importlib.import_module(mod)
+        for part in attr.split("."):
+            obj = getattr(obj, part)
+    except (ImportError, AttributeError) as exc:
+        raise DataError(f"artifact kind {kind!r} ({target}) is not available here ({exc})") from None
+    if not callable(getattr(obj, "from_dict", None)):
+        raise DataError(f"artifact kind {kind!r} ({target}) has no from_dict")
+    return obj
 
 
 def artifact_channels(obj: Any) -> dict[str, list[str]]:
@@ -104,8 +136,10 @@ def save_artifact(path: str | os.PathLike, obj: Any, *, meta: dict | None = None
     (3, 0.5)
     """
     kind = type(obj).__name__
-    if kind not in KINDS:
-        raise DataError(f"{kind} is not a registered artifact kind; known kinds: {sorted(KINDS)}")
+    where = _class_path(obj)
+    if where is None:
+        raise DataError(f"{kind} is not an artifact kind (registered: {sorted(KINDS)}; any fdikit class "
+                        "with to_dict/from_dict also is)")
     from .. import __version__
 
     arrays: dict[str, np.ndarray] = {}
@@ -115,6 +149,7 @@ def save_artifact(path: str | os.PathLike, obj: Any, *, meta: dict | None = None
         "format": ARTIFACT_FORMAT,
         "fdikit_version": __version__,
         "kind": kind,
+        "class": where,
         "channels": artifact_channels(obj),
         "units": dict(units or {}),
         "meta": dict(meta or {}),
@@ -170,7 +205,7 @@ def load_artifact(path: str | os.PathLike, *, kind: str | None = None,
                 arrays = {key: z[stored] for key, stored in manifest["arrays"].items()}
         except (OSError, ValueError, KeyError) as exc:
             raise DataError(f"{npz}: arrays of the artifact are missing or unreadable ({exc})") from None
-    cls = _resolve(k)
+    cls = _resolve(str(k), manifest.get("class"))
     try:
         return cls.from_dict(_unflatten(manifest["payload"], arrays))
     except (KeyError, TypeError, ValueError) as exc:
