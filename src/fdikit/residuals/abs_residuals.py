@@ -137,6 +137,8 @@ class ParityR1(ResidualGenerator):
         self.p = _params(params)
         self.variant = variant
         self.v_min = float(v_min)
+        self.order, self.cutoff_hz = int(order), float(cutoff_hz)
+        self.spline_cutoff_hz = float(spline_cutoff_hz)
         self.sos = butter_sos(order, cutoff_hz, 1.0 / self.dt)
         self.window = int(window)
         self.lam = spline_lam(spline_cutoff_hz, self.dt)
@@ -149,6 +151,31 @@ class ParityR1(ResidualGenerator):
         self.reset(1)
 
     _state_attrs = ("_lp", "_der")
+
+    def to_dict(self) -> dict:
+        """The design as plain data (a design artifact, :mod:`fdikit.monitor.artifacts`).
+
+        The constructor's arguments, the nominal parameters and the Butterworth sections
+        ``sos`` (ceil(order/2), 6), which the loaded design uses as saved.
+        """
+        return {"dt": self.dt, "params": dict(self.p), "variant": self.variant, "order": self.order,
+                "cutoff_hz": self.cutoff_hz, "window": self.window,
+                "spline_cutoff_hz": self.spline_cutoff_hz, "v_min": self.v_min, "sos": self.sos.copy()}
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> ParityR1:
+        """Rebuild from :meth:`to_dict`; the stored ``sos`` is used as saved."""
+        g = cls(d["dt"], d["params"], variant=d["variant"], order=d["order"], cutoff_hz=d["cutoff_hz"],
+                window=d["window"], spline_cutoff_hz=d["spline_cutoff_hz"], v_min=d["v_min"])
+        if "sos" in d:
+            sos = np.asarray(d["sos"], float)
+            if sos.shape != g.sos.shape:
+                raise DataError(f"r1 design: stored Butterworth sections have shape {sos.shape}, order "
+                                f"{g.order} needs {g.sos.shape}")
+            g.sos = sos
+            g._lp = CausalLowPass(sos)
+            g.reset(1)
+        return g
 
     def reset(self, runs: int = 1) -> None:
         self._lp.reset(runs, 2)
@@ -307,6 +334,7 @@ class ParityR2(ResidualGenerator):
         self._r1 = ParityR1(dt, params, variant=variant, order=order, cutoff_hz=cutoff_hz, window=window,
                             spline_cutoff_hz=spline_cutoff_hz)
         self.dt, self.p, self.variant = self._r1.dt, self._r1.p, variant
+        self.substeps = int(substeps)
         self.q = _pack(self.p, self.dt, int(substeps))
         self.u_names = list(_U)
         self.y_names = list(_Y)
@@ -321,6 +349,19 @@ class ParityR2(ResidualGenerator):
         return self.p["R_w"] * self.p["N_v"] * mu(slip(y1f, y2f)) - self.p["I_w"] * dy1
 
     _state_attrs = ("_r1", "_d", "_x5")
+
+    def to_dict(self) -> dict:
+        """The design as plain data (a design artifact): the constructor's arguments and parameters."""
+        r1 = self._r1
+        return {"dt": self.dt, "params": dict(self.p), "variant": self.variant, "order": r1.order,
+                "cutoff_hz": r1.cutoff_hz, "window": r1.window, "spline_cutoff_hz": r1.spline_cutoff_hz,
+                "substeps": self.substeps}
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> ParityR2:
+        """Rebuild from :meth:`to_dict`."""
+        return cls(d["dt"], d["params"], variant=d["variant"], order=d["order"], cutoff_hz=d["cutoff_hz"],
+                   window=d["window"], spline_cutoff_hz=d["spline_cutoff_hz"], substeps=d["substeps"])
 
     def reset(self, runs: int = 1) -> None:
         self._r1.reset(runs)
@@ -566,6 +607,7 @@ class ABSObserver(ResidualGenerator):
         self.L = np.ascontiguousarray(L, dtype=float)
         if self.L.shape != (5, 2):
             raise DataError(f"observer gain must be 5 x 2, got {self.L.shape}")
+        self.substeps = int(substeps)
         self.q = _pack(self.p, self.dt, int(substeps))
         self._tab = np.ascontiguousarray(MU_TABLE, dtype=float)
         self.u_names = list(_U)
@@ -575,6 +617,16 @@ class ABSObserver(ResidualGenerator):
         self.reset(1)
 
     _state_attrs = ("_x", "_started")
+
+    def to_dict(self) -> dict:
+        """The design as plain data (a design artifact): ``dt``, the nominal parameters, the gain
+        ``L`` (5, 2) and ``substeps``."""
+        return {"dt": self.dt, "params": dict(self.p), "L": self.L.copy(), "substeps": self.substeps}
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> ABSObserver:
+        """Rebuild from :meth:`to_dict` (the stored gain is used as saved)."""
+        return cls(d["dt"], d["params"], L=np.asarray(d["L"], float), substeps=d["substeps"])
 
     def reset(self, runs: int = 1) -> None:
         self._x = np.zeros((runs, 5))
