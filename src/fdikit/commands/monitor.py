@@ -10,6 +10,11 @@
   arrive (a header line with the time column and the source channels first), steps the
   monitor per line and prints each announcement as one JSON line at once; the results equal
   the batch run over the same data.
+* With a CAN config (``[log].dbc`` set, ``[log].rate`` required) ``--follow`` reads
+  ``candump -L`` lines instead (``candump -L can0 | fdikit monitor - --config C --follow``):
+  frames are decoded and put on the grid as they arrive (:class:`fdikit.io.stream.FrameGridder`,
+  the same arithmetic as the batch loader), so the announcements equal the batch run over the
+  same candump log. ``--input csv|candump`` overrides the choice.
 """
 
 from __future__ import annotations
@@ -95,12 +100,61 @@ def _batch(args, cfg) -> int:
     return 0
 
 
+def _follow_candump(args, cfg, mon, stream) -> int:
+    """Stream candump lines through the gridder and the monitor, printing events as they happen."""
+    from ..io.stream import FrameGridder, parse_candump_line
+    from ..monitor.config import map_sample
+
+    dbc, rate = cfg.log.get("dbc"), cfg.log.get("rate")
+    if not dbc:
+        raise DataError(f"{cfg.path}: following candump lines needs [log].dbc")
+    if rate is None:
+        raise DataError(f"{cfg.path}: following candump lines needs [log].rate (Hz): a stream cannot "
+                        "measure the source rate ahead of time")
+    sources = list(dict.fromkeys(c.source for c in cfg.channels))
+    grid = FrameGridder(cfg.path.parent / dbc, sources, rate)
+    n = 0
+
+    def feed(samples):
+        nonlocal n
+        for t, vals, why in samples:
+            _, _, events = mon.step(t, map_sample(cfg, vals))
+            if mon.last_invalid is not None:
+                print(json.dumps({"t": t, "sample": n, "invalid": mon.last_invalid}), flush=True)
+            elif why:  # cannot happen: an invalid grid value is NaN and the monitor flags it
+                raise AssertionError(why)
+            for e in events:
+                print(json.dumps(_event_record(e)), flush=True)
+            n += 1
+
+    for lineno, line in enumerate(stream, start=1):
+        try:
+            frame = parse_candump_line(line, lineno)
+        except DataError as exc:
+            print(json.dumps({"line": lineno, "invalid": str(exc)}), flush=True)
+            continue
+        if frame is None:
+            continue
+        t, bus, fid, data = frame
+        feed(grid.push(t, fid, data, bus))
+    feed(grid.flush())
+    return 0
+
+
 def _follow(args, cfg) -> int:
-    """Stream CSV lines from stdin through the monitor, printing announcements as they happen."""
+    """Stream CSV (or candump) lines from stdin through the monitor, printing events as they happen."""
     from ..monitor.config import build_monitor, map_sample
 
     mon = build_monitor(cfg)
     mon.reset(1)
+    kind = args.input or ("candump" if cfg.log.get("dbc") else "csv")
+    if kind == "candump":
+        stream = sys.stdin if args.log == "-" else open(args.log)  # closed below
+        try:
+            return _follow_candump(args, cfg, mon, stream)
+        finally:
+            if stream is not sys.stdin:
+                stream.close()
     tcol = cfg.log.get("time", "t")
     stream = sys.stdin if args.log == "-" else open(args.log)  # closed below
     try:
@@ -170,6 +224,8 @@ def register(sub) -> None:
     p.add_argument("--config", required=True, help="monitor configuration (TOML)")
     p.add_argument("--events", help="write announcements and held samples as JSON lines here")
     p.add_argument("--stats", help="write residuals and statistics as Parquet here")
-    p.add_argument("--follow", action="store_true", help="stream CSV lines (stdin with LOG = -)")
+    p.add_argument("--follow", action="store_true", help="stream CSV or candump lines (stdin with LOG = -)")
+    p.add_argument("--input", choices=("csv", "candump"),
+                   help="follow-mode line format (default: candump when the config has [log].dbc, else CSV)")
     p.add_argument("--json", action="store_true", help="print one JSON summary object")
     p.set_defaults(func=_monitor)
