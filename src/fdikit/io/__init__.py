@@ -5,7 +5,9 @@
 * :func:`read_can_log` — a CAN log decoded with a DBC onto one time grid;
 * :func:`read_csv` — a CSV recording;
 * per-format readers :func:`read_blf`, :func:`read_asc`, :func:`read_candump`, :func:`read_mdf`,
-  :func:`read_parquet`, :func:`read_table_csv`.
+  :func:`read_parquet`, :func:`read_table_csv`;
+* :class:`FrameGridder` and :func:`parse_candump_line` — live CAN frames (e.g. ``candump -L``)
+  onto the same grid as they arrive, with the batch loader's arithmetic.
 
 They return :class:`LogSignals` (or its subclass :class:`LoadedSignals`), a Signals whose values
 may hold NaN where the source had a gap or a bad sample; ``valid`` marks the samples that hold
@@ -31,9 +33,11 @@ from .formats import (
     read_table_csv,
     series_to_grid,
 )
+from .stream import FrameGridder, parse_candump_line
 
 __all__ = [
     "FORMATS",
+    "FrameGridder",
     "LoadedSignals",
     "LogSignals",
     "SignalInfo",
@@ -42,6 +46,7 @@ __all__ = [
     "convert_units",
     "detect_format",
     "frames_to_signals",
+    "parse_candump_line",
     "read_asc",
     "read_blf",
     "read_can_log",
