@@ -5,12 +5,13 @@ GLRT (paper luo-et-al, eq. (24), with the moving window of Section V-A)::
 
     g_k = 1 / (2 sigma^2) * max_{k-W+1 <= j <= k} (1 / (k-j+1)) * (sum_{i=j..k} (r_i - mu_0))^2
 
-(before the window is full, ``j`` runs from the first sample). The window sums are formed
-afresh at every sample from a ring buffer of the last ``W`` centred residuals, adding from the
-newest sample backwards: there is no long running sum to drift, so a record of any length is as
-accurate as a short one, and batch and streaming perform the same additions in the same order
-(identical results). The cost is ``W`` additions and ``W`` divisions per sample, compiled with
-numba (about 1 ns each).
+(before the window is full, ``j`` runs from the first sample). Window sums are differences of
+running (prefix) sums, O(1) per sample amortised; the running sums are re-anchored every ``W``
+samples so that none spans more than ``2W`` samples, so nothing drifts over a long record (a
+million-sample test checks it) and batch and streaming perform the same operations in the same
+order (identical results). The maximum over the ``W`` candidate change times is the one O(W)
+part, with independent terms that the compiler vectorises (about 0.3 ns per term here;
+``benchmarks/bench_glrt.py``).
 """
 
 from __future__ import annotations
@@ -27,44 +28,57 @@ from ..signals import Signals
 __all__ = ["GLRT", "ThresholdDesign", "TimeGated", "design_threshold", "glrt_statistic"]
 
 
-@njit(cache=True)
-def _glrt_sample(buf, head, count, W, scale, invL):  # pragma: no cover - compiled
-    """g at the newest sample; ``buf`` is a ring buffer of centred residuals, ``head`` the newest;
-    ``invL[L-1] = 1 / L``."""
-    acc = 0.0
+@njit(cache=True, fastmath={"nnan", "ninf"})
+def _glrt_sample(Q, p, n, invL):  # pragma: no cover - compiled
+    """g (unscaled) at the newest sample: ``max_L (Q[p] - Q[p-L])^2 / L`` for L = 1..n.
+
+    The L terms are independent (no running accumulation), so the loop vectorises; ``max`` is
+    exact in any order, so the result does not depend on how it is vectorised. (Inputs are
+    checked finite before they reach here, which is what ``nnan``/``ninf`` assume.)
+    """
+    top = Q[p]
     best = 0.0
-    idx = head
-    n = min(count, W)
     for L in range(1, n + 1):
-        acc += buf[idx]
-        v = acc * acc * invL[L - 1]
-        if v > best:
-            best = v
-        idx -= 1
-        if idx < 0:
-            idx += W
-    return best * scale
+        d = top - Q[p - L]
+        v = d * d * invL[L - 1]
+        best = max(best, v)
+    return best
 
 
 @njit(cache=True)
-def _glrt_batch(x, mu0, scale, W, out, bufs, heads, counts):  # pragma: no cover - compiled
-    """x (runs, T, C) -> out (runs, T, C); bufs (runs, C, W) ring buffers updated in place."""
+def _glrt_batch(x, mu0, scale, W, out, Qs, pos, counts):  # pragma: no cover - compiled
+    """x (runs, T, C) -> out (runs, T, C).
+
+    ``Qs`` (runs, C, 2W + 1) holds prefix sums of the centred residuals relative to an anchor,
+    ``pos`` the index of the newest one: window sums are differences ``Q[p] - Q[p - L]``, O(1)
+    each. When ``p`` reaches the end of the array, the last ``W + 1`` prefix sums move to the
+    front with the oldest of them subtracted (re-anchoring, O(W) once per W samples, O(1)
+    amortised), so a stored prefix sum never spans more than 2W samples: a record of any length
+    is as accurate as a short one.
+    """
     R, T, C = x.shape
     invL = 1.0 / np.arange(1, W + 1)
+    top = 2 * W
     for r in range(R):
         for c in range(C):
-            buf = bufs[r, c]
-            head = heads[r, c]
+            Q = Qs[r, c]
+            p = pos[r, c]
             count = counts[r, c]
+            m = mu0[c]
+            sc = scale[c]
             for k in range(T):
-                head += 1
-                if head >= W:
-                    head = 0
-                buf[head] = x[r, k, c] - mu0[c]
-                count += 1
-                out[r, k, c] = _glrt_sample(buf, head, count, W, scale[c], invL)
-            heads[r, c] = head
-            counts[r, c] = min(count, W)
+                if p == top:  # re-anchor: keep the last W + 1 prefix sums, the oldest becomes 0
+                    base = Q[top - W]
+                    for i in range(W + 1):
+                        Q[i] = Q[top - W + i] - base
+                    p = W
+                Q[p + 1] = Q[p] + (x[r, k, c] - m)
+                p += 1
+                if count < W:
+                    count += 1
+                out[r, k, c] = _glrt_sample(Q, p, count, invL) * sc
+            pos[r, c] = p
+            counts[r, c] = count
 
 
 def glrt_statistic(r: np.ndarray, mu0, sigma2, W: int) -> np.ndarray:
@@ -147,12 +161,12 @@ class GLRT(ResidualProcessor):
         R, T, C = x.shape
         out = np.empty((R, T, C))
         if state is None:
-            bufs = np.zeros((R, C, W))
-            heads = np.full((R, C), -1, np.int64)
+            Qs = np.zeros((R, C, 2 * W + 1))
+            pos = np.zeros((R, C), np.int64)
             counts = np.zeros((R, C), np.int64)
         else:
-            bufs, heads, counts = state
-        _glrt_batch(np.ascontiguousarray(x), mu0, 1.0 / (2.0 * sigma2), W, out, bufs, heads, counts)
+            Qs, pos, counts = state
+        _glrt_batch(np.ascontiguousarray(x), mu0, 1.0 / (2.0 * sigma2), W, out, Qs, pos, counts)
         return out
 
     _state_attrs = ("_state", "_k")
@@ -168,7 +182,7 @@ class GLRT(ResidualProcessor):
 
     def reset(self, runs: int = 1) -> None:
         c = len(self.input_names)
-        self._state = (np.zeros((runs, c, self.W)), np.full((runs, c), -1, np.int64),
+        self._state = (np.zeros((runs, c, 2 * self.W + 1)), np.zeros((runs, c), np.int64),
                        np.zeros((runs, c), np.int64))
         self._k = 0
 
