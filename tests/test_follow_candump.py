@@ -170,11 +170,57 @@ def test_follow_candump_equals_batch(tmp_path, frames):
     batch = [json.loads(x) for x in (tmp_path / "ev.jsonl").read_text().splitlines()]
     text = (tmp_path / "drive.log").read_text()
     text = text.replace(text.splitlines()[5], "this line is not a frame", 1)  # one garbled line
+    ls = text.splitlines()
+    ls.insert(20, "(0.000001) can0 0B4#0000000000000000")  # an extra frame whose time goes back
+    text = "\n".join(ls) + "\n"
     fol = cli("monitor", "-", "--config", tmp_path / "m.toml", "--follow", stdin=text)
     assert fol.returncode == 0, fol.stderr
     follow = [json.loads(x) for x in fol.stdout.splitlines()]
     assert follow[0]["line"] == 6 and "not a frame" in follow[0]["invalid"]
+    assert follow[1]["line"] == 21 and "time goes backwards" in follow[1]["invalid"]
     # the garbled line was an early frame of a message sent at >= 50 Hz: the grid is unchanged
-    got = [(e["hypothesis"], e["sample"], e["t"], e["value"]) for e in follow[1:]]
+    got = [(e["hypothesis"], e["sample"], e["t"], e["value"]) for e in follow[2:]]
     want = [(e["hypothesis"], e["sample"], e["t"], e["value"]) for e in batch]
     assert got == want
+
+
+@needs_data
+def test_follow_candump_bad_lines_flagged_and_stream_continues(tmp_path, frames):
+    """A live stream with a garbled line, a frame whose time goes back, a truncated payload and an
+    unparsable time: each is reported (line number and reason), none stops the stream, and the
+    grid the monitor sees equals the batch loader's on the log without the refused lines."""
+    import can
+
+    from fdikit.io.formats import read_candump
+
+    with can.CanutilsLogWriter(str(tmp_path / "drive.log")) as w:
+        for m in can.LogReader(str(BLF)):
+            w.on_message_received(m)
+    lines = (tmp_path / "drive.log").read_text().splitlines()
+    k_speed = next(i for i in range(2000, len(lines)) if " 0B4#" in lines[i])
+    bad = dict(lines=list(lines))
+    bad["lines"][1000] = "(12x.5) can0 0B4#00"                       # unparsable time
+    bad["lines"][1500] = "(0.000001) can0 0B4#0000000000000000"      # time goes back
+    bad["lines"][k_speed] = bad["lines"][k_speed].split("#")[0] + "#00"  # truncated SPEED payload
+    text = "\n".join(bad["lines"]) + "\n"
+    g = FrameGridder(DBC, ["SPEED.SPEED", "KINEMATICS.YAW_RATE"], 50.0)
+    reports, out = [], []
+    for i, line in enumerate(text.splitlines(), start=1):
+        try:
+            fr = parse_candump_line(line, i)
+            if fr is not None:
+                out += g.push(fr[0], fr[2], fr[3], fr[1])
+        except DataError as exc:
+            reports.append((i, str(exc)))
+    out += g.flush()
+    assert [r[0] for r in reports] == [1001, 1501]
+    assert "not a frame" in reports[0][1] and "time goes backwards" in reports[1][1]
+    # reference: the batch reader on the same log without the two refused lines
+    keep = [ln for i, ln in enumerate(bad["lines"]) if i not in (1000, 1500)]
+    (tmp_path / "ref.log").write_text("\n".join(keep) + "\n")
+    ref = read_candump(tmp_path / "ref.log", DBC, ["SPEED.SPEED", "KINEMATICS.YAW_RATE"], 50.0)
+    V = np.array([[o[1]["SPEED.SPEED"], o[1]["KINEMATICS.YAW_RATE"]] for o in out])
+    flagged = np.array([o[2] is not None for o in out])
+    assert np.array_equal(flagged, ~ref.valid[0].all(axis=1)) and flagged.sum() >= 1
+    assert np.array_equal(V[~flagged], ref.values[0][~flagged])
+    assert all("SPEED.SPEED: undecodable" in o[2] for o in out if o[2])

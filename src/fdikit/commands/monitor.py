@@ -136,7 +136,12 @@ def _follow_candump(args, cfg, mon, stream) -> int:
         if frame is None:
             continue
         t, bus, fid, data = frame
-        feed(grid.push(t, fid, data, bus))
+        try:
+            samples = grid.push(t, fid, data, bus)
+        except DataError as exc:  # e.g. time going back: the frame is refused, the stream goes on
+            print(json.dumps({"line": lineno, "invalid": str(exc)}), flush=True)
+            continue
+        feed(samples)
     feed(grid.flush())
     return 0
 
