@@ -32,7 +32,8 @@ from numba import njit
 
 from ...detect.mhsspt import UniformMeanGaussian, umg_component_logpdf
 from ...errors import DataError
-from ...residuals import stack_designs
+from ...monitor.core import ResidualGenerator
+from ...residuals import FilterDesign, stack_designs
 from ...signals import Signals
 from .monitor import CarMonitor, OffsetFilter, ParityEquations, delayed_feedthrough
 
@@ -52,7 +53,7 @@ _exact_nb = umg_component_logpdf  # one compiled component density, shared with 
 
 
 @njit(cache=True)
-def _fused_row(v, xi, A, Bv, C, Dv, v0, par_idx, par_a, par_state, r,
+def _fused_row(v, xi, A, Bv, C, Dv, v0, pv0, par_idx, par_a, par_state, r,
                f_idx, f_starts, f_alpha, feat,
                g0, inv_h, nG, toff, tab, low, high, std, point, logw,
                blk_c0, blk_c1, blk_h0, blk_h1, log1mp, logp_pi, logq, log1mq, logF, ll, phi,
@@ -90,13 +91,16 @@ def _fused_row(v, xi, A, Bv, C, Dv, v0, par_idx, par_a, par_state, r,
         xi[i] = tmp[i]
     # ---- parity equations (throttle, brake, throttle_meas, brake_meas channel indices)
     if par_idx[0] >= 0:
+        # the parity equations read absolute values: pv0 adds back an operating point that was
+        # subtracted before the monitor (deviation inputs); zero for absolute inputs
+        thr = v[par_idx[0]] + pv0[par_idx[0]]
         prev = par_state[1]
         if np.isnan(prev):
-            prev = v[par_idx[0]]
-        r[q] = v[par_idx[2]] - prev
-        r[q + 1] = v[par_idx[3]] - par_state[0]
-        par_state[0] = par_a * par_state[0] + (1.0 - par_a) * v[par_idx[1]]
-        par_state[1] = v[par_idx[0]]
+            prev = thr
+        r[q] = (v[par_idx[2]] + pv0[par_idx[2]]) - prev
+        r[q + 1] = (v[par_idx[3]] + pv0[par_idx[3]]) - par_state[0]
+        par_state[0] = par_a * par_state[0] + (1.0 - par_a) * (v[par_idx[1]] + pv0[par_idx[1]])
+        par_state[1] = thr
     # ---- features
     nfeat = f_starts.shape[0] - 1
     for j in range(nfeat):
@@ -171,7 +175,7 @@ def _fused_row(v, xi, A, Bv, C, Dv, v0, par_idx, par_a, par_state, r,
 
 
 @njit(cache=True)
-def _fused_run(V, xi, A, Bv, C, Dv, v0, par_idx, par_a, par_state, f_idx, f_starts, f_alpha, feat,
+def _fused_run(V, xi, A, Bv, C, Dv, v0, pv0, par_idx, par_a, par_state, f_idx, f_starts, f_alpha, feat,
                g0, inv_h, nG, toff, tab, low, high, std, point, logw,
                blk_c0, blk_c1, blk_h0, blk_h1, log1mp, logp_pi, logq, log1mq, logF,
                k0, warm, x0, grp, hold_z, level, cnt, out):  # pragma: no cover - compiled
@@ -183,7 +187,7 @@ def _fused_run(V, xi, A, Bv, C, Dv, v0, par_idx, par_a, par_state, f_idx, f_star
     phi = np.empty(H)
     for i in range(R):
         for k in range(T):
-            _fused_row(V[i, k], xi[i], A, Bv, C, Dv, v0, par_idx, par_a, par_state[i], r,
+            _fused_row(V[i, k], xi[i], A, Bv, C, Dv, v0, pv0, par_idx, par_a, par_state[i], r,
                        f_idx, f_starts, f_alpha, feat[i], g0, inv_h, nG, toff, tab, low, high, std, point,
                        logw, blk_c0, blk_c1, blk_h0, blk_h1, log1mp, logp_pi, logq, log1mq, logF[i], ll, phi,
                        k0 + k, warm, x0, grp, hold_z, level, cnt[i], out[i, k])
@@ -198,23 +202,58 @@ def _csr(M: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return np.cumsum(ptr), cols.astype(np.int64), np.ascontiguousarray(M[rows, cols])
 
 
-class FusedCarMonitor:
+#: Version of the payload of :meth:`FusedCarMonitor.to_dict` (checked by :meth:`FusedCarMonitor.from_dict`).
+FUSED_FORMAT = 1
+
+#: Arrays of a fused monitor: name -> (dtype, number of dimensions); all of them travel in an artifact.
+_ARRAYS: dict[str, tuple[type, int]] = {
+    "A": (float, 2), "Bv": (float, 2), "C": (float, 2), "Dv": (float, 2), "v0": (float, 1), "pv0": (float, 1),
+    "par_idx": (np.int64, 1), "f_idx": (np.int64, 1), "f_starts": (np.int64, 1),
+    "low": (float, 2), "high": (float, 2), "std": (float, 2), "point": (bool, 2), "logw": (float, 2),
+    "blk_c0": (np.int64, 1), "blk_c1": (np.int64, 1), "blk_h0": (np.int64, 1), "blk_h1": (np.int64, 1),
+    "log1mp": (float, 1), "logq": (float, 1), "log1mq": (float, 1), "logp_pi": (float, 1), "x0": (float, 1),
+    "grp": (np.int64, 2), "tab": (float, 2), "g0": (float, 1), "inv_h": (float, 1), "nG": (np.int64, 1),
+    "toff": (np.int64, 1),
+}
+
+
+class FusedCarMonitor(ResidualGenerator):
     """All blocks of the car monitor in one compiled per-sample update (see the module docstring).
+
+    A :class:`~fdikit.monitor.ResidualGenerator`, so it runs inside a :class:`~fdikit.monitor.Monitor`
+    (e.g. one built from a TOML config, :mod:`fdikit.monitor.config`); a saveable design
+    (:meth:`to_dict` / :meth:`from_dict`, :func:`~fdikit.monitor.save_artifact`) and a
+    :class:`~fdikit.monitor.state.Stateful` component (filter states, parity states, features,
+    log posteriors, hold counters and the sample counter are its checkpoint).
 
     Parameters
     ----------
     monitors : sequence of CarMonitor
         Calibrated blocks (e.g. the longitudinal and the lateral monitor) of one design; each
-        must use the same feature smoothing, warm-up, hold and announcement level.
+        must use the same feature smoothing, warm-up, hold and announcement level, and
+        fixed-speed filters (no speed schedule).
     resolution : float
         Table spacing as a fraction of the smallest std of each feature (default 1/32).
+    deviations : bool
+        ``False`` (default): the monitor reads the channels as measured and subtracts the
+        filters' operating point itself (as :class:`~fdikit.plants.passenger_car.monitor.OffsetFilter`
+        does). ``True``: it reads deviations from the operating point :attr:`operating_point`,
+        subtracted before it (paper 1, Section V: "the nominal values of the control commands
+        and measurements have to be subtracted"; in a config, the channels' ``offset``); the
+        parity equations add it back (they compare absolute command and measurement).
 
     Attributes
     ----------
+    u_names, y_names : list of str
+        Commands (``throttle`` deg, ``brake`` MPa, ``steer`` rad) and measurements read.
     input_names : list of str
-        Channels read (commands and measurements).
+        ``u_names + y_names``: the order of a full sample for :meth:`step` with one argument.
     output_names : list of str
         ``"P:<fault>"`` for every fault of every block, then ``"A:<fault>"`` (announced, 0/1).
+    operating_point : dict
+        Channel -> nominal value (channel units) the filters were linearised about.
+    faults, hypotheses : list of str
+        Monitored faults (probability groups) and every MHSSPT hypothesis of every block.
     table_error : float
         Largest absolute log-density interpolation error measured at the grid midpoints (nats).
 
@@ -222,9 +261,13 @@ class FusedCarMonitor:
     --------
     >>> fused = FusedCarMonitor([lon, lat])            # doctest: +SKIP
     >>> fused.reset(1); P = fused.step(sample)         # doctest: +SKIP
+    >>> save_artifact("designs/car", fused)            # doctest: +SKIP
     """
 
-    def __init__(self, monitors: Sequence[CarMonitor], *, resolution: float = 1.0 / 32.0):
+    _state_attrs = ("_xi", "_par", "_feat", "_logF", "_cnt", "_k")
+
+    def __init__(self, monitors: Sequence[CarMonitor], *, resolution: float = 1.0 / 32.0,
+                 deviations: bool = False):
         monitors = list(monitors)
         if not monitors:
             raise DataError("FusedCarMonitor needs at least one CarMonitor")
@@ -249,46 +292,59 @@ class FusedCarMonitor:
             d = f.design
             m = len(d.u_names)
             nf = d.order - m
-            from ...residuals import FilterDesign
-
             members.append(FilterDesign(d.A[:nf, :nf], d.Bu[:nf], d.By[:nf], d.C[:, :nf], d.C[:, nf:],
                                         d.Dy, d.dt, d.u_names, d.y_names, d.residual_names))
         design = delayed_feedthrough(stack_designs(members))
-        off = {**{n: float(u) for f in filters for n, u in zip(f.design.u_names, f.u0)},
-               **{n: float(y) for f in filters for n, y in zip(f.design.y_names, f.y0)}}
-        chans = list(design.u_names) + list(design.y_names)
+        # the operating point: the blocks' trim (every command and measurement, the parity
+        # equations' too), then exactly what each filter subtracts
+        off: dict[str, float] = {}
+        for cm in monitors:
+            des = getattr(cm, "design", None)
+            trim = {**getattr(des, "u0", {}), **getattr(des, "y0", {})}
+            off.update({str(n): float(v) for n, v in trim.items()})
+        off.update({n: float(u) for f in filters for n, u in zip(f.design.u_names, f.u0)})
+        off.update({n: float(y) for f in filters for n, y in zip(f.design.y_names, f.y0)})
+        u_names, y_names = list(design.u_names), list(design.y_names)
         if parity:
-            for n in (*parity[0].u_names, *parity[0].y_names):
-                if n not in chans:
-                    chans.append(n)
-        self.input_names = chans
-        nu = len(design.u_names)
-        self._A = np.ascontiguousarray(design.A)
+            u_names += [n for n in parity[0].u_names if n not in u_names]
+            y_names += [n for n in parity[0].y_names if n not in y_names]
+        chans = u_names + y_names
+        self.u_names, self.y_names = u_names, y_names
+        self.dt = float(design.dt)
+        self.deviations = bool(deviations)
+        self.operating_point = {n: off.get(n, 0.0) for n in chans}
         nv = len(chans)
-        self._Bv = np.zeros((design.order, nv))
-        self._Dv = np.zeros((len(design.residual_names), nv))
-        self._Bv[:, :nu + len(design.y_names)] = np.hstack([design.Bu, design.By])
-        self._Dv[:, :nu + len(design.y_names)] = np.hstack([design.Du, design.Dy])
-        self._C = np.ascontiguousarray(design.C)
-        self._v0 = np.array([off.get(n, 0.0) for n in chans])
+        a: dict[str, Any] = {}
+        a["A"] = np.ascontiguousarray(design.A)
+        a["C"] = np.ascontiguousarray(design.C)
+        a["Bv"] = np.zeros((design.order, nv))
+        a["Dv"] = np.zeros((len(design.residual_names), nv))
+        cols = [chans.index(n) for n in (*design.u_names, *design.y_names)]
+        a["Bv"][:, cols] = np.hstack([design.Bu, design.By])
+        a["Dv"][:, cols] = np.hstack([design.Du, design.Dy])
+        op = np.array([self.operating_point[n] for n in chans])
+        a["v0"] = np.zeros(nv) if self.deviations else op
+        a["pv0"] = op if self.deviations else np.zeros(nv)
         if parity:
             pe = parity[0]
-            self._par_idx = np.array([chans.index(n) for n in (*pe.u_names, *pe.y_names)], np.int64)
-            self._par_a = pe.a
+            a["par_idx"] = np.array([chans.index(n) for n in (*pe.u_names, *pe.y_names)], np.int64)
+            self.par_a = float(pe.a)
             rnames = list(design.residual_names) + list(pe.output_names)
         else:
-            self._par_idx = np.full(4, -1, np.int64)
-            self._par_a = 0.0
+            a["par_idx"] = np.full(4, -1, np.int64)
+            self.par_a = 0.0
             rnames = list(design.residual_names)
+        self.filter_residual_names = rnames
         # features
         taus = {f.alpha for f in feats}
         if len(taus) != 1:
             raise DataError(f"blocks use different feature smoothing: {sorted(taus)}")
-        self._alpha = feats[0].alpha
+        self.alpha = float(feats[0].alpha)
         groups = {k: v for f in feats for k, v in f.groups.items()}
         fnames = list(groups)
-        self._f_idx = np.array([rnames.index(c) for v in groups.values() for c in v], np.int64)
-        self._f_starts = np.cumsum([0] + [len(v) for v in groups.values()]).astype(np.int64)
+        self.feature_names = fnames
+        a["f_idx"] = np.array([rnames.index(c) for v in groups.values() for c in v], np.int64)
+        a["f_starts"] = np.cumsum([0] + [len(v) for v in groups.values()]).astype(np.int64)
         # hypotheses
         Htot = sum(len(t.hypotheses) for t in tests)
         Ctot = len(fnames)
@@ -299,7 +355,7 @@ class FusedCarMonitor:
         x0 = np.zeros(Ctot)
         hyp_names: list[str] = []
         h = 0
-        self.output_names = []
+        p_names = []
         grp_rows = []
         warm = set()
         for t in tests:
@@ -321,51 +377,53 @@ class FusedCarMonitor:
             logp_pi[h0[-1]:h1[-1]] = t._logp_pi
             x0[cs] = t.densities[0].low
             warm.add(getattr(t, "warmup", 0))
-            for g, members in t.groups.items():
-                grp_rows.append([h0[-1] + t.hypotheses.index(mm) for mm in members])
-                self.output_names.append(f"P:{g}")
+            for g, mem in t.groups.items():
+                grp_rows.append([h0[-1] + t.hypotheses.index(mm) for mm in mem])
+                p_names.append(f"P:{g}")
         if len(warm) != 1:
             raise DataError(f"blocks use different warm-ups: {sorted(warm)}")
-        self._warm = warm.pop()
+        self.warmup = int(warm.pop())
         width = max(len(r) for r in grp_rows)
-        self._grp = np.array([r + [-1] * (width - len(r)) for r in grp_rows], np.int64)
-        self.faults = [n[2:] for n in self.output_names]
-        self.output_names += [f"A:{f}" for f in self.faults]
+        a["grp"] = np.array([r + [-1] * (width - len(r)) for r in grp_rows], np.int64)
+        self.faults = [n[2:] for n in p_names]
+        self.output_names = p_names + [f"A:{f}" for f in self.faults]
         zs = {hd.Z for hd in holds}
         lv = {hd.threshold[0] for hd in holds}
         if len(zs) != 1 or len(lv) != 1:
             raise DataError("blocks use different hold lengths or announcement levels")
-        self._hold, self._level = int(zs.pop()), float(lv.pop())
-        self._low, self._high, self._std, self._point = low, high, std, point
-        self._logw = np.log(np.where(point, 1.0, np.maximum(high - low, 1e-300)))
-        self._blk = tuple(np.array(a, np.int64) for a in (c0, c1, h0, h1))
-        self._l1p, self._lq, self._l1q = np.array(l1p), np.array(lq), np.array(l1q)
-        self._logp_pi = logp_pi
-        self._x0 = x0
-        self._H = Htot
+        self.hold, self.level = int(zs.pop()), float(lv.pop())
+        a.update(low=low, high=high, std=std, point=point,
+                 logw=np.log(np.where(point, 1.0, np.maximum(high - low, 1e-300))),
+                 blk_c0=np.array(c0, np.int64), blk_c1=np.array(c1, np.int64),
+                 blk_h0=np.array(h0, np.int64), blk_h1=np.array(h1, np.int64),
+                 log1mp=np.array(l1p, float), logq=np.array(lq, float), log1mq=np.array(l1q, float),
+                 logp_pi=logp_pi, x0=x0)
         self.hypotheses = hyp_names
-        self._build_tables(resolution, h0, h1, c0, c1)
-        self._sA, self._sBv, self._sC, self._sDv = (_csr(M) for M in (self._A, self._Bv, self._C, self._Dv))
-        self.reset(1)
+        a.update(self._build_tables(a, resolution))
+        self._setup(a)
 
-    def _build_tables(self, resolution, h0, h1, c0, c1):
-        C = self._x0.size
+    # ------------------------------------------------------------------ construction helpers
+    @staticmethod
+    def _build_tables(a: dict[str, np.ndarray], resolution: float) -> dict[str, Any]:
+        """Per feature a uniform grid and the log density of every hypothesis of its block on it."""
+        x0, low, high, std, point = a["x0"], a["low"], a["high"], a["std"], a["point"]
+        C, H = x0.size, low.shape[0]
         g0, inv_h, nG, toff = np.zeros(C), np.zeros(C), np.zeros(C, np.int64), np.zeros(C, np.int64)
         tabs, err, total = [], 0.0, 0
-        for b in range(len(h0)):
-            hs = slice(h0[b], h1[b])
-            for c in range(c0[b], c1[b]):
-                s_min, s_max = self._std[hs, c].min(), self._std[hs, c].max()
-                lo = self._low[hs, c].min() - 12 * s_max
-                hi = self._high[hs, c].max() + 12 * s_max
+        for b in range(a["blk_h0"].size):
+            hs = slice(a["blk_h0"][b], a["blk_h1"][b])
+            for c in range(a["blk_c0"][b], a["blk_c1"][b]):
+                s_min, s_max = std[hs, c].min(), std[hs, c].max()
+                lo = low[hs, c].min() - 12 * s_max
+                hi = high[hs, c].max() + 12 * s_max
                 step = resolution * s_min
                 n = int(min(np.ceil((hi - lo) / step) + 1, 400_000))
                 step = (hi - lo) / (n - 1)
                 grid = lo + step * np.arange(n)
                 mid = grid[:-1] + 0.5 * step
-                T = np.zeros((n, self._H))
-                for j in range(h0[b], h1[b]):
-                    args = (self._low[j, c], self._high[j, c], self._std[j, c], bool(self._point[j, c]))
+                T = np.zeros((n, H))
+                for j in range(a["blk_h0"][b], a["blk_h1"][b]):
+                    args = (low[j, c], high[j, c], std[j, c], bool(point[j, c]))
                     T[:, j] = _exact_component(grid, *args)
                     e = np.abs(0.5 * (T[:-1, j] + T[1:, j]) - _exact_component(mid, *args))
                     # error that matters: where the density is not negligible against the others
@@ -373,46 +431,137 @@ class FusedCarMonitor:
                 g0[c], inv_h[c], nG[c], toff[c] = lo, 1.0 / step, n, total
                 total += n
                 tabs.append(T)
-        self._tab = np.ascontiguousarray(np.vstack(tabs))
-        self._g0, self._inv_h, self._nG, self._toff = g0, inv_h, nG, toff
-        self.table_error = err
-        self.table_bytes = int(self._tab.nbytes)
+        return {"tab": np.ascontiguousarray(np.vstack(tabs)), "g0": g0, "inv_h": inv_h, "nG": nG,
+                "toff": toff, "table_error": err}
+
+    def _setup(self, a: dict[str, Any]) -> None:
+        """Install the arrays (and derived sparse forms) and reset to one run."""
+        self.table_error = float(a.pop("table_error"))
+        self._a = {k: np.ascontiguousarray(a[k], dtype=_ARRAYS[k][0]) for k in _ARRAYS}
+        self.input_names = list(self.u_names) + list(self.y_names)
+        self.table_bytes = int(self._a["tab"].nbytes)
+        self._H = self._a["low"].shape[0]
+        self._sA, self._sBv, self._sC, self._sDv = (_csr(self._a[k]) for k in ("A", "Bv", "C", "Dv"))
+        self.reset(1)
+
+    # ------------------------------------------------------------------ artifact
+    def to_dict(self) -> dict[str, Any]:
+        """Everything the runtime needs, as plain data (arrays for NPZ, the rest JSON).
+
+        Examples
+        --------
+        >>> d = fused.to_dict()                               # doctest: +SKIP
+        >>> same = FusedCarMonitor.from_dict(d)               # doctest: +SKIP
+        """
+        return {"format": FUSED_FORMAT, "u_names": list(self.u_names), "y_names": list(self.y_names),
+                "filter_residual_names": list(self.filter_residual_names),
+                "feature_names": list(self.feature_names),
+                "hypotheses": list(self.hypotheses), "faults": list(self.faults),
+                "output_names": list(self.output_names), "operating_point": dict(self.operating_point),
+                "deviations": self.deviations, "dt": self.dt, "par_a": self.par_a, "alpha": self.alpha,
+                "warmup": self.warmup, "hold": self.hold, "level": self.level,
+                "table_error": self.table_error,
+                "arrays": {k: v.copy() for k, v in self._a.items()}}
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> FusedCarMonitor:
+        """Rebuild from :meth:`to_dict` (nothing is redesigned or recalibrated); every array's
+        shape is checked against the channel, feature and hypothesis counts."""
+        if d.get("format") != FUSED_FORMAT:
+            raise DataError(f"FusedCarMonitor payload format {d.get('format')!r}, this fdikit reads "
+                            f"{FUSED_FORMAT}")
+        self = cls.__new__(cls)
+        for k in ("u_names", "y_names", "filter_residual_names", "feature_names", "hypotheses", "faults",
+                  "output_names"):
+            setattr(self, k, [str(s) for s in d[k]])
+        self.operating_point = {str(k): float(v) for k, v in d["operating_point"].items()}
+        self.deviations = bool(d["deviations"])
+        self.dt, self.par_a, self.alpha, self.level = (float(d[k]) for k in ("dt", "par_a", "alpha", "level"))
+        self.warmup, self.hold = int(d["warmup"]), int(d["hold"])
+        arrays = dict(d["arrays"])
+        missing = sorted(set(_ARRAYS) - set(arrays))
+        if missing:
+            raise DataError(f"FusedCarMonitor payload lacks arrays {missing}")
+        a = {k: np.asarray(arrays[k]) for k in _ARRAYS}
+        for k, (_dt, nd) in _ARRAYS.items():
+            if a[k].ndim != nd:
+                raise DataError(f"FusedCarMonitor array {k!r} has {a[k].ndim} dimensions, expected {nd}")
+        nv, nx = len(self.u_names) + len(self.y_names), a["A"].shape[0]
+        nr = len(self.filter_residual_names) - (2 if a["par_idx"][0] >= 0 else 0)
+        H, C = len(self.hypotheses), len(self.feature_names)
+        want = {"A": (nx, nx), "Bv": (nx, nv), "C": (nr, nx), "Dv": (nr, nv), "v0": (nv,), "pv0": (nv,),
+                "par_idx": (4,), "low": (H, C), "high": (H, C), "std": (H, C), "point": (H, C),
+                "logw": (H, C), "logp_pi": (H,), "x0": (C,), "g0": (C,), "inv_h": (C,), "nG": (C,),
+                "toff": (C,), "f_starts": (C + 1,), "grp": (len(self.faults), a["grp"].shape[1])}
+        for k, shape in want.items():
+            if a[k].shape != shape:
+                raise DataError(f"FusedCarMonitor array {k!r} has shape {a[k].shape}, expected {shape} for "
+                                f"{nv} channels, {nx} filter states, {H} hypotheses and {C} features")
+        if a["tab"].shape != (int(a["nG"].sum()), H):
+            raise DataError(f"FusedCarMonitor density table has shape {a['tab'].shape}, expected "
+                            f"({int(a['nG'].sum())}, {H})")
+        if len(self.output_names) != 2 * len(self.faults):
+            raise DataError("FusedCarMonitor outputs must be P:<fault> and A:<fault> for every fault")
+        bad = [k for k in _ARRAYS if a[k].dtype.kind == "f" and k not in ("logp_pi", "logq", "g0") and
+               not np.all(np.isfinite(a[k]))]
+        if bad:
+            raise DataError(f"FusedCarMonitor arrays {bad} hold non-finite values")
+        a["table_error"] = d["table_error"]
+        self._setup(a)
+        return self
 
     # ------------------------------------------------------------------ runtime
     def reset(self, runs: int = 1) -> None:
-        self._xi = np.zeros((runs, self._A.shape[0]))
+        a = self._a
+        self._xi = np.zeros((runs, a["A"].shape[0]))
         self._par = np.column_stack([np.zeros(runs), np.full(runs, np.nan)])
-        self._feat = np.zeros((runs, self._x0.size))
+        self._feat = np.zeros((runs, a["x0"].size))
         self._logF = np.full((runs, self._H), -np.inf)
-        for h in self._blk[2]:
+        for h in a["blk_h0"]:
             self._logF[:, h] = 0.0
         self._cnt = np.zeros((runs, len(self.faults)), np.int64)
         self._k = 0
 
     def _args(self):
-        return (self._sA, self._sBv, self._sC, self._sDv, self._v0, self._par_idx, self._par_a, self._par,
-                self._f_idx, self._f_starts, self._alpha, self._feat, self._g0, self._inv_h, self._nG,
-                self._toff, self._tab, self._low, self._high, self._std, self._point, self._logw,
-                *self._blk, self._l1p, self._logp_pi, self._lq, self._l1q, self._logF)
+        a = self._a
+        return (self._sA, self._sBv, self._sC, self._sDv, a["v0"], a["pv0"], a["par_idx"], self.par_a,
+                self._par,
+                a["f_idx"], a["f_starts"], self.alpha, self._feat, a["g0"], a["inv_h"], a["nG"],
+                a["toff"], a["tab"], a["low"], a["high"], a["std"], a["point"], a["logw"],
+                a["blk_c0"], a["blk_c1"], a["blk_h0"], a["blk_h1"], a["log1mp"], a["logp_pi"], a["logq"],
+                a["log1mq"], self._logF)
 
     def _advance(self, V: np.ndarray) -> np.ndarray:
         if V.shape[0] != self._xi.shape[0]:
             raise DataError(f"sample has {V.shape[0]} runs; the monitor was reset for {self._xi.shape[0]}")
         out = np.empty((V.shape[0], V.shape[1], len(self.output_names)))
-        _fused_run(V, self._xi, *self._args(), self._k, self._warm, self._x0, self._grp, self._hold,
-                   self._level, self._cnt, out)
+        _fused_run(V, self._xi, *self._args(), self._k, self.warmup, self._a["x0"], self._a["grp"], self.hold,
+                   self.level, self._cnt, out)
         self._k += V.shape[1]
         return out
 
-    def step(self, v_k: Any) -> np.ndarray:
-        """One sample ``v_k`` (runs, len(input_names)) (or (n,) for one run) -> (runs, outputs)."""
-        v = np.asarray(v_k, float)
+    def _step(self, u: np.ndarray, y: np.ndarray) -> np.ndarray:
+        v = np.concatenate((u, y), axis=1) if u.shape[1] else y
+        return self._advance(np.ascontiguousarray(v[:, None]))[:, 0]
+
+    def step(self, u_k: Any, y_k: Any = None) -> np.ndarray:
+        """One sample -> (runs, outputs).
+
+        ``step(v_k)``: the full sample ``v_k`` (runs, len(input_names)) (or (n,) for one run);
+        ``step(u_k, y_k)``: commands and measurements apart, as every residual generator.
+        """
+        if y_k is not None:
+            return super().step(u_k, y_k)
+        v = np.asarray(u_k, float)
         if v.ndim == 1:
             v = v[None]
+        if v.ndim != 2 or v.shape[1] != len(self.input_names):
+            raise DataError(f"sample must have shape (runs, {len(self.input_names)}) for channels "
+                            f"{self.input_names}, got {v.shape}")
         return self._advance(np.ascontiguousarray(v[:, None]))[:, 0]
 
     def run(self, signals: Signals) -> Signals:
-        """Batch over a record (all runs)."""
+        """Batch over a record (all runs): ``signals`` holds :attr:`input_names` -> (runs, T, outputs)."""
         V = np.ascontiguousarray(signals.values[:, :, signals.index(self.input_names)])
         if not np.all(np.isfinite(V)):
             run, k, c = np.argwhere(~np.isfinite(V))[0]

@@ -1,0 +1,96 @@
+"""Design recipe of the config-driven passenger-car health monitor (``examples/passenger-car``).
+
+``fdikit design examples/passenger-car/monitor.toml`` calls :func:`design` with the config's
+``[design.params]`` and saves what it returns as artifacts: the whole calibrated car monitor
+(both blocks: six filter sets, two parity equations, features, both MHSSPTs, warm-up and
+hold-then-announce) as one :class:`~fdikit.plants.passenger_car.monitor_fused.FusedCarMonitor`,
+and a pass-through :class:`~fdikit.detect.Hold` that exposes its announcement channels to the
+config's ``[decision]`` (a :class:`~fdikit.monitor.Decision` reads processor outputs).
+
+The monitor reads deviations from the operating point (paper 1, Section V: "the nominal values
+of the control commands and measurements have to be subtracted from the vehicle generated
+data"): the config subtracts them with each channel's ``offset``, and
+:func:`operating_point` gives the values for a design speed.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from ...detect import Hold
+from ...errors import DataError
+from .monitor import calibrate_monitor, design_car_monitor
+from .monitor_fused import FusedCarMonitor
+
+__all__ = ["DEFAULTS", "design", "operating_point"]
+
+#: Default recipe parameters (see :func:`design`).
+DEFAULTS: dict[str, Any] = {"speed": 20.0, "dt": 0.01, "seed": 11, "calibration_seconds": 10.0}
+
+#: Onset (s) of the faults in the calibration simulations (:func:`calibrate_monitor`'s default).
+_ONSET = 6.0
+
+
+def operating_point(speed: float = 20.0) -> dict[str, float]:
+    """Nominal commands and measurements (channel units) of the design at ``speed`` (m/s): the
+    ``offset`` of each channel in the config.
+
+    Examples
+    --------
+    >>> op = operating_point(20.0)                     # doctest: +SKIP
+    >>> round(op["w_rear_sum"], 3)                     # doctest: +SKIP
+    121.212
+    """
+    des = design_car_monitor(float(speed))
+    return {**des.u0, **des.y0}
+
+
+def design(params: dict | None = None) -> dict[str, Any]:
+    """Design and calibrate the car monitor: ``{"car": FusedCarMonitor, "announce": Hold}``.
+
+    Parameters
+    ----------
+    params : dict, optional
+        ``speed`` (m/s, default 20): operating speed of the linearisation, of the filter designs
+        and of the calibration drives (the paper uses 20 and 24 m/s); the config's offsets must be
+        :func:`operating_point` at this speed.
+        ``dt`` (s, default 0.01): sample time of the monitor; the log must be sampled at it (the
+        car monitor is designed for 100 Hz: other values are refused).
+        ``seed`` (int, default 11): noise seed of the calibration simulations.
+        ``calibration_seconds`` (s, default 10, >= 8): length of every calibration simulation (the
+        faults start at 6 s; the densities use the features from 6.1 s to the end, so this
+        sets the calibration sample size).
+
+    Returns
+    -------
+    dict
+        ``"car"``: the :class:`FusedCarMonitor` (``deviations=True``), outputs ``P:<fault>``
+        (probability) and ``A:<fault>`` (announced, 0/1) for the 7 longitudinal and 5 lateral
+        faults; ``"announce"``: ``Hold(["A:<fault>", ...], 0.5, Z=1)`` whose outputs
+        ``A:<fault>:alarm`` equal the announcements.
+
+    Examples
+    --------
+    >>> designs = design({"speed": 20.0})              # doctest: +SKIP
+    >>> designs["car"].faults[:2]                      # doctest: +SKIP
+    ['throttle', 'brake_actuator']
+    """
+    p = {**DEFAULTS, **(params or {})}
+    unknown = sorted(set(p) - set(DEFAULTS))
+    if unknown:
+        raise DataError(f"car recipe: unknown parameters {unknown}; known: {sorted(DEFAULTS)}")
+    speed, dt, seed, dur = float(p["speed"]), float(p["dt"]), int(p["seed"]), float(p["calibration_seconds"])
+    if not 5.0 <= speed <= 40.0:
+        raise DataError(f"car recipe: speed must be in [5, 40] m/s, got {speed}")
+    des_dt = design_car_monitor(speed).dt
+    if abs(dt - des_dt) > 1e-12:
+        raise DataError(f"car recipe: dt = {dt} s, but the car monitor is designed for dt = {des_dt} s")
+    if dur < _ONSET + 2.0:
+        raise DataError(f"car recipe: calibration_seconds must be >= {_ONSET + 2.0} (faults start at "
+                        f"{_ONSET} s), got {dur}")
+    # the fused runtime needs fixed-speed filters: no speed schedule
+    blocks = [calibrate_monitor(b, speed, duration=dur, seed=seed, schedule=()) for b in ("longitudinal",
+                                                                                          "lateral")]
+    car = FusedCarMonitor(blocks, deviations=True)
+    announce = Hold([f"A:{f}" for f in car.faults], 0.5, Z=1, absolute=False)
+    return {"car": car, "announce": announce}
