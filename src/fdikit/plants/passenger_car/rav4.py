@@ -286,7 +286,7 @@ class Rav4Fit:
 
 
 def fit_rav4(path: str | os.PathLike | None = None, *, rate: float = 50.0, ay_weight: float = 0.5,
-             signals=None, holdout: bool = True) -> Rav4Fit:
+             signals=None, holdout: bool = True, fit_until: float | None = None) -> Rav4Fit:
     """Fit the lateral model to the RAV4 minute and compare it with the measured yaw rate and lateral
     acceleration.
 
@@ -304,6 +304,10 @@ def fit_rav4(path: str | os.PathLike | None = None, *, rate: float = 50.0, ay_we
     holdout : bool
         Also fit on the first two thirds and evaluate on the last (and compute the LTI reference);
         ``False`` halves the time.
+    fit_until : float, optional
+        Fit the parameters on the samples with ``t <= fit_until`` only (s; e.g. the calibration
+        half of the minute, so that the rest stays held out for an evaluation); the figures are
+        still computed over the whole minute. Default: the whole minute.
 
     Returns
     -------
@@ -332,8 +336,13 @@ def fit_rav4(path: str | os.PathLike | None = None, *, rate: float = 50.0, ay_we
     ay_m = v[:, col["KINEMATICS.ACCEL_Y"]]
     dt = float(np.mean(np.diff(s.t)))
     i_s = RAV4["i_s"]
-    # sign of the accelerometer axis from the data: a_y ~ U r in a steady turn
-    s_ay = float(np.sign(np.corrcoef(ay_m, U * yaw_m)[0, 1]) or 1.0)
+    T = U.size
+    n_fit = T if fit_until is None else int(np.searchsorted(s.t - s.t[0], fit_until, side="right"))
+    if n_fit < 100:
+        raise DataError(f"fit_until = {fit_until} s leaves {n_fit} samples; the fit needs at least 100")
+    fs = slice(0, n_fit)
+    # sign of the accelerometer axis from the (fitted part of the) data: a_y ~ U r in a steady turn
+    s_ay = float(np.sign(np.corrcoef(ay_m[fs], U[fs] * yaw_m[fs])[0, 1]) or 1.0)
     kin = U * dsw / i_s / RAV4["L"]
     kin_corr = float(np.corrcoef(kin, yaw_m)[0, 1])
     names = [p[0] for p in FIT_PARAMS]
@@ -342,7 +351,7 @@ def fit_rav4(path: str | os.PathLike | None = None, *, rate: float = 50.0, ay_we
     hi = np.array([p[3] for p in FIT_PARAMS])
     scale = np.array([1e5, 1e5, 0.1, 0.01, 0.005, 0.01, 0.1, 0.3])
     # initial offsets from the data: the yaw offset is the mean yaw rate minus the kinematic mean
-    x0[4] = float(np.mean(yaw_m) - np.mean(kin))
+    x0[4] = float(np.mean(yaw_m[fs]) - np.mean(kin[fs]))
 
     def make(sl):
         d, u_, ym, am = dsw[sl] / i_s, U[sl], yaw_m[sl], ay_m[sl]
@@ -374,8 +383,7 @@ def fit_rav4(path: str | os.PathLike | None = None, *, rate: float = 50.0, ay_we
                             max_nfev=200)
         return sol.x * scale
 
-    T = U.size
-    th = solve(slice(0, T))
+    th = solve(fs)
     th_road = th.copy()
     th_road[3] /= i_s
     yaw, ay = simulate_single_track(th_road, U, dsw / i_s, dt, s_ay=s_ay, r0=float(yaw_m[0]))
