@@ -107,7 +107,11 @@ def test_diagnoser_isolates_each_detectable_class_on_fresh_seeds(dg, fault, mag)
 
 
 @pytest.mark.xfail(strict=True, reason="tau_m +15..50 % moves no GLRT statistic over its zero-false-alarm "
-                   "threshold in this plant: F5 is diagnosed 'system OK'")
+                   "threshold in this plant: with the step pedal force P_m settles ~0.1 s after the brake "
+                   "(tau_m = 0.02 s), long before the valves act. Measured (23 dB, 200 runs, W = 40 "
+                   "thresholds from 2000 nominal runs): Pd 0 for every test at +15, +30 and +50 %; "
+                   "noise-free, the largest 40-sample mean of the r3 change is 0.007 (+15 %) and "
+                   "0.024 rad/s (+50 %) against the ~0.058 rad/s G_O1 needs. F5 is diagnosed 'system OK'")
 def test_tau_m_fault_is_isolated(dg):
     rec = simulate(None, Scenario(fault="F5", magnitude=0.5), seed=5)
     assert dg.diagnose(rec)["fault"] == "F5"

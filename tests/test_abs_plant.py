@@ -282,6 +282,23 @@ def test_process_noise_matches_requested_snr(plant, nominal, snr):
     assert np.allclose(res.process_noise_var, ratio * ms, rtol=1e-9)
 
 
+def test_process_noise_held_over_a_sample_when_asked(plant):
+    """noise_hold = 10 ms: the recovered w_k is one draw per 10 ms block, with the same variance."""
+    res = simulate(plant, Scenario(snr_db=20.0, meas_var=0.0, noise_hold=0.01, t_end=2.0), runs=1, seed=3,
+                   keep_states=True, state_stride=1)
+    x, t = res.x.values[0], res.x.t
+    u = np.zeros((t.size - 1, 9))
+    u[:, 0] = plant.pedal_force(t[:-1], 0.5)
+    w = (x[1:] - x[:-1]) / 1e-3 - plant.f(0.0, x[:-1], u, plant.params)
+    for i in (0, 1, 2, 3, 5):
+        blocks = w[: (w.shape[0] // 10) * 10, i].reshape(-1, 10)
+        assert np.max(np.abs(blocks - blocks[:, :1])) < 1e-6 * np.std(w[:, i])  # held within a block
+        assert not np.allclose(blocks[1:, 0], blocks[:-1, 0])  # a new draw per block
+        assert blocks[:, 0].var() / res.state_mean_square[i] == pytest.approx(0.01, rel=0.3)
+    with pytest.raises(DataError, match="noise_hold"):
+        Scenario(noise_hold=0.0015)
+
+
 # ------------------------------------------------------------------ determinism
 def test_run_identical_alone_and_in_batches_of_any_size(plant):
     sc = Scenario(fault="F4", t_end=3.0)

@@ -48,6 +48,9 @@ def register(subparsers) -> argparse.ArgumentParser:
                    help="process-noise SNR in dB (23, 20, 17 in the paper) or 'none' (default 23)")
     s.add_argument("--meas-var", type=float, default=0.004,
                    help="measurement noise variance, (rad/s)^2 (default 0.004)")
+    s.add_argument("--noise-hold", type=float, default=None,
+                   help="process-noise hold time, s (default: a new sample every 1 ms step; 0.01: one per "
+                   "10 ms sample)")
     s.add_argument("--v0", type=float, default=28.0, help="initial speed, m/s (default 28)")
     s.add_argument("--t-brake", type=float, default=0.5, help="brake application time, s (default 0.5)")
     s.add_argument("--t-end", type=float, default=12.5, help="record length, s (default 12.5)")
@@ -67,7 +70,7 @@ def _simulate(args) -> int:
     if args.runs < 1:
         raise DataError(f"--runs must be >= 1, got {args.runs}")
     sc = Scenario(fault=args.fault, magnitude=args.magnitude, snr_db=args.snr, meas_var=args.meas_var,
-                  v0=args.v0, t_brake=args.t_brake, t_end=args.t_end)
+                  v0=args.v0, t_brake=args.t_brake, t_end=args.t_end, noise_hold=args.noise_hold)
     res = simulate(None, sc, runs=args.runs, seed=args.seed, keep_states=bool(args.plot))
     out = summarize(res)
     if args.plot:

@@ -48,6 +48,9 @@ def add_campaign_parser(abs_subparsers) -> argparse.ArgumentParser:
                    help="target per-run false-alarm probability of each test (default 0: thresholds "
                    "above every nominal design run, plus the margin)")
     p.add_argument("--margin", type=float, default=0.1, help="relative threshold margin (default 0.1)")
+    p.add_argument("--noise-hold", type=float, default=None,
+                   help="process-noise hold time, s (default: a new sample every 1 ms step; 0.01: one per "
+                   "10 ms sample, the alternative reading of Section III-A)")
     p.add_argument("--gate", type=float, default=0.5, help="gate time T of G_O_T1/G_O_T2, s (default 0.5)")
     p.add_argument("--progress", dest="progress", action="store_true", default=None,
                    help="show a progress bar on stderr (default: when stderr is a terminal)")
@@ -78,6 +81,7 @@ def _campaign(args) -> int:
     res = run_campaign(args.runs, nominal_runs=args.nominal_runs, design_runs=args.design_runs,
                        snr_db=args.snr, seed=args.seed, W=args.window, gate=args.gate,
                        magnitudes=args.magnitudes, pfa=args.pfa, margin=args.margin,
+                       noise_hold=args.noise_hold,
                        progress=sys.stderr.isatty() if args.progress is None else args.progress)
     out = res.to_dict()
     if args.complete:
