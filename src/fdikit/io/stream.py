@@ -117,7 +117,7 @@ class FrameGridder:
     >>> g = FrameGridder(db, ["SPEED.SPEED"], rate=10.0)
     >>> out = []
     >>> for k, kmh in enumerate([10.0, 12.0, 14.0]):
-    ...     out += g.push(100.0 + 0.1 * k, 180, int(kmh * 100).to_bytes(8, "big"))
+    ...     out += g.push(100.0 + 0.1 * k, 180, (int(kmh * 100) << 8).to_bytes(8, "big"))
     >>> out += g.flush()
     >>> [(round(t, 3), round(v["SPEED.SPEED"], 6), why) for t, v, why in out]
     [(0.0, 10.0, None), (0.1, 12.0, None), (0.2, 14.0, None)]
