@@ -21,15 +21,23 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 from scipy.special import log_ndtr
 
 from ..errors import DataError
 from ..monitor.core import ResidualProcessor
 from ..signals import Signals
 
-__all__ = ["MHSSPT", "MHSSPTCalibration", "UniformMeanGaussian", "calibrate_densities",
-           "umg_component_logpdf"]
+__all__ = [
+    "MHSSPT",
+    "NEGLIGIBLE_NATS",
+    "MHSSPTCalibration",
+    "UniformMeanGaussian",
+    "calibrate_densities",
+    "mhsspt_update",
+    "tabulate_umg",
+    "umg_component_logpdf",
+]
 
 _LOG_SQRT_2PI = 0.5 * np.log(2 * np.pi)
 
@@ -79,12 +87,12 @@ def umg_component_logpdf(x, low, high, std, point, logw):  # pragma: no cover - 
     return lhi + math.log1p(-math.exp(d)) - logw
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def _loglik_umg(x, low, high, std, point, logw, out):  # pragma: no cover - compiled
-    """Log densities of uniform-mean Gaussians: x (R, T, C) -> out (R, T, H)."""
+    """Log densities of uniform-mean Gaussians: x (R, T, C) -> out (R, T, H); runs in parallel."""
     R, T, C = x.shape
     H = low.shape[0]
-    for r in range(R):
+    for r in prange(R):
         for k in range(T):
             for j in range(H):
                 acc = 0.0
@@ -92,6 +100,108 @@ def _loglik_umg(x, low, high, std, point, logw, out):  # pragma: no cover - comp
                     acc += umg_component_logpdf(x[r, k, c], low[j, c], high[j, c], std[j, c],
                                                 point[j, c], logw[j, c])
                 out[r, k, j] = acc
+
+
+@njit(cache=True)
+def umg_table_add(x, c, tab, g0, inv_h, nG, toff, low, high, std, point, logw, ll, h0,
+                  h1):  # pragma: no cover - compiled
+    """Add the log density of component ``c`` at ``x`` of hypotheses ``h0..h1-1`` to ``ll``: linear
+    interpolation in the table of :func:`tabulate_umg` inside its grid, the exact formula outside."""
+    t = (x - g0[c]) * inv_h[c]
+    if t >= 0.0 and t < nG[c] - 1:
+        i0 = int(t)
+        fr = t - i0
+        base = toff[c] + i0
+        for j in range(h0, h1):
+            ll[j] += (1.0 - fr) * tab[base, j] + fr * tab[base + 1, j]
+    else:
+        for j in range(h0, h1):
+            ll[j] += umg_component_logpdf(x, low[j, c], high[j, c], std[j, c], point[j, c], logw[j, c])
+
+
+@njit(cache=True, parallel=True)
+def _loglik_table(x, tab, g0, inv_h, nG, toff, low, high, std, point, logw, out):  # pragma: no cover
+    """Tabulated log densities: x (R, T, C) -> out (R, T, H); runs in parallel."""
+    R, T, C = x.shape
+    H = low.shape[0]
+    for r in prange(R):
+        for k in range(T):
+            o = out[r, k]
+            for j in range(H):
+                o[j] = 0.0
+            for c in range(C):
+                umg_table_add(x[r, k, c], c, tab, g0, inv_h, nG, toff, low, high, std, point, logw, o, 0, H)
+
+
+def _component_logpdf(x: np.ndarray, low: float, high: float, std: float, point: bool) -> np.ndarray:
+    """Exact log density of one component at the points ``x`` (the table's reference)."""
+    x = np.asarray(x, float)
+    if point:
+        return -0.5 * ((x - low) / std) ** 2 - math.log(std) - _LOG_SQRT_2PI
+    return UniformMeanGaussian([low], [high], [std]).logpdf(x[:, None])
+
+
+def tabulate_umg(low: np.ndarray, high: np.ndarray, std: np.ndarray, point: np.ndarray,
+                 resolution: float = 1.0 / 32.0, max_points: int = 400_000) -> dict[str, np.ndarray]:
+    """Tables of uniform-mean Gaussian component log densities for linear interpolation.
+
+    Per component ``c`` a uniform grid over ``[min_j low - 12 max_j std, max_j high + 12 max_j std]``
+    with spacing ``resolution * min_j std`` (at most ``max_points`` points), holding the exact
+    log density of every hypothesis ``j``. Linear interpolation of a function with second
+    derivative ``<= 1 / std^2`` errs by at most ``h^2 / (8 std^2) = resolution^2 / 8`` nats
+    (1.2e-4 at 1/32); the error measured at the grid midpoints is returned as ``error``
+    (where the density exceeds exp(-700)).
+
+    Parameters
+    ----------
+    low, high, std : array (H, C)
+        Mean ranges and standard deviations (units of the features).
+    point : bool array (H, C)
+        Components whose mean range is a point (plain Gaussian).
+    resolution : float
+        Grid spacing as a fraction of the smallest std of the component.
+
+    Returns
+    -------
+    dict
+        ``tab`` (sum of grid sizes, H), ``g0``, ``inv_h`` (C,) grid start and inverse spacing,
+        ``nG``, ``toff`` (C,) grid sizes and row offsets in ``tab``, ``error`` (nats).
+
+    Examples
+    --------
+    >>> t = tabulate_umg(np.array([[0.0], [1.0]]), np.array([[0.0], [2.0]]), np.ones((2, 1)),
+    ...                  np.array([[True], [False]]))
+    >>> t["tab"].shape[1], bool(t["error"] < 2e-4)
+    (2, True)
+    """
+    low, high, std = (np.asarray(a, float) for a in (low, high, std))
+    point = np.asarray(point, bool)
+    H, C = low.shape
+    if not resolution > 0:
+        raise DataError(f"table resolution must be positive, got {resolution}")
+    g0, inv_h = np.zeros(C), np.zeros(C)
+    nG, toff = np.zeros(C, np.int64), np.zeros(C, np.int64)
+    tabs, err, total = [], 0.0, 0
+    for c in range(C):
+        s_min, s_max = std[:, c].min(), std[:, c].max()
+        lo = low[:, c].min() - 12 * s_max
+        hi = high[:, c].max() + 12 * s_max
+        n = int(min(np.ceil((hi - lo) / (resolution * s_min)) + 1, max_points))
+        step = (hi - lo) / (n - 1)
+        grid = lo + step * np.arange(n)
+        mid = grid[:-1] + 0.5 * step
+        T = np.zeros((n, H))
+        for j in range(H):
+            args = (low[j, c], high[j, c], std[j, c], bool(point[j, c]))
+            T[:, j] = _component_logpdf(grid, *args)
+            e = np.abs(0.5 * (T[:-1, j] + T[1:, j]) - _component_logpdf(mid, *args))
+            # the error that matters: where the density is not negligible
+            err = max(err, float(e[T[:-1, j] > -700].max(initial=0.0)))
+        g0[c], inv_h[c], nG[c], toff[c] = lo, 1.0 / step, n, total
+        total += n
+        tabs.append(T)
+    return {"tab": np.ascontiguousarray(np.vstack(tabs)), "g0": g0, "inv_h": inv_h, "nG": nG, "toff": toff,
+            "error": err}
 
 
 class UniformMeanGaussian:
@@ -151,47 +261,88 @@ class UniformMeanGaussian:
         return {"low": self.low.tolist(), "high": self.high.tolist(), "std": self.std.tolist()}
 
 
+#: Terms more than 40 nats below the largest are dropped from the log-sum-exp sums of the
+#: recursion: exp(-40) = 4.2e-18, so 1 + exp(-40) rounds to 1 (a two-term log-sum-exp is then
+#: bitwise the larger term) and even 26 such terms change a sum dominated by 1 by less than half
+#: a unit in the last place. It saves the exp and log of every hypothesis far from the lead.
+NEGLIGIBLE_NATS = 40.0
+
+
 @njit(cache=True)
-def _mhsspt_recursion(loglik, logF, log1mp, logp_pi, logq, log1mq, out):  # pragma: no cover
-    """loglik (R, T, H) -> out (R, T, H) log posteriors; logF (R, H) is updated in place."""
-    R, T, H = loglik.shape
-    phi = np.empty(H)
-    for r in range(R):
-        for k in range(T):
-            # log-sum-exp of the fault hypotheses (for the return probability)
-            m = -np.inf
-            for j in range(1, H):
-                if logF[r, j] > m:
-                    m = logF[r, j]
+def _logaddexp(a, b):  # pragma: no cover - compiled
+    """log(exp(a) + exp(b)); the smaller term dropped when it is below the larger's rounding."""
+    if a < b:
+        a, b = b, a
+    if a == -np.inf:
+        return -np.inf
+    d = b - a
+    if d < -NEGLIGIBLE_NATS:
+        return a
+    return a + math.log(1.0 + math.exp(d))
+
+
+@njit(cache=True)
+def mhsspt_update(logF, ll, phi, P, h0, h1, log1mp, logp_pi, logq, log1mq):  # pragma: no cover - compiled
+    """One step of the log-domain Shiryayev recursion for hypotheses ``h0..h1-1`` (``h0`` is H0).
+
+    ``logF`` (log posteriors) is updated in place from the log likelihoods ``ll``; ``P`` receives
+    the posterior probabilities (0 for hypotheses more than :data:`NEGLIGIBLE_NATS` below the
+    most probable); ``phi`` is scratch. Shared by :class:`MHSSPT` and the fused car monitor.
+    """
+    # propagation (notes, residual-processing: phi_0, phi_j)
+    if logq == -np.inf:  # q = 0: phi_0 = F_0 (1 - p) exactly
+        phi[h0] = logF[h0] + log1mp
+    else:
+        m = -np.inf
+        for j in range(h0 + 1, h1):
+            if logF[j] > m:
+                m = logF[j]
+        lse_f = -np.inf
+        if m > -np.inf:
             sf = 0.0
-            if m > -np.inf:
-                for j in range(1, H):
-                    sf += np.exp(logF[r, j] - m)
-                lse_f = m + np.log(sf)
-            else:
-                lse_f = -np.inf
-            a = logF[r, 0] + log1mp
-            b = logq + lse_f
-            mx = max(a, b)
-            phi[0] = mx + np.log(np.exp(a - mx) + np.exp(b - mx)) if mx > -np.inf else -np.inf
-            for j in range(1, H):
-                a = logF[r, j] + log1mq
-                b = logF[r, 0] + logp_pi[j]
-                mx = max(a, b)
-                phi[j] = mx + np.log(np.exp(a - mx) + np.exp(b - mx)) if mx > -np.inf else -np.inf
-            # Bayes update
-            m = -np.inf
+            for j in range(h0 + 1, h1):
+                x = logF[j] - m
+                if x > -NEGLIGIBLE_NATS:
+                    sf += math.exp(x)
+            lse_f = m + math.log(sf)
+        phi[h0] = _logaddexp(logF[h0] + log1mp, logq + lse_f)
+    lf0 = logF[h0]
+    for j in range(h0 + 1, h1):
+        phi[j] = _logaddexp(logF[j] + log1mq, lf0 + logp_pi[j])
+    # Bayes update and normalisation
+    m = -np.inf
+    for j in range(h0, h1):
+        phi[j] += ll[j]
+        if phi[j] > m:
+            m = phi[j]
+    s = 0.0
+    for j in range(h0, h1):
+        x = phi[j] - m
+        if x > -NEGLIGIBLE_NATS:
+            e = math.exp(x)
+            P[j] = e
+            s += e
+        else:
+            P[j] = 0.0
+    lz = m + math.log(s)
+    for j in range(h0, h1):
+        logF[j] = phi[j] - lz
+        P[j] = P[j] / s
+
+
+@njit(cache=True, parallel=True)
+def _mhsspt_recursion(loglik, logF, log1mp, logp_pi, logq, log1mq, out):  # pragma: no cover
+    """loglik (R, T, H) -> out (R, T, H) log posteriors; logF (R, H) is updated in place; runs
+    are independent streams, advanced in parallel."""
+    R, T, H = loglik.shape
+    for r in prange(R):
+        phi = np.empty(H)
+        P = np.empty(H)
+        lf = logF[r]
+        for k in range(T):
+            mhsspt_update(lf, loglik[r, k], phi, P, 0, H, log1mp, logp_pi, logq, log1mq)
             for j in range(H):
-                phi[j] += loglik[r, k, j]
-                if phi[j] > m:
-                    m = phi[j]
-            s = 0.0
-            for j in range(H):
-                s += np.exp(phi[j] - m)
-            lz = m + np.log(s)
-            for j in range(H):
-                logF[r, j] = phi[j] - lz
-                out[r, k, j] = logF[r, j]
+                out[r, k, j] = lf[j]
 
 
 class MHSSPT(ResidualProcessor):
@@ -212,6 +363,11 @@ class MHSSPT(ResidualProcessor):
         Return probability from a fault hypothesis to H0 (0 = the exact MHSSPT).
     groups : mapping name -> list of hypothesis names, optional
         Extra outputs summing hypotheses, e.g. ``{"brake": ["brake_small", "brake_large"]}``.
+    tabulate : float, optional
+        With :class:`UniformMeanGaussian` densities: evaluate them by linear interpolation in
+        tables of spacing ``tabulate`` times each feature's smallest std (:func:`tabulate_umg`;
+        error <= tabulate^2 / 8 nats per component, measured as ``table_error``) instead of the
+        exact formula -- about 20 times faster. ``None`` (default): exact.
 
     Outputs ``"P:<hypothesis>"`` for every hypothesis, then ``"P:<group>"`` for every group.
 
@@ -235,6 +391,7 @@ class MHSSPT(ResidualProcessor):
         pi: Sequence[float] | None = None,
         q: float = 0.0,
         groups: Mapping[str, Sequence[str]] | None = None,
+        tabulate: float | None = None,
     ):
         self.input_names = [str(s) for s in inputs]
         self.hypotheses = [str(h) for h in densities]
@@ -274,6 +431,15 @@ class MHSSPT(ResidualProcessor):
             self._umg = (*st, point, logw)
         else:
             self._umg = None
+        self.tabulate = None if tabulate is None else float(tabulate)
+        self._table = None
+        self.table_error = 0.0
+        if self.tabulate is not None:
+            if self._umg is None:
+                raise DataError("tabulated densities need UniformMeanGaussian densities")
+            tb = tabulate_umg(self._umg[0], self._umg[1], self._umg[2], self._umg[3], self.tabulate)
+            self._table = (tb["tab"], tb["g0"], tb["inv_h"], tb["nG"], tb["toff"])
+            self.table_error = tb["error"]
         self.reset(1)
 
     def loglik(self, x: np.ndarray) -> np.ndarray:
@@ -287,7 +453,10 @@ class MHSSPT(ResidualProcessor):
             return np.stack([d.logpdf(x) for d in self.densities], axis=-1)
         x3 = np.ascontiguousarray(x.reshape(-1, 1, x.shape[-1]) if x.ndim != 3 else x)
         out = np.empty((*x3.shape[:2], len(self.hypotheses)))
-        _loglik_umg(x3, *self._umg, out)
+        if self._table is not None:
+            _loglik_table(x3, *self._table, *self._umg, out)
+        else:
+            _loglik_umg(x3, *self._umg, out)
         return out.reshape((*x.shape[:-1], len(self.hypotheses)))
 
     _state_attrs = ("_logF", "_k")
@@ -298,12 +467,13 @@ class MHSSPT(ResidualProcessor):
             raise DataError("only MHSSPTs with UniformMeanGaussian densities can be exported")
         return {"inputs": list(self.input_names),
                 "densities": {h: d.to_dict() for h, d in zip(self.hypotheses, self.densities)},
-                "p": self.p, "pi": self.pi.tolist(), "q": self.q, "groups": self.groups}
+                "p": self.p, "pi": self.pi.tolist(), "q": self.q, "groups": self.groups,
+                "tabulate": self.tabulate}
 
     @classmethod
     def from_dict(cls, d: dict) -> MHSSPT:
         dens = {h: UniformMeanGaussian(v["low"], v["high"], v["std"]) for h, v in d["densities"].items()}
-        return cls(d["inputs"], dens, d["p"], d["pi"], d["q"], d["groups"])
+        return cls(d["inputs"], dens, d["p"], d["pi"], d["q"], d["groups"], tabulate=d.get("tabulate"))
 
     def reset(self, runs: int = 1) -> None:
         self._logF = np.full((runs, len(self.hypotheses)), -np.inf)

@@ -28,9 +28,9 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
-from ...detect.mhsspt import UniformMeanGaussian, umg_component_logpdf
+from ...detect.mhsspt import mhsspt_update, tabulate_umg, umg_table_add
 from ...errors import DataError
 from ...monitor.core import ResidualGenerator
 from ...residuals import FilterDesign, stack_designs
@@ -39,139 +39,115 @@ from .monitor import CarMonitor, OffsetFilter, ParityEquations, delayed_feedthro
 
 __all__ = ["FusedCarMonitor"]
 
-_HALF_LOG_2PI = 0.5 * math.log(2.0 * math.pi)
-
-
-def _exact_component(x: np.ndarray, low: float, high: float, std: float, point: bool) -> np.ndarray:
-    """Exact log density of one component (vector x) — the table's reference."""
-    d = UniformMeanGaussian([low], [high], [std])
-    return d.logpdf(np.asarray(x, float)[:, None]) if not point else \
-        -0.5 * ((x - low) / std) ** 2 - math.log(std) - _HALF_LOG_2PI
-
-
-_exact_nb = umg_component_logpdf  # one compiled component density, shared with detect.MHSSPT
-
 
 @njit(cache=True)
-def _fused_row(v, xi, A, Bv, C, Dv, v0, pv0, par_idx, par_a, par_state, r,
-               f_idx, f_starts, f_alpha, feat,
-               g0, inv_h, nG, toff, tab, low, high, std, point, logw,
-               blk_c0, blk_c1, blk_h0, blk_h1, log1mp, logp_pi, logq, log1mq, logF, ll, phi,
-               k, warm, x0, grp, hold_z, level, cnt, out):  # pragma: no cover - compiled
-    """One sample of one run. v (nv,) raw channels; writes the probabilities, group sums and
-    alarms into out."""
-    nf = xi.shape[0]
-    nv = v.shape[0]
-    A_p, A_j, A_x = A
-    B_p, B_j, B_x = Bv
-    C_p, C_j, C_x = C
-    D_p, D_j, D_x = Dv
-    q = C_p.shape[0] - 1
-    # ---- fused filter (sparse rows, the zeros of the block-diagonal structure skipped):
-    # r = C xi + Dv (v - v0); xi <- A xi + Bv (v - v0)
-    dv = np.empty(nv)
-    for j in range(nv):
-        dv[j] = v[j] - v0[j]
-    for i in range(q):
-        acc = 0.0
-        for e in range(C_p[i], C_p[i + 1]):
-            acc += C_x[e] * xi[C_j[e]]
-        for e in range(D_p[i], D_p[i + 1]):
-            acc += D_x[e] * dv[D_j[e]]
-        r[i] = acc
-    tmp = np.empty(nf)
-    for i in range(nf):
-        acc = 0.0
-        for e in range(A_p[i], A_p[i + 1]):
-            acc += A_x[e] * xi[A_j[e]]
-        for e in range(B_p[i], B_p[i + 1]):
-            acc += B_x[e] * dv[B_j[e]]
-        tmp[i] = acc
-    for i in range(nf):
-        xi[i] = tmp[i]
-    # ---- parity equations (throttle, brake, throttle_meas, brake_meas channel indices)
-    if par_idx[0] >= 0:
-        # the parity equations read absolute values: pv0 adds back an operating point that was
-        # subtracted before the monitor (deviation inputs); zero for absolute inputs
-        thr = v[par_idx[0]] + pv0[par_idx[0]]
-        prev = par_state[1]
-        if np.isnan(prev):
-            prev = thr
-        r[q] = (v[par_idx[2]] + pv0[par_idx[2]]) - prev
-        r[q + 1] = (v[par_idx[3]] + pv0[par_idx[3]]) - par_state[0]
-        par_state[0] = par_a * par_state[0] + (1.0 - par_a) * (v[par_idx[1]] + pv0[par_idx[1]])
-        par_state[1] = thr
-    # ---- features
+def _fused_one(i, V, xi_all, A, Bv, C, Dv, v0, pv0, par_idx, par_a, par_all, f_idx, f_starts, f_alpha,
+               feat_all, g0, inv_h, nG, toff, tab, low, high, std, point, logw,
+               blk_c0, blk_c1, blk_h0, blk_h1, log1mp, logp_pi, logq, log1mq, logF_all,
+               k0, warm, x0, grp, hold_z, level, cnt_all, out_all):  # pragma: no cover - compiled
+    """All samples of run ``i``. The per-sample body is written out in this loop (no inner calls
+    but the MHSSPT update and the density outside its table): a call with many array arguments
+    costs their reference counting, more than the arithmetic here."""
+    A_l, A_h, A_o, A_x, _nA = A
+    B_l, B_h, B_o, B_x, _nB = Bv
+    C_l, C_h, C_o, C_x, C_n = C
+    D_l, D_h, D_o, D_x, _nD = Dv
+    q = C_n[0]
+    nf = xi_all.shape[1]
+    nv = V.shape[2]
+    H = logF_all.shape[1]
     nfeat = f_starts.shape[0] - 1
-    for j in range(nfeat):
-        s = 0.0
-        for c in range(f_starts[j], f_starts[j + 1]):
-            w = r[f_idx[c]]
-            s += w * w
-        feat[j] = feat[j] + f_alpha * (math.sqrt(s) - feat[j])
-    # ---- MHSSPT per block
-    H = logF.shape[0]
-    for j in range(H):
-        ll[j] = 0.0
-    for b in range(blk_c0.shape[0]):
-        h0, h1 = blk_h0[b], blk_h1[b]
-        for c in range(blk_c0[b], blk_c1[b]):
-            x = feat[c] if k >= warm else x0[c]
-            t = (x - g0[c]) * inv_h[c]
-            if t >= 0.0 and t < nG[c] - 1:
-                i0 = int(t)
-                fr = t - i0
-                base = toff[c] + i0
-                for j in range(h0, h1):
-                    ll[j] += (1.0 - fr) * tab[base, j] + fr * tab[base + 1, j]
-            else:
-                for j in range(h0, h1):
-                    ll[j] += _exact_nb(x, low[j, c], high[j, c], std[j, c], point[j, c], logw[j, c])
-        # propagate (log domain) and Bayes update; hypothesis h0 is the block's H0
-        m = -np.inf
-        for j in range(h0 + 1, h1):
-            if logF[j] > m:
-                m = logF[j]
-        if m > -np.inf:
-            sf = 0.0
-            for j in range(h0 + 1, h1):
-                sf += math.exp(logF[j] - m)
-            lse_f = m + math.log(sf)
-        else:
-            lse_f = -np.inf
-        a = logF[h0] + log1mp[b]
-        bb = logq[b] + lse_f
-        mx = max(a, bb)
-        phi[h0] = mx + math.log(math.exp(a - mx) + math.exp(bb - mx)) if mx > -np.inf else -np.inf
-        for j in range(h0 + 1, h1):
-            a = logF[j] + log1mq[b]
-            bb = logF[h0] + logp_pi[j]
-            mx = max(a, bb)
-            phi[j] = mx + math.log(math.exp(a - mx) + math.exp(bb - mx)) if mx > -np.inf else -np.inf
-        m = -np.inf
-        for j in range(h0, h1):
-            phi[j] += ll[j]
-            if phi[j] > m:
-                m = phi[j]
-        s = 0.0
-        for j in range(h0, h1):
-            s += math.exp(phi[j] - m)
-        lz = m + math.log(s)
-        for j in range(h0, h1):
-            logF[j] = phi[j] - lz
-    # ---- outputs: group probabilities and hold-then-announce
     G = grp.shape[0]
-    for g in range(G):
-        pg = 0.0
-        for e in range(grp.shape[1]):
-            if grp[g, e] >= 0:
-                pg += math.exp(logF[grp[g, e]])
-        out[g] = pg
-        if pg > level:  # as fdikit.detect.Hold: strictly above the level
-            cnt[g] += 1
-        else:
-            cnt[g] = 0
-        out[G + g] = 1.0 if cnt[g] >= hold_z else 0.0
+    r = np.empty(q + 2)
+    dv = np.empty(nv)
+    tmp = np.empty(nf)
+    ll = np.empty(H)
+    phi = np.empty(H)
+    P = np.empty(H)
+    xi = xi_all[i]
+    par_state = par_all[i]
+    feat = feat_all[i]
+    logF = logF_all[i]
+    cnt = cnt_all[i]
+    for kk in range(V.shape[1]):
+        v = V[i, kk]
+        out = out_all[i, kk]
+        # ---- fused filter: r = C xi + Dv (v - v0); xi <- A xi + Bv (v - v0), as sums of columns
+        # over the rows each column touches (the block-diagonal zeros skipped; contiguous
+        # multiply-adds that the compiler vectorises, in a fixed order)
+        for j in range(nv):
+            dv[j] = v[j] - v0[j]
+        for ii in range(q):
+            r[ii] = 0.0
+        for ii in range(nf):
+            tmp[ii] = 0.0
+        for j in range(nf):
+            x = xi[j]
+            o = C_o[j] - C_l[j]
+            for ii in range(C_l[j], C_h[j]):
+                r[ii] += C_x[o + ii] * x
+            o = A_o[j] - A_l[j]
+            for ii in range(A_l[j], A_h[j]):
+                tmp[ii] += A_x[o + ii] * x
+        for j in range(nv):
+            x = dv[j]
+            o = D_o[j] - D_l[j]
+            for ii in range(D_l[j], D_h[j]):
+                r[ii] += D_x[o + ii] * x
+            o = B_o[j] - B_l[j]
+            for ii in range(B_l[j], B_h[j]):
+                tmp[ii] += B_x[o + ii] * x
+        for ii in range(nf):
+            xi[ii] = tmp[ii]
+        # ---- parity equations (throttle, brake, throttle_meas, brake_meas channel indices)
+        if par_idx[0] >= 0:
+            # the parity equations read absolute values: pv0 adds back an operating point that was
+            # subtracted before the monitor (deviation inputs); zero for absolute inputs
+            thr = v[par_idx[0]] + pv0[par_idx[0]]
+            prev = par_state[1]
+            if np.isnan(prev):
+                prev = thr
+            r[q] = (v[par_idx[2]] + pv0[par_idx[2]]) - prev
+            r[q + 1] = (v[par_idx[3]] + pv0[par_idx[3]]) - par_state[0]
+            par_state[0] = par_a * par_state[0] + (1.0 - par_a) * (v[par_idx[1]] + pv0[par_idx[1]])
+            par_state[1] = thr
+        # ---- features: low-passed norms of the filters' residual vectors and of the parity residuals
+        for j in range(nfeat):
+            s = 0.0
+            for c in range(f_starts[j], f_starts[j + 1]):
+                w = r[f_idx[c]]
+                s += w * w
+            feat[j] = feat[j] + f_alpha * (math.sqrt(s) - feat[j])
+        # ---- MHSSPT per block (paper 1, Section IV-E) on tabulated densities
+        for b in range(blk_c0.shape[0]):
+            h0, h1 = blk_h0[b], blk_h1[b]
+            for j in range(h0, h1):
+                ll[j] = 0.0
+            for c in range(blk_c0[b], blk_c1[b]):
+                x = feat[c] if k0 + kk >= warm else x0[c]
+                # linear interpolation in the table (as detect.mhsspt.umg_table_add, written out)
+                t = (x - g0[c]) * inv_h[c]
+                if t >= 0.0 and t < nG[c] - 1:
+                    i0 = int(t)
+                    fr = t - i0
+                    base = toff[c] + i0
+                    for j in range(h0, h1):
+                        ll[j] += (1.0 - fr) * tab[base, j] + fr * tab[base + 1, j]
+                else:
+                    umg_table_add(x, c, tab, g0, inv_h, nG, toff, low, high, std, point, logw, ll, h0, h1)
+            mhsspt_update(logF, ll, phi, P, h0, h1, log1mp[b], logp_pi, logq[b], log1mq[b])
+        # ---- outputs: group probabilities and hold-then-announce
+        for g in range(G):
+            pg = 0.0
+            for e in range(grp.shape[1]):
+                if grp[g, e] >= 0:
+                    pg += P[grp[g, e]]
+            out[g] = pg
+            if pg > level:  # as fdikit.detect.Hold: strictly above the level
+                cnt[g] += 1
+            else:
+                cnt[g] = 0
+            out[G + g] = 1.0 if cnt[g] >= hold_z else 0.0
 
 
 @njit(cache=True)
@@ -179,27 +155,42 @@ def _fused_run(V, xi, A, Bv, C, Dv, v0, pv0, par_idx, par_a, par_state, f_idx, f
                g0, inv_h, nG, toff, tab, low, high, std, point, logw,
                blk_c0, blk_c1, blk_h0, blk_h1, log1mp, logp_pi, logq, log1mq, logF,
                k0, warm, x0, grp, hold_z, level, cnt, out):  # pragma: no cover - compiled
-    R, T = V.shape[0], V.shape[1]
-    q = C[0].shape[0] - 1
-    r = np.empty(q + 2)
-    H = logF.shape[1]
-    ll = np.empty(H)
-    phi = np.empty(H)
-    for i in range(R):
-        for k in range(T):
-            _fused_row(V[i, k], xi[i], A, Bv, C, Dv, v0, pv0, par_idx, par_a, par_state[i], r,
-                       f_idx, f_starts, f_alpha, feat[i], g0, inv_h, nG, toff, tab, low, high, std, point,
-                       logw, blk_c0, blk_c1, blk_h0, blk_h1, log1mp, logp_pi, logq, log1mq, logF[i], ll, phi,
-                       k0 + k, warm, x0, grp, hold_z, level, cnt[i], out[i, k])
+    """Runs one after the other (streaming: no thread start-up)."""
+    for i in range(V.shape[0]):
+        _fused_one(i, V, xi, A, Bv, C, Dv, v0, pv0, par_idx, par_a, par_state, f_idx, f_starts, f_alpha, feat,
+                   g0, inv_h, nG, toff, tab, low, high, std, point, logw, blk_c0, blk_c1, blk_h0, blk_h1,
+                   log1mp, logp_pi, logq, log1mq, logF, k0, warm, x0, grp, hold_z, level, cnt, out)
 
 
-def _csr(M: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Row pointers, column indices and values of the nonzeros of M, row by row in column order."""
+@njit(cache=True, parallel=True)
+def _fused_run_parallel(V, xi, A, Bv, C, Dv, v0, pv0, par_idx, par_a, par_state, f_idx, f_starts, f_alpha,
+                        feat, g0, inv_h, nG, toff, tab, low, high, std, point, logw,
+                        blk_c0, blk_c1, blk_h0, blk_h1, log1mp, logp_pi, logq, log1mq, logF,
+                        k0, warm, x0, grp, hold_z, level, cnt, out):  # pragma: no cover - compiled
+    """Runs in parallel threads (independent runs; each run's arithmetic is that of _fused_run)."""
+    for i in prange(V.shape[0]):
+        _fused_one(i, V, xi, A, Bv, C, Dv, v0, pv0, par_idx, par_a, par_state, f_idx, f_starts, f_alpha, feat,
+                   g0, inv_h, nG, toff, tab, low, high, std, point, logw, blk_c0, blk_c1, blk_h0, blk_h1,
+                   log1mp, logp_pi, logq, log1mq, logF, k0, warm, x0, grp, hold_z, level, cnt, out)
+
+
+def _colspans(M: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Column-span form of M: per column j the first and one-past-last nonzero row (``lo``, ``hi``),
+    the offset of its values in ``vals``, ``vals`` (M[lo:hi, j] of every column, concatenated)
+    and the number of rows (a one-element array)."""
     M = np.asarray(M, float)
-    rows, cols = np.nonzero(M)
-    ptr = np.zeros(M.shape[0] + 1, np.int64)
-    np.add.at(ptr, rows + 1, 1)
-    return np.cumsum(ptr), cols.astype(np.int64), np.ascontiguousarray(M[rows, cols])
+    n = M.shape[1]
+    lo, hi, off = np.zeros(n, np.int64), np.zeros(n, np.int64), np.zeros(n, np.int64)
+    vals, total = [], 0
+    for j in range(n):
+        nz = np.flatnonzero(M[:, j])
+        if nz.size:
+            lo[j], hi[j] = nz[0], nz[-1] + 1
+            vals.append(M[lo[j]:hi[j], j])
+        off[j] = total
+        total += hi[j] - lo[j]
+    return (lo, hi, off, np.ascontiguousarray(np.concatenate(vals) if vals else np.zeros(0)),
+            np.array([M.shape[0]], np.int64))
 
 
 #: Version of the payload of :meth:`FusedCarMonitor.to_dict` (checked by :meth:`FusedCarMonitor.from_dict`).
@@ -405,32 +396,22 @@ class FusedCarMonitor(ResidualGenerator):
     # ------------------------------------------------------------------ construction helpers
     @staticmethod
     def _build_tables(a: dict[str, np.ndarray], resolution: float) -> dict[str, Any]:
-        """Per feature a uniform grid and the log density of every hypothesis of its block on it."""
-        x0, low, high, std, point = a["x0"], a["low"], a["high"], a["std"], a["point"]
-        C, H = x0.size, low.shape[0]
+        """Per feature a uniform grid and the log density of every hypothesis of its block on it
+        (:func:`~fdikit.detect.mhsspt.tabulate_umg` per block, columns at the block's hypotheses)."""
+        H, C = a["low"].shape
         g0, inv_h, nG, toff = np.zeros(C), np.zeros(C), np.zeros(C, np.int64), np.zeros(C, np.int64)
         tabs, err, total = [], 0.0, 0
         for b in range(a["blk_h0"].size):
             hs = slice(a["blk_h0"][b], a["blk_h1"][b])
-            for c in range(a["blk_c0"][b], a["blk_c1"][b]):
-                s_min, s_max = std[hs, c].min(), std[hs, c].max()
-                lo = low[hs, c].min() - 12 * s_max
-                hi = high[hs, c].max() + 12 * s_max
-                step = resolution * s_min
-                n = int(min(np.ceil((hi - lo) / step) + 1, 400_000))
-                step = (hi - lo) / (n - 1)
-                grid = lo + step * np.arange(n)
-                mid = grid[:-1] + 0.5 * step
-                T = np.zeros((n, H))
-                for j in range(a["blk_h0"][b], a["blk_h1"][b]):
-                    args = (low[j, c], high[j, c], std[j, c], bool(point[j, c]))
-                    T[:, j] = _exact_component(grid, *args)
-                    e = np.abs(0.5 * (T[:-1, j] + T[1:, j]) - _exact_component(mid, *args))
-                    # error that matters: where the density is not negligible against the others
-                    err = max(err, float(e[T[:-1, j] > -700].max(initial=0.0)))
-                g0[c], inv_h[c], nG[c], toff[c] = lo, 1.0 / step, n, total
-                total += n
-                tabs.append(T)
+            cs = slice(a["blk_c0"][b], a["blk_c1"][b])
+            tb = tabulate_umg(a["low"][hs, cs], a["high"][hs, cs], a["std"][hs, cs], a["point"][hs, cs],
+                              resolution)
+            T = np.zeros((tb["tab"].shape[0], H))
+            T[:, hs] = tb["tab"]
+            tabs.append(T)
+            g0[cs], inv_h[cs], nG[cs], toff[cs] = tb["g0"], tb["inv_h"], tb["nG"], tb["toff"] + total
+            total += T.shape[0]
+            err = max(err, tb["error"])
         return {"tab": np.ascontiguousarray(np.vstack(tabs)), "g0": g0, "inv_h": inv_h, "nG": nG,
                 "toff": toff, "table_error": err}
 
@@ -441,7 +422,8 @@ class FusedCarMonitor(ResidualGenerator):
         self.input_names = list(self.u_names) + list(self.y_names)
         self.table_bytes = int(self._a["tab"].nbytes)
         self._H = self._a["low"].shape[0]
-        self._sA, self._sBv, self._sC, self._sDv = (_csr(self._a[k]) for k in ("A", "Bv", "C", "Dv"))
+        self._sA, self._sBv, self._sC, self._sDv = (_colspans(self._a[k]) for k in ("A", "Bv", "C", "Dv"))
+        self.parallel = True
         self.reset(1)
 
     # ------------------------------------------------------------------ artifact
@@ -535,7 +517,10 @@ class FusedCarMonitor(ResidualGenerator):
         if V.shape[0] != self._xi.shape[0]:
             raise DataError(f"sample has {V.shape[0]} runs; the monitor was reset for {self._xi.shape[0]}")
         out = np.empty((V.shape[0], V.shape[1], len(self.output_names)))
-        _fused_run(V, self._xi, *self._args(), self._k, self.warmup, self._a["x0"], self._a["grp"], self.hold,
+        # independent runs in parallel threads when there is enough work to share; the same
+        # per-run arithmetic either way (batch = streaming bitwise)
+        kernel = _fused_run_parallel if self.parallel and V.shape[0] > 1 and V.size > 4096 else _fused_run
+        kernel(V, self._xi, *self._args(), self._k, self.warmup, self._a["x0"], self._a["grp"], self.hold,
                    self.level, self._cnt, out)
         self._k += V.shape[1]
         return out
