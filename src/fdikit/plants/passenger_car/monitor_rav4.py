@@ -85,7 +85,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy.signal import butter, tf2ss
 
 from ...detect import Hold
 from ...detect.mhsspt import MHSSPTCalibration, UniformMeanGaussian, calibrate_densities
@@ -322,6 +321,8 @@ def band_limited(design: FilterDesign, band_hz: float, order: int = 2) -> Filter
     >>> round(r[-1], 9)                                   # unit DC gain
     1.0
     """
+    from scipy.signal import butter, tf2ss  # design time only: keeps the runtime import light
+
     if band_hz <= 0:
         return design
     dt, q = design.dt, len(design.residual_names)
