@@ -85,9 +85,16 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from numba import njit
 
 from ...detect import Hold
-from ...detect.mhsspt import MHSSPTCalibration, UniformMeanGaussian, calibrate_densities
+from ...detect.mhsspt import (
+    MHSSPTCalibration,
+    UniformMeanGaussian,
+    calibrate_densities,
+    mhsspt_update,
+    umg_component_logpdf,
+)
 from ...errors import DataError
 from ...model.linear import GROUPS, LinearFaultModel
 from ...monitor.core import Decision, Monitor, ResidualGenerator
@@ -512,6 +519,33 @@ class Rav4FeatureNorms(FeatureNorms):
         return cls(d["groups"], d["dt"], d["tau"])
 
 
+@njit(cache=True)
+def _serial_step(x, low, high, std, point, logw, logF, log1mp, logp_pi, logq, log1mq,
+                 out):  # pragma: no cover - compiled
+    """One sample of the MHSSPT for every run, serially: x (R, C) -> log posteriors out (R, H).
+
+    The same compiled component density and recursion step as the batch kernels of
+    :mod:`fdikit.detect.mhsspt` (:func:`~fdikit.detect.mhsspt.umg_component_logpdf`,
+    :func:`~fdikit.detect.mhsspt.mhsspt_update`), summed in the same order, without their
+    parallel launch (which costs more than the arithmetic of one sample)."""
+    R, C = x.shape
+    H = low.shape[0]
+    ll = np.empty(H)
+    phi = np.empty(H)
+    P = np.empty(H)
+    for r in range(R):
+        for j in range(H):
+            acc = 0.0
+            for c in range(C):
+                acc += umg_component_logpdf(x[r, c], low[j, c], high[j, c], std[j, c], point[j, c],
+                                            logw[j, c])
+            ll[j] = acc
+        lf = logF[r]
+        mhsspt_update(lf, ll, phi, P, 0, H, log1mp, logp_pi, logq, log1mq)
+        for j in range(H):
+            out[r, j] = lf[j]
+
+
 class Rav4MHSSPT(WarmupMHSSPT):
     """:class:`~fdikit.plants.passenger_car.monitor.WarmupMHSSPT` as a saveable artifact (the
     warm-up length is part of its ``to_dict``).
@@ -529,6 +563,27 @@ class Rav4MHSSPT(WarmupMHSSPT):
         d0 = self.densities[0]
         # warm-up features: the middle of the no-fault range (its most likely mean)
         self._x0 = 0.5 * (np.asarray(d0.low, float) + np.asarray(d0.high, float))
+
+    def _advance(self, x):
+        needed = ("_umg", "_logF", "_log1mp", "_logp_pi", "_logq", "_log1mq")
+        if x.shape[1] != 1 or any(getattr(self, a, None) is None for a in needed) or \
+                getattr(self, "_table", None) is not None:
+            return super()._advance(x)
+        # streaming: one sample, the serial kernel (same arithmetic as the batch path)
+        if self.warmup - self._k > 0:
+            x = np.broadcast_to(self._x0, x.shape)
+        x0 = np.ascontiguousarray(x[:, 0], dtype=float)
+        if not np.all(np.isfinite(x0)):
+            run, c = np.argwhere(~np.isfinite(x0))[0]
+            raise DataError(f"MHSSPT input {self.input_names[c]!r} is not finite at sample {self._k} "
+                            f"(run {run})")
+        if x0.shape[0] != self._logF.shape[0]:
+            raise DataError(f"sample has {x0.shape[0]} runs; the test was reset for {self._logF.shape[0]}")
+        out = np.empty((x0.shape[0], 1, len(self.hypotheses)))
+        _serial_step(x0, *self._umg, self._logF, self._log1mp, self._logp_pi, self._logq, self._log1mq,
+                     out[:, 0])
+        self._k += 1
+        return out
 
     def to_dict(self) -> dict[str, Any]:
         return {**super().to_dict(), "warmup": self.warmup}
