@@ -40,138 +40,200 @@ from .monitor import CarMonitor, OffsetFilter, ParityEquations, delayed_feedthro
 __all__ = ["FusedCarMonitor"]
 
 
+#: Runs advanced together by one kernel call (the filter's multiply-adds run across them).
+CHUNK = 8
+
+
+#: Segments of the packed integer and float parameter vectors of the kernel (one array each: a
+#: call's cost is dominated by unboxing its array arguments, so the kernel takes few).
+INT_SEGS = ("C_l", "C_h", "C_o", "D_l", "D_h", "D_o", "A_l", "A_h", "A_o", "B_l", "B_h", "B_o", "par_idx",
+            "f_idx", "f_starts", "nG", "toff", "blk_c0", "blk_c1", "blk_h0", "blk_h1", "iscal")
+FLT_SEGS = ("C_x", "D_x", "A_x", "B_x", "v0", "pv0", "g0", "inv_h", "x0", "log1mp", "logq", "log1mq",
+            "logp_pi", "fscal")
+_NI, _NF = len(INT_SEGS), len(FLT_SEGS)
+
+
 @njit(cache=True)
-def _fused_one(i, V, xi_all, A, Bv, C, Dv, v0, pv0, par_idx, par_a, par_all, f_idx, f_starts, f_alpha,
-               feat_all, g0, inv_h, nG, toff, tab, low, high, std, point, logw,
-               blk_c0, blk_c1, blk_h0, blk_h1, log1mp, logp_pi, logq, log1mq, logF_all,
-               k0, warm, x0, grp, hold_z, level, cnt_all, out_all):  # pragma: no cover - compiled
-    """All samples of run ``i``. The per-sample body is written out in this loop (no inner calls
-    but the MHSSPT update and the density outside its table): a call with many array arguments
-    costs their reference counting, more than the arithmetic here."""
-    A_l, A_h, A_o, A_x, _nA = A
-    B_l, B_h, B_o, B_x, _nB = Bv
-    C_l, C_h, C_o, C_x, C_n = C
-    D_l, D_h, D_o, D_x, _nD = Dv
-    q = C_n[0]
+def _iseg(IP, k):  # pragma: no cover - compiled
+    """Integer segment ``k`` of the packed parameters (a view)."""
+    return IP[IP[k]:IP[k + 1]]
+
+
+@njit(cache=True)
+def _fseg(FP, IP, k):  # pragma: no cover - compiled
+    """Float segment ``k`` of the packed parameters (a view)."""
+    return FP[IP[_NI + 1 + k]:IP[_NI + 2 + k]]
+
+
+@njit(cache=True)
+def _fused_chunk(i0, i1, V, xi_all, par_all, feat_all, logF_all, cnt_all, out_all, IP, FP, tab, dens, point,
+                 grp, k0):  # pragma: no cover - compiled
+    """All samples of runs ``i0..i1-1``. The filter runs across the runs of the chunk (the inner
+    loop over runs is what the compiler vectorises); each run's own arithmetic -- every sum in
+    the same order -- is that of a chunk of one, so batch and streaming are bitwise equal. The
+    rest of the per-sample body is written out here (no inner calls but the MHSSPT update and
+    the density outside its table): a call with many array arguments costs their reference
+    counting, more than the arithmetic. ``IP``/``FP``: packed parameters (:func:`_pack`)."""
+    C_l, C_h, C_o, D_l, D_h, D_o = _iseg(IP, 0), _iseg(IP, 1), _iseg(IP, 2), _iseg(IP, 3), _iseg(IP, 4), \
+        _iseg(IP, 5)
+    A_l, A_h, A_o, B_l, B_h, B_o = _iseg(IP, 6), _iseg(IP, 7), _iseg(IP, 8), _iseg(IP, 9), _iseg(IP, 10), \
+        _iseg(IP, 11)
+    par_idx, f_idx, f_starts, nG, toff = _iseg(IP, 12), _iseg(IP, 13), _iseg(IP, 14), _iseg(IP, 15), \
+        _iseg(IP, 16)
+    blk_c0, blk_c1, blk_h0, blk_h1 = _iseg(IP, 17), _iseg(IP, 18), _iseg(IP, 19), _iseg(IP, 20)
+    q, warm, hold_z = _iseg(IP, 21)[0], _iseg(IP, 21)[1], _iseg(IP, 21)[2]
+    C_x, D_x, A_x, B_x = _fseg(FP, IP, 0), _fseg(FP, IP, 1), _fseg(FP, IP, 2), _fseg(FP, IP, 3)
+    v0, pv0, g0, inv_h, x0 = _fseg(FP, IP, 4), _fseg(FP, IP, 5), _fseg(FP, IP, 6), _fseg(FP, IP, 7), \
+        _fseg(FP, IP, 8)
+    log1mp, logq, log1mq, logp_pi = _fseg(FP, IP, 9), _fseg(FP, IP, 10), _fseg(FP, IP, 11), _fseg(FP, IP, 12)
+    par_a, f_alpha, level = _fseg(FP, IP, 13)[0], _fseg(FP, IP, 13)[1], _fseg(FP, IP, 13)[2]
+    low, high, std, logw = dens[0], dens[1], dens[2], dens[3]
     nf = xi_all.shape[1]
     nv = V.shape[2]
     H = logF_all.shape[1]
     nfeat = f_starts.shape[0] - 1
     G = grp.shape[0]
+    W = i1 - i0
+    XI = np.empty((nf, W))
+    TMP = np.empty((nf, W))
+    RR = np.empty((q, W))
+    DV = np.empty((nv, W))
     r = np.empty(q + 2)
-    dv = np.empty(nv)
-    tmp = np.empty(nf)
     ll = np.empty(H)
     phi = np.empty(H)
     P = np.empty(H)
-    xi = xi_all[i]
-    par_state = par_all[i]
-    feat = feat_all[i]
-    logF = logF_all[i]
-    cnt = cnt_all[i]
-    for kk in range(V.shape[1]):
-        v = V[i, kk]
-        out = out_all[i, kk]
-        # ---- fused filter: r = C xi + Dv (v - v0); xi <- A xi + Bv (v - v0), as sums of columns
-        # over the rows each column touches (the block-diagonal zeros skipped; contiguous
-        # multiply-adds that the compiler vectorises, in a fixed order)
-        for j in range(nv):
-            dv[j] = v[j] - v0[j]
-        for ii in range(q):
-            r[ii] = 0.0
+    for w in range(W):
         for ii in range(nf):
-            tmp[ii] = 0.0
+            XI[ii, w] = xi_all[i0 + w, ii]
+    for kk in range(V.shape[1]):
+        # ---- fused filter: r = C xi + Dv (v - v0); xi <- A xi + Bv (v - v0), as sums of columns
+        # over the rows each column touches (the block-diagonal zeros skipped), in a fixed order
+        for j in range(nv):
+            for w in range(W):
+                DV[j, w] = V[i0 + w, kk, j] - v0[j]
+        RR[:, :] = 0.0
+        TMP[:, :] = 0.0
         for j in range(nf):
-            x = xi[j]
             o = C_o[j] - C_l[j]
             for ii in range(C_l[j], C_h[j]):
-                r[ii] += C_x[o + ii] * x
+                cij = C_x[o + ii]
+                for w in range(W):
+                    RR[ii, w] += cij * XI[j, w]
             o = A_o[j] - A_l[j]
             for ii in range(A_l[j], A_h[j]):
-                tmp[ii] += A_x[o + ii] * x
+                aij = A_x[o + ii]
+                for w in range(W):
+                    TMP[ii, w] += aij * XI[j, w]
         for j in range(nv):
-            x = dv[j]
             o = D_o[j] - D_l[j]
             for ii in range(D_l[j], D_h[j]):
-                r[ii] += D_x[o + ii] * x
+                dij = D_x[o + ii]
+                for w in range(W):
+                    RR[ii, w] += dij * DV[j, w]
             o = B_o[j] - B_l[j]
             for ii in range(B_l[j], B_h[j]):
-                tmp[ii] += B_x[o + ii] * x
-        for ii in range(nf):
-            xi[ii] = tmp[ii]
-        # ---- parity equations (throttle, brake, throttle_meas, brake_meas channel indices)
-        if par_idx[0] >= 0:
-            # the parity equations read absolute values: pv0 adds back an operating point that was
-            # subtracted before the monitor (deviation inputs); zero for absolute inputs
-            thr = v[par_idx[0]] + pv0[par_idx[0]]
-            prev = par_state[1]
-            if np.isnan(prev):
-                prev = thr
-            r[q] = (v[par_idx[2]] + pv0[par_idx[2]]) - prev
-            r[q + 1] = (v[par_idx[3]] + pv0[par_idx[3]]) - par_state[0]
-            par_state[0] = par_a * par_state[0] + (1.0 - par_a) * (v[par_idx[1]] + pv0[par_idx[1]])
-            par_state[1] = thr
-        # ---- features: low-passed norms of the filters' residual vectors and of the parity residuals
-        for j in range(nfeat):
-            s = 0.0
-            for c in range(f_starts[j], f_starts[j + 1]):
-                w = r[f_idx[c]]
-                s += w * w
-            feat[j] = feat[j] + f_alpha * (math.sqrt(s) - feat[j])
-        # ---- MHSSPT per block (paper 1, Section IV-E) on tabulated densities
-        for b in range(blk_c0.shape[0]):
-            h0, h1 = blk_h0[b], blk_h1[b]
-            for j in range(h0, h1):
-                ll[j] = 0.0
-            for c in range(blk_c0[b], blk_c1[b]):
-                x = feat[c] if k0 + kk >= warm else x0[c]
-                # linear interpolation in the table (as detect.mhsspt.umg_table_add, written out)
-                t = (x - g0[c]) * inv_h[c]
-                if t >= 0.0 and t < nG[c] - 1:
-                    i0 = int(t)
-                    fr = t - i0
-                    base = toff[c] + i0
-                    for j in range(h0, h1):
-                        ll[j] += (1.0 - fr) * tab[base, j] + fr * tab[base + 1, j]
+                bij = B_x[o + ii]
+                for w in range(W):
+                    TMP[ii, w] += bij * DV[j, w]
+        XI[:, :] = TMP
+        for w in range(W):
+            i = i0 + w
+            v = V[i, kk]
+            out = out_all[i, kk]
+            par_state = par_all[i]
+            feat = feat_all[i]
+            logF = logF_all[i]
+            cnt = cnt_all[i]
+            for ii in range(q):
+                r[ii] = RR[ii, w]
+            # ---- parity equations (throttle, brake, throttle_meas, brake_meas channel indices)
+            if par_idx[0] >= 0:
+                # the parity equations read absolute values: pv0 adds back an operating point that was
+                # subtracted before the monitor (deviation inputs); zero for absolute inputs
+                thr = v[par_idx[0]] + pv0[par_idx[0]]
+                prev = par_state[1]
+                if np.isnan(prev):
+                    prev = thr
+                r[q] = (v[par_idx[2]] + pv0[par_idx[2]]) - prev
+                r[q + 1] = (v[par_idx[3]] + pv0[par_idx[3]]) - par_state[0]
+                par_state[0] = par_a * par_state[0] + (1.0 - par_a) * (v[par_idx[1]] + pv0[par_idx[1]])
+                par_state[1] = thr
+            # ---- features: low-passed norms of the filters' residual vectors and of the parity residuals
+            for j in range(nfeat):
+                s = 0.0
+                for c in range(f_starts[j], f_starts[j + 1]):
+                    rc = r[f_idx[c]]
+                    s += rc * rc
+                feat[j] = feat[j] + f_alpha * (math.sqrt(s) - feat[j])
+            # ---- MHSSPT per block (paper 1, Section IV-E) on tabulated densities
+            for b in range(blk_c0.shape[0]):
+                h0, h1 = blk_h0[b], blk_h1[b]
+                for j in range(h0, h1):
+                    ll[j] = 0.0
+                for c in range(blk_c0[b], blk_c1[b]):
+                    x = feat[c] if k0 + kk >= warm else x0[c]
+                    # linear interpolation in the table (as detect.mhsspt.umg_table_add, written out)
+                    t = (x - g0[c]) * inv_h[c]
+                    if t >= 0.0 and t < nG[c] - 1:
+                        it = int(t)
+                        fr = t - it
+                        base = toff[c] + it
+                        for j in range(h0, h1):
+                            ll[j] += (1.0 - fr) * tab[base, j] + fr * tab[base + 1, j]
+                    else:
+                        umg_table_add(x, c, tab, g0, inv_h, nG, toff, low, high, std, point, logw, ll, h0, h1)
+                mhsspt_update(logF, ll, phi, P, h0, h1, log1mp[b], logp_pi, logq[b], log1mq[b])
+            # ---- outputs: group probabilities and hold-then-announce
+            for g in range(G):
+                pg = 0.0
+                for e in range(grp.shape[1]):
+                    if grp[g, e] >= 0:
+                        pg += P[grp[g, e]]
+                out[g] = pg
+                if pg > level:  # as fdikit.detect.Hold: strictly above the level
+                    cnt[g] += 1
                 else:
-                    umg_table_add(x, c, tab, g0, inv_h, nG, toff, low, high, std, point, logw, ll, h0, h1)
-            mhsspt_update(logF, ll, phi, P, h0, h1, log1mp[b], logp_pi, logq[b], log1mq[b])
-        # ---- outputs: group probabilities and hold-then-announce
-        for g in range(G):
-            pg = 0.0
-            for e in range(grp.shape[1]):
-                if grp[g, e] >= 0:
-                    pg += P[grp[g, e]]
-            out[g] = pg
-            if pg > level:  # as fdikit.detect.Hold: strictly above the level
-                cnt[g] += 1
-            else:
-                cnt[g] = 0
-            out[G + g] = 1.0 if cnt[g] >= hold_z else 0.0
+                    cnt[g] = 0
+                out[G + g] = 1.0 if cnt[g] >= hold_z else 0.0
+    for w in range(W):
+        for ii in range(nf):
+            xi_all[i0 + w, ii] = XI[ii, w]
 
 
 @njit(cache=True)
-def _fused_run(V, xi, A, Bv, C, Dv, v0, pv0, par_idx, par_a, par_state, f_idx, f_starts, f_alpha, feat,
-               g0, inv_h, nG, toff, tab, low, high, std, point, logw,
-               blk_c0, blk_c1, blk_h0, blk_h1, log1mp, logp_pi, logq, log1mq, logF,
-               k0, warm, x0, grp, hold_z, level, cnt, out):  # pragma: no cover - compiled
-    """Runs one after the other (streaming: no thread start-up)."""
-    for i in range(V.shape[0]):
-        _fused_one(i, V, xi, A, Bv, C, Dv, v0, pv0, par_idx, par_a, par_state, f_idx, f_starts, f_alpha, feat,
-                   g0, inv_h, nG, toff, tab, low, high, std, point, logw, blk_c0, blk_c1, blk_h0, blk_h1,
-                   log1mp, logp_pi, logq, log1mq, logF, k0, warm, x0, grp, hold_z, level, cnt, out)
+def _fused_run(V, xi, par, feat, logF, cnt, out, IP, FP, tab, dens, point, grp, k0):  # pragma: no cover
+    """Chunks of runs one after the other (streaming: no thread start-up)."""
+    R = V.shape[0]
+    for c in range((R + CHUNK - 1) // CHUNK):
+        _fused_chunk(c * CHUNK, min(R, (c + 1) * CHUNK), V, xi, par, feat, logF, cnt, out, IP, FP, tab, dens,
+                     point, grp, k0)
 
 
 @njit(cache=True, parallel=True)
-def _fused_run_parallel(V, xi, A, Bv, C, Dv, v0, pv0, par_idx, par_a, par_state, f_idx, f_starts, f_alpha,
-                        feat, g0, inv_h, nG, toff, tab, low, high, std, point, logw,
-                        blk_c0, blk_c1, blk_h0, blk_h1, log1mp, logp_pi, logq, log1mq, logF,
-                        k0, warm, x0, grp, hold_z, level, cnt, out):  # pragma: no cover - compiled
-    """Runs in parallel threads (independent runs; each run's arithmetic is that of _fused_run)."""
-    for i in prange(V.shape[0]):
-        _fused_one(i, V, xi, A, Bv, C, Dv, v0, pv0, par_idx, par_a, par_state, f_idx, f_starts, f_alpha, feat,
-                   g0, inv_h, nG, toff, tab, low, high, std, point, logw, blk_c0, blk_c1, blk_h0, blk_h1,
-                   log1mp, logp_pi, logq, log1mq, logF, k0, warm, x0, grp, hold_z, level, cnt, out)
+def _fused_run_parallel(V, xi, par, feat, logF, cnt, out, IP, FP, tab, dens, point, grp,
+                        k0):  # pragma: no cover - compiled
+    """Chunks of runs in parallel threads (independent runs; the arithmetic of _fused_run)."""
+    R = V.shape[0]
+    for c in prange((R + CHUNK - 1) // CHUNK):
+        _fused_chunk(c * CHUNK, min(R, (c + 1) * CHUNK), V, xi, par, feat, logF, cnt, out, IP, FP, tab, dens,
+                     point, grp, k0)
+
+
+def _pack(a: dict[str, np.ndarray], spans: dict[str, tuple], scal_i, scal_f) -> tuple[np.ndarray, np.ndarray]:
+    """Pack the kernel's parameters into one int64 vector (header: segment offsets) and one float
+    vector, in the order of :data:`INT_SEGS` / :data:`FLT_SEGS`."""
+    iv = {**{f"{m}_{k}": spans[m][i] for m in "CDAB" for i, k in enumerate("lho")},
+          **{k: a[k] for k in ("par_idx", "f_idx", "f_starts", "nG", "toff", "blk_c0", "blk_c1", "blk_h0",
+                               "blk_h1")}, "iscal": np.asarray(scal_i, np.int64)}
+    fv = {**{f"{m}_x": spans[m][3] for m in "CDAB"},
+          **{k: a[k] for k in ("v0", "pv0", "g0", "inv_h", "x0", "log1mp", "logq", "log1mq", "logp_pi")},
+          "fscal": np.asarray(scal_f, float)}
+    head = _NI + 1 + _NF + 1
+    ioff = np.cumsum([head] + [len(iv[k]) for k in INT_SEGS])
+    foff = np.cumsum([0] + [len(fv[k]) for k in FLT_SEGS])
+    IP = np.concatenate([ioff, foff] + [np.asarray(iv[k], np.int64) for k in INT_SEGS]).astype(np.int64)
+    FP = np.concatenate([np.asarray(fv[k], float) for k in FLT_SEGS])
+    return IP, FP
 
 
 def _colspans(M: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -422,7 +484,10 @@ class FusedCarMonitor(ResidualGenerator):
         self.input_names = list(self.u_names) + list(self.y_names)
         self.table_bytes = int(self._a["tab"].nbytes)
         self._H = self._a["low"].shape[0]
-        self._sA, self._sBv, self._sC, self._sDv = (_colspans(self._a[k]) for k in ("A", "Bv", "C", "Dv"))
+        spans = {m: _colspans(self._a[k]) for m, k in (("A", "A"), ("B", "Bv"), ("C", "C"), ("D", "Dv"))}
+        self._IP, self._FP = _pack(self._a, spans, (self._a["C"].shape[0], self.warmup, self.hold),
+                                   (self.par_a, self.alpha, self.level))
+        self._dens = np.ascontiguousarray(np.stack([self._a[k] for k in ("low", "high", "std", "logw")]))
         self.parallel = True
         self.reset(1)
 
@@ -504,15 +569,6 @@ class FusedCarMonitor(ResidualGenerator):
         self._cnt = np.zeros((runs, len(self.faults)), np.int64)
         self._k = 0
 
-    def _args(self):
-        a = self._a
-        return (self._sA, self._sBv, self._sC, self._sDv, a["v0"], a["pv0"], a["par_idx"], self.par_a,
-                self._par,
-                a["f_idx"], a["f_starts"], self.alpha, self._feat, a["g0"], a["inv_h"], a["nG"],
-                a["toff"], a["tab"], a["low"], a["high"], a["std"], a["point"], a["logw"],
-                a["blk_c0"], a["blk_c1"], a["blk_h0"], a["blk_h1"], a["log1mp"], a["logp_pi"], a["logq"],
-                a["log1mq"], self._logF)
-
     def _advance(self, V: np.ndarray) -> np.ndarray:
         if V.shape[0] != self._xi.shape[0]:
             raise DataError(f"sample has {V.shape[0]} runs; the monitor was reset for {self._xi.shape[0]}")
@@ -520,8 +576,8 @@ class FusedCarMonitor(ResidualGenerator):
         # independent runs in parallel threads when there is enough work to share; the same
         # per-run arithmetic either way (batch = streaming bitwise)
         kernel = _fused_run_parallel if self.parallel and V.shape[0] > 1 and V.size > 4096 else _fused_run
-        kernel(V, self._xi, *self._args(), self._k, self.warmup, self._a["x0"], self._a["grp"], self.hold,
-                   self.level, self._cnt, out)
+        kernel(V, self._xi, self._par, self._feat, self._logF, self._cnt, out, self._IP, self._FP,
+               self._a["tab"], self._dens, self._a["point"], self._a["grp"], self._k)
         self._k += V.shape[1]
         return out
 
