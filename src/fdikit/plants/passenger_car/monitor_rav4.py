@@ -473,8 +473,11 @@ class Rav4LateralFilter(ScheduledFilter):
         self.y_names = list(_RAW_Y)
 
     def to_dict(self) -> dict[str, Any]:
-        return {"pre": self.pre.to_dict(), "speeds": self.speeds.tolist(),
-                "designs": [d.to_dict() for d in self.designs]}
+        # the filter matrices as arrays: an artifact stores them in its NPZ (compact, exact)
+        mats = ("A", "Bu", "By", "C", "Du", "Dy")
+        designs = [{k: (np.asarray(v, float) if k in mats else v) for k, v in d.to_dict().items()}
+                   for d in self.designs]
+        return {"pre": self.pre.to_dict(), "speeds": self.speeds.tolist(), "designs": designs}
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> Rav4LateralFilter:
