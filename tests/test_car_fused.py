@@ -66,7 +66,8 @@ def setup():
         nominal, f = X[0, t >= 0.3], X[run, t >= 0.8]
         cal = calibrate_densities(nominal, {f"f_{block}": {1.0: f, 1.1: 1.1 * f, 1.2: 1.2 * f}},
                                   no_fault=f"none:{block}", inflate=1.5)
-        blocks.append(build_monitor(des, block, cal, warmup=0.3))
+        # the blocks announce after different hold lengths (3 and 5 samples), as the car monitor's do
+        blocks.append(build_monitor(des, block, cal, warmup=0.3, hold=3 if block == "longitudinal" else 5))
     log = car_signals(simulate_drive("straight", 20.0, duration=2.0, dt=5e-3, runs=1, noise=sensor_noise(),
                                      seed=9, faults=[Bias("sensor:a_x", 1.0, start=1.0)]))
     return {"des": des, "blocks": blocks, "log": log,
@@ -181,6 +182,13 @@ def test_generator_in_monitor_batch_equals_stream(setup):
     assert np.array_equal(stream.residuals.values, ref.values)
     assert np.array_equal(stream.statistics.values, batch.statistics.values)
     assert np.array_equal(batch.statistics.values, ref.values[:, :, len(fused.faults):])
+    # the announcements equal the stage-by-stage blocks' (each with its own hold length)
+    assert fused.hold == [3, 5]
+    for b in setup["blocks"]:
+        st = b.monitor.run(log).statistics
+        for f in b.faults:
+            assert np.array_equal(ref[f"A:{f}"], st[f"P:{f}:alarm"]), f
+            assert np.abs(ref[f"P:{f}"] - st[f"P:{f}"]).max() < 1e-3
     # the (u, y) generator interface equals the one-argument sample interface
     fused.reset(1)
     u = log.values[:, :, log.index(fused.u_names)]

@@ -135,3 +135,70 @@ def test_calibration_recovers_ranges_and_isolates():
     assert out["P:B"][0, -1] > 0.99 and out["P:A"][0, -1] < 0.01 and out["P:none"][0, 99] > 0.9
     with pytest.raises(DataError, match="need features at >= 2 magnitudes"):
         calibrate_densities(nominal, {"A": {1.0: feats["A"][1.0]}})
+
+
+def _log_brute_force(logf, p, pi):
+    """Bayes over every change time in the log domain (scipy's logsumexp): log posteriors of H0..HM."""
+    from scipy.special import logsumexp
+
+    k, H = logf.shape
+    c0 = np.concatenate([[0.0], np.cumsum(logf[:, 0])])  # log prod_{i < theta} f0
+    out = np.full(H, -np.inf)
+    out[0] = k * np.log1p(-p) + c0[k]
+    for j in range(1, H):
+        cj = np.concatenate([[0.0], np.cumsum(logf[:, j])])
+        theta = np.arange(1, k + 1)
+        terms = (np.log(p) + (theta - 1) * np.log1p(-p) + np.log(pi[j - 1]) + c0[theta - 1]
+                 + (cj[k] - cj[theta - 1]))
+        out[j] = logsumexp(terms)
+    return out - logsumexp(out)
+
+
+def test_recursion_equals_log_domain_bayes_across_hundreds_of_nats():
+    """Posteriors that fall to 1e-200 and come back (the terms the recursion drops below double
+    rounding must not matter): equal to the log-domain brute force over all change times."""
+    rng = np.random.default_rng(3)
+    dens = {"H0": UniformMeanGaussian([0, 0], [0, 0], [0.1, 0.1]),
+            "a": UniformMeanGaussian([1, 0], [2, 0], [0.1, 0.1]),
+            "b": UniformMeanGaussian([0, 1], [0, 1.5], [0.1, 0.2])}
+    p, pi = 1e-3, [0.4, 0.6]
+    test = MHSSPT(["x1", "x2"], dens, p=p, pi=pi)
+    x = rng.normal(0.0, 0.1, (60, 2))
+    x[20:35, 0] += 1.4   # fault a: H0 and b fall by hundreds of nats
+    x[35:, 1] += 1.2     # then b
+    test.run(Signals(np.arange(60.0), x, ["x1", "x2"]))
+    logf = test.loglik(x)
+    test.reset(1)
+    for k in range(60):
+        test.step(x[k])
+        ref = _log_brute_force(logf[:k + 1], p, pi)
+        got = test.log_posterior()[0]
+        big = ref > -700
+        np.testing.assert_allclose(got[big], ref[big], rtol=1e-10, atol=1e-9)
+    assert ref[1] < -100 and test.log_posterior()[0, 2] > -1e-6  # a came and went; b holds
+
+
+def test_tabulated_densities_match_exact_and_round_trip():
+    rng = np.random.default_rng(4)
+    dens = {"H0": UniformMeanGaussian([0.2, 0.1], [0.2, 0.1], [0.05, 0.02]),
+            "f:small": UniformMeanGaussian([0.5, 0.1], [1.0, 0.2], [0.06, 0.03]),
+            "f:large": UniformMeanGaussian([1.0, 0.2], [2.0, 0.4], [0.08, 0.04])}
+    exact = MHSSPT(["a", "b"], dens, p=1e-3, groups={"f": ["f:small", "f:large"]})
+    tab = MHSSPT(["a", "b"], dens, p=1e-3, groups={"f": ["f:small", "f:large"]}, tabulate=1 / 32)
+    assert 0 < tab.table_error < 1.3e-4  # (1/32)^2 / 8 per component
+    x = np.abs(rng.normal([0.2, 0.1], [0.05, 0.02], (40, 300, 2)))
+    x[20:, 150:] += [1.3, 0.2]
+    x[25, 200] = [30.0, -5.0]  # off the table: the exact formula
+    ll_e, ll_t = exact.loglik(x), tab.loglik(x)
+    assert np.abs(ll_t - ll_e).max() <= 2 * tab.table_error + 1e-12  # two components per hypothesis
+    assert np.abs(ll_t[25, 200] - ll_e[25, 200]).max() < 1e-9
+    s = Signals(np.arange(300.0), x, ["a", "b"])
+    Pe, Pt = exact.run(s).values, tab.run(s).values
+    assert np.abs(Pt - Pe).max() < 1e-3 and Pt[20:, -1, -1].min() > 0.99
+    # streaming (one run at a time, no threads) = batch (40 streams in parallel threads), bitwise
+    tab.reset(1)
+    one = np.concatenate([tab.step(x[33, k]) for k in range(300)])
+    np.testing.assert_array_equal(one, Pt[33])
+    back = MHSSPT.from_dict(tab.to_dict())
+    assert back.tabulate == tab.tabulate
+    np.testing.assert_array_equal(back.run(s).values, Pt)

@@ -133,6 +133,55 @@ def _loglik_table(x, tab, g0, inv_h, nG, toff, low, high, std, point, logw, out)
                 umg_table_add(x[r, k, c], c, tab, g0, inv_h, nG, toff, low, high, std, point, logw, o, 0, H)
 
 
+@njit(cache=True)
+def _mhsspt_table_stream(r, x, tab, g0, inv_h, nG, toff, dens, point, logF, log1mp, logp_pi, logq, log1mq,
+                         out):  # pragma: no cover - compiled
+    """Stream ``r``: tabulated log likelihoods and the recursion for all its samples."""
+    T, C = x.shape[1], x.shape[2]
+    H = logF.shape[1]
+    ll = np.empty(H)
+    phi = np.empty(H)
+    P = np.empty(H)
+    lf = logF[r]
+    low, high, std, logw = dens[0], dens[1], dens[2], dens[3]
+    for k in range(T):
+        for j in range(H):
+            ll[j] = 0.0
+        for c in range(C):
+            xc = x[r, k, c]
+            # linear interpolation in the table (umg_table_add, written out: no call per component)
+            t = (xc - g0[c]) * inv_h[c]
+            if t >= 0.0 and t < nG[c] - 1:
+                it = int(t)
+                fr = t - it
+                base = toff[c] + it
+                for j in range(H):
+                    ll[j] += (1.0 - fr) * tab[base, j] + fr * tab[base + 1, j]
+            else:
+                umg_table_add(xc, c, tab, g0, inv_h, nG, toff, low, high, std, point, logw, ll, 0, H)
+        mhsspt_update(lf, ll, phi, P, 0, H, log1mp, logp_pi, logq, log1mq)
+        for j in range(H):
+            out[r, k, j] = lf[j]
+
+
+@njit(cache=True)
+def _mhsspt_table_run(x, tab, g0, inv_h, nG, toff, dens, point, logF, log1mp, logp_pi, logq, log1mq,
+                      out):  # pragma: no cover - compiled
+    """Tabulated MHSSPT over x (R, T, C), streams one after the other."""
+    for r in range(x.shape[0]):
+        _mhsspt_table_stream(r, x, tab, g0, inv_h, nG, toff, dens, point, logF, log1mp, logp_pi, logq, log1mq,
+                             out)
+
+
+@njit(cache=True, parallel=True)
+def _mhsspt_table_run_parallel(x, tab, g0, inv_h, nG, toff, dens, point, logF, log1mp, logp_pi, logq, log1mq,
+                               out):  # pragma: no cover - compiled
+    """Tabulated MHSSPT over x (R, T, C), streams in parallel threads (the arithmetic of the serial one)."""
+    for r in prange(x.shape[0]):
+        _mhsspt_table_stream(r, x, tab, g0, inv_h, nG, toff, dens, point, logF, log1mp, logp_pi, logq, log1mq,
+                             out)
+
+
 def _component_logpdf(x: np.ndarray, low: float, high: float, std: float, point: bool) -> np.ndarray:
     """Exact log density of one component at the points ``x`` (the table's reference)."""
     x = np.asarray(x, float)
@@ -439,6 +488,7 @@ class MHSSPT(ResidualProcessor):
                 raise DataError("tabulated densities need UniformMeanGaussian densities")
             tb = tabulate_umg(self._umg[0], self._umg[1], self._umg[2], self._umg[3], self.tabulate)
             self._table = (tb["tab"], tb["g0"], tb["inv_h"], tb["nG"], tb["toff"])
+            self._dens = np.ascontiguousarray(np.stack([self._umg[i] for i in (0, 1, 2, 4)]))
             self.table_error = tb["error"]
         self.reset(1)
 
@@ -494,9 +544,15 @@ class MHSSPT(ResidualProcessor):
                             f"{self._k + k} (run {run})")
         if x.shape[0] != self._logF.shape[0]:
             raise DataError(f"sample has {x.shape[0]} runs; the test was reset for {self._logF.shape[0]}")
-        ll = np.ascontiguousarray(self.loglik(x))
-        out = np.empty_like(ll)
-        _mhsspt_recursion(ll, self._logF, self._log1mp, self._logp_pi, self._logq, self._log1mq, out)
+        if self._table is not None:  # one compiled call: table look-up and recursion, streams in parallel
+            out = np.empty((*x.shape[:2], len(self.hypotheses)))
+            kern = _mhsspt_table_run_parallel if x.shape[0] > 1 and x.size > 2048 else _mhsspt_table_run
+            kern(np.ascontiguousarray(x, dtype=float), *self._table, self._dens, self._umg[3], self._logF,
+                 self._log1mp, self._logp_pi, self._logq, self._log1mq, out)
+        else:
+            ll = np.ascontiguousarray(self.loglik(x))
+            out = np.empty_like(ll)
+            _mhsspt_recursion(ll, self._logF, self._log1mp, self._logp_pi, self._logq, self._log1mq, out)
         self._k += x.shape[1]
         return out
 

@@ -47,9 +47,9 @@ CHUNK = 8
 #: Segments of the packed integer and float parameter vectors of the kernel (one array each: a
 #: call's cost is dominated by unboxing its array arguments, so the kernel takes few).
 INT_SEGS = ("C_l", "C_h", "C_o", "D_l", "D_h", "D_o", "A_l", "A_h", "A_o", "B_l", "B_h", "B_o", "par_idx",
-            "f_idx", "f_starts", "nG", "toff", "blk_c0", "blk_c1", "blk_h0", "blk_h1", "iscal")
+            "f_idx", "f_starts", "nG", "toff", "blk_c0", "blk_c1", "blk_h0", "blk_h1", "hold_z", "iscal")
 FLT_SEGS = ("C_x", "D_x", "A_x", "B_x", "v0", "pv0", "g0", "inv_h", "x0", "log1mp", "logq", "log1mq",
-            "logp_pi", "fscal")
+            "logp_pi", "level", "fscal")
 _NI, _NF = len(INT_SEGS), len(FLT_SEGS)
 
 
@@ -81,12 +81,14 @@ def _fused_chunk(i0, i1, V, xi_all, par_all, feat_all, logF_all, cnt_all, out_al
     par_idx, f_idx, f_starts, nG, toff = _iseg(IP, 12), _iseg(IP, 13), _iseg(IP, 14), _iseg(IP, 15), \
         _iseg(IP, 16)
     blk_c0, blk_c1, blk_h0, blk_h1 = _iseg(IP, 17), _iseg(IP, 18), _iseg(IP, 19), _iseg(IP, 20)
-    q, warm, hold_z = _iseg(IP, 21)[0], _iseg(IP, 21)[1], _iseg(IP, 21)[2]
+    hold_z = _iseg(IP, 21)
+    q, warm = _iseg(IP, 22)[0], _iseg(IP, 22)[1]
     C_x, D_x, A_x, B_x = _fseg(FP, IP, 0), _fseg(FP, IP, 1), _fseg(FP, IP, 2), _fseg(FP, IP, 3)
     v0, pv0, g0, inv_h, x0 = _fseg(FP, IP, 4), _fseg(FP, IP, 5), _fseg(FP, IP, 6), _fseg(FP, IP, 7), \
         _fseg(FP, IP, 8)
     log1mp, logq, log1mq, logp_pi = _fseg(FP, IP, 9), _fseg(FP, IP, 10), _fseg(FP, IP, 11), _fseg(FP, IP, 12)
-    par_a, f_alpha, level = _fseg(FP, IP, 13)[0], _fseg(FP, IP, 13)[1], _fseg(FP, IP, 13)[2]
+    level = _fseg(FP, IP, 13)
+    par_a, f_alpha = _fseg(FP, IP, 14)[0], _fseg(FP, IP, 14)[1]
     low, high, std, logw = dens[0], dens[1], dens[2], dens[3]
     nf = xi_all.shape[1]
     nv = V.shape[2]
@@ -190,11 +192,11 @@ def _fused_chunk(i0, i1, V, xi_all, par_all, feat_all, logF_all, cnt_all, out_al
                     if grp[g, e] >= 0:
                         pg += P[grp[g, e]]
                 out[g] = pg
-                if pg > level:  # as fdikit.detect.Hold: strictly above the level
+                if pg > level[g]:  # as fdikit.detect.Hold: strictly above the level
                     cnt[g] += 1
                 else:
                     cnt[g] = 0
-                out[G + g] = 1.0 if cnt[g] >= hold_z else 0.0
+                out[G + g] = 1.0 if cnt[g] >= hold_z[g] else 0.0
     for w in range(W):
         for ii in range(nf):
             xi_all[i0 + w, ii] = XI[ii, w]
@@ -219,15 +221,17 @@ def _fused_run_parallel(V, xi, par, feat, logF, cnt, out, IP, FP, tab, dens, poi
                      point, grp, k0)
 
 
-def _pack(a: dict[str, np.ndarray], spans: dict[str, tuple], scal_i, scal_f) -> tuple[np.ndarray, np.ndarray]:
+def _pack(a: dict[str, np.ndarray], spans: dict[str, tuple], hold, level, scal_i,
+          scal_f) -> tuple[np.ndarray, np.ndarray]:
     """Pack the kernel's parameters into one int64 vector (header: segment offsets) and one float
     vector, in the order of :data:`INT_SEGS` / :data:`FLT_SEGS`."""
     iv = {**{f"{m}_{k}": spans[m][i] for m in "CDAB" for i, k in enumerate("lho")},
           **{k: a[k] for k in ("par_idx", "f_idx", "f_starts", "nG", "toff", "blk_c0", "blk_c1", "blk_h0",
-                               "blk_h1")}, "iscal": np.asarray(scal_i, np.int64)}
+                               "blk_h1")},
+          "hold_z": np.asarray(hold, np.int64), "iscal": np.asarray(scal_i, np.int64)}
     fv = {**{f"{m}_x": spans[m][3] for m in "CDAB"},
           **{k: a[k] for k in ("v0", "pv0", "g0", "inv_h", "x0", "log1mp", "logq", "log1mq", "logp_pi")},
-          "fscal": np.asarray(scal_f, float)}
+          "level": np.asarray(level, float), "fscal": np.asarray(scal_f, float)}
     head = _NI + 1 + _NF + 1
     ioff = np.cumsum([head] + [len(iv[k]) for k in INT_SEGS])
     foff = np.cumsum([0] + [len(fv[k]) for k in FLT_SEGS])
@@ -440,11 +444,13 @@ class FusedCarMonitor(ResidualGenerator):
         a["grp"] = np.array([r + [-1] * (width - len(r)) for r in grp_rows], np.int64)
         self.faults = [n[2:] for n in p_names]
         self.output_names = p_names + [f"A:{f}" for f in self.faults]
-        zs = {hd.Z for hd in holds}
-        lv = {hd.threshold[0] for hd in holds}
-        if len(zs) != 1 or len(lv) != 1:
-            raise DataError("blocks use different hold lengths or announcement levels")
-        self.hold, self.level = int(zs.pop()), float(lv.pop())
+        # announcement of each fault: its block's level and hold length (fdikit.detect.Hold)
+        self.hold, self.level = [], []
+        for t, hd in zip(tests, holds):
+            for g in t.groups:
+                i = hd.input_names.index(f"P:{g}")
+                self.hold.append(int(hd.Z))
+                self.level.append(float(hd.threshold[i]))
         a.update(low=low, high=high, std=std, point=point,
                  logw=np.log(np.where(point, 1.0, np.maximum(high - low, 1e-300))),
                  blk_c0=np.array(c0, np.int64), blk_c1=np.array(c1, np.int64),
@@ -485,8 +491,8 @@ class FusedCarMonitor(ResidualGenerator):
         self.table_bytes = int(self._a["tab"].nbytes)
         self._H = self._a["low"].shape[0]
         spans = {m: _colspans(self._a[k]) for m, k in (("A", "A"), ("B", "Bv"), ("C", "C"), ("D", "Dv"))}
-        self._IP, self._FP = _pack(self._a, spans, (self._a["C"].shape[0], self.warmup, self.hold),
-                                   (self.par_a, self.alpha, self.level))
+        self._IP, self._FP = _pack(self._a, spans, self.hold, self.level,
+                                   (self._a["C"].shape[0], self.warmup), (self.par_a, self.alpha))
         self._dens = np.ascontiguousarray(np.stack([self._a[k] for k in ("low", "high", "std", "logw")]))
         self.parallel = True
         self.reset(1)
@@ -506,7 +512,7 @@ class FusedCarMonitor(ResidualGenerator):
                 "hypotheses": list(self.hypotheses), "faults": list(self.faults),
                 "output_names": list(self.output_names), "operating_point": dict(self.operating_point),
                 "deviations": self.deviations, "dt": self.dt, "par_a": self.par_a, "alpha": self.alpha,
-                "warmup": self.warmup, "hold": self.hold, "level": self.level,
+                "warmup": self.warmup, "hold": list(self.hold), "level": list(self.level),
                 "table_error": self.table_error,
                 "arrays": {k: v.copy() for k, v in self._a.items()}}
 
@@ -523,8 +529,11 @@ class FusedCarMonitor(ResidualGenerator):
             setattr(self, k, [str(s) for s in d[k]])
         self.operating_point = {str(k): float(v) for k, v in d["operating_point"].items()}
         self.deviations = bool(d["deviations"])
-        self.dt, self.par_a, self.alpha, self.level = (float(d[k]) for k in ("dt", "par_a", "alpha", "level"))
-        self.warmup, self.hold = int(d["warmup"]), int(d["hold"])
+        self.dt, self.par_a, self.alpha = (float(d[k]) for k in ("dt", "par_a", "alpha"))
+        self.warmup = int(d["warmup"])
+        F = len(self.faults)
+        self.hold = [int(h) for h in np.broadcast_to(np.asarray(d["hold"]), (F,))]
+        self.level = [float(v) for v in np.broadcast_to(np.asarray(d["level"], float), (F,))]
         arrays = dict(d["arrays"])
         missing = sorted(set(_ARRAYS) - set(arrays))
         if missing:
