@@ -130,3 +130,21 @@ def test_svm_artifact(tmp_path):
     back = roundtrip(tmp_path, dec, "svm")
     assert (tmp_path / "svm.npz").exists()  # the support vectors travel as an array
     np.testing.assert_array_equal(back.decision_function(X), dec.decision_function(X))
+
+
+def test_large_filter_matrices_go_to_npz_exactly(tmp_path):
+    from fdikit.residuals import FilterDesign
+
+    rng = np.random.default_rng(5)
+    n, m, p, q = 20, 2, 3, 4
+    d = FilterDesign(rng.normal(size=(n, n)) / 10, rng.normal(size=(n, m)), rng.normal(size=(n, p)),
+                     rng.normal(size=(q, n)), rng.normal(size=(q, m)), rng.normal(size=(q, p)), 0.01,
+                     ["u1", "u2"], ["y1", "y2", "y3"], [f"r{i}" for i in range(q)])
+    path = save_artifact(tmp_path / "big", d)
+    manifest = json.loads(path.read_text())
+    # A (400 entries) is an array in the NPZ; the small C, Du, Dy stay readable in the JSON
+    assert "p/A" in manifest["arrays"] and "p/Du" not in manifest["arrays"]
+    back = load_artifact(path)
+    for k in ("A", "Bu", "By", "C", "Du", "Dy"):
+        assert np.array_equal(getattr(back, k), getattr(d, k)), k
+    assert all(isinstance(v, list) for k, v in d.to_dict(inline=None).items() if k in ("A", "C"))
