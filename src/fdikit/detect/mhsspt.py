@@ -87,19 +87,32 @@ def umg_component_logpdf(x, low, high, std, point, logw):  # pragma: no cover - 
     return lhi + math.log1p(-math.exp(d)) - logw
 
 
-@njit(cache=True, parallel=True)
-def _loglik_umg(x, low, high, std, point, logw, out):  # pragma: no cover - compiled
-    """Log densities of uniform-mean Gaussians: x (R, T, C) -> out (R, T, H); runs in parallel."""
-    R, T, C = x.shape
+@njit(cache=True)
+def _loglik_umg_stream(r, x, low, high, std, point, logw, out):  # pragma: no cover - compiled
+    """Log densities of stream ``r``: x[r] (T, C) -> out[r] (T, H)."""
+    T, C = x.shape[1], x.shape[2]
     H = low.shape[0]
-    for r in prange(R):
-        for k in range(T):
-            for j in range(H):
-                acc = 0.0
-                for c in range(C):
-                    acc += umg_component_logpdf(x[r, k, c], low[j, c], high[j, c], std[j, c],
-                                                point[j, c], logw[j, c])
-                out[r, k, j] = acc
+    for k in range(T):
+        for j in range(H):
+            acc = 0.0
+            for c in range(C):
+                acc += umg_component_logpdf(x[r, k, c], low[j, c], high[j, c], std[j, c], point[j, c],
+                                            logw[j, c])
+            out[r, k, j] = acc
+
+
+@njit(cache=True)
+def _loglik_umg(x, low, high, std, point, logw, out):  # pragma: no cover - compiled
+    """Log densities of uniform-mean Gaussians: x (R, T, C) -> out (R, T, H), streams in turn."""
+    for r in range(x.shape[0]):
+        _loglik_umg_stream(r, x, low, high, std, point, logw, out)
+
+
+@njit(cache=True, parallel=True)
+def _loglik_umg_parallel(x, low, high, std, point, logw, out):  # pragma: no cover - compiled
+    """As :func:`_loglik_umg`, streams in parallel threads."""
+    for r in prange(x.shape[0]):
+        _loglik_umg_stream(r, x, low, high, std, point, logw, out)
 
 
 @njit(cache=True)
@@ -121,7 +134,7 @@ def umg_table_add(x, c, tab, g0, inv_h, nG, toff, low, high, std, point, logw, l
 
 @njit(cache=True, parallel=True)
 def _loglik_table(x, tab, g0, inv_h, nG, toff, low, high, std, point, logw, out):  # pragma: no cover
-    """Tabulated log densities: x (R, T, C) -> out (R, T, H); runs in parallel."""
+    """Tabulated log densities: x (R, T, C) -> out (R, T, H); streams in parallel (a bulk call)."""
     R, T, C = x.shape
     H = low.shape[0]
     for r in prange(R):
@@ -379,19 +392,36 @@ def mhsspt_update(logF, ll, phi, P, h0, h1, log1mp, logp_pi, logq, log1mq):  # p
         P[j] = P[j] / s
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
+def _mhsspt_recursion_stream(r, loglik, logF, log1mp, logp_pi, logq, log1mq, out):  # pragma: no cover
+    """Stream ``r``: loglik[r] (T, H) -> out[r] log posteriors; logF[r] updated in place."""
+    T, H = loglik.shape[1], loglik.shape[2]
+    phi = np.empty(H)
+    P = np.empty(H)
+    lf = logF[r]
+    for k in range(T):
+        mhsspt_update(lf, loglik[r, k], phi, P, 0, H, log1mp, logp_pi, logq, log1mq)
+        for j in range(H):
+            out[r, k, j] = lf[j]
+
+
+@njit(cache=True)
 def _mhsspt_recursion(loglik, logF, log1mp, logp_pi, logq, log1mq, out):  # pragma: no cover
-    """loglik (R, T, H) -> out (R, T, H) log posteriors; logF (R, H) is updated in place; runs
-    are independent streams, advanced in parallel."""
-    R, T, H = loglik.shape
-    for r in prange(R):
-        phi = np.empty(H)
-        P = np.empty(H)
-        lf = logF[r]
-        for k in range(T):
-            mhsspt_update(lf, loglik[r, k], phi, P, 0, H, log1mp, logp_pi, logq, log1mq)
-            for j in range(H):
-                out[r, k, j] = lf[j]
+    """loglik (R, T, H) -> out (R, T, H) log posteriors; logF (R, H) is updated in place; streams in turn."""
+    for r in range(loglik.shape[0]):
+        _mhsspt_recursion_stream(r, loglik, logF, log1mp, logp_pi, logq, log1mq, out)
+
+
+@njit(cache=True, parallel=True)
+def _mhsspt_recursion_parallel(loglik, logF, log1mp, logp_pi, logq, log1mq, out):  # pragma: no cover
+    """As :func:`_mhsspt_recursion`, streams in parallel threads (the same arithmetic per stream)."""
+    for r in prange(loglik.shape[0]):
+        _mhsspt_recursion_stream(r, loglik, logF, log1mp, logp_pi, logq, log1mq, out)
+
+
+#: Work (samples x components) above which a call shares the streams among threads; below it the
+#: thread start-up costs more than it saves (a streaming step).
+PARALLEL_MIN_WORK = 4096
 
 
 class MHSSPT(ResidualProcessor):
@@ -506,7 +536,8 @@ class MHSSPT(ResidualProcessor):
         if self._table is not None:
             _loglik_table(x3, *self._table, *self._umg, out)
         else:
-            _loglik_umg(x3, *self._umg, out)
+            par = x3.shape[0] > 1 and x3.size > PARALLEL_MIN_WORK
+            (_loglik_umg_parallel if par else _loglik_umg)(x3, *self._umg, out)
         return out.reshape((*x.shape[:-1], len(self.hypotheses)))
 
     _state_attrs = ("_logF", "_k")
@@ -546,13 +577,16 @@ class MHSSPT(ResidualProcessor):
             raise DataError(f"sample has {x.shape[0]} runs; the test was reset for {self._logF.shape[0]}")
         if self._table is not None:  # one compiled call: table look-up and recursion, streams in parallel
             out = np.empty((*x.shape[:2], len(self.hypotheses)))
-            kern = _mhsspt_table_run_parallel if x.shape[0] > 1 and x.size > 2048 else _mhsspt_table_run
+            par = x.shape[0] > 1 and x.size > PARALLEL_MIN_WORK
+            kern = _mhsspt_table_run_parallel if par else _mhsspt_table_run
             kern(np.ascontiguousarray(x, dtype=float), *self._table, self._dens, self._umg[3], self._logF,
                  self._log1mp, self._logp_pi, self._logq, self._log1mq, out)
         else:
             ll = np.ascontiguousarray(self.loglik(x))
             out = np.empty_like(ll)
-            _mhsspt_recursion(ll, self._logF, self._log1mp, self._logp_pi, self._logq, self._log1mq, out)
+            rec = _mhsspt_recursion_parallel if x.shape[0] > 1 and x.size > PARALLEL_MIN_WORK else \
+                _mhsspt_recursion
+            rec(ll, self._logF, self._log1mp, self._logp_pi, self._logq, self._log1mq, out)
         self._k += x.shape[1]
         return out
 
