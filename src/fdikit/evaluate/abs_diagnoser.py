@@ -42,13 +42,15 @@ by the severity estimate instead (estimated k_ws or R_w change against Table II'
 F1.1 2-5 %, F1.2 >= 5 %; F2.1 2-20 %, F2.2 >= 20 %). (ii) The sensor fault shows from the first
 sample and the R_w fault only after braking, so the gated G_O_T1 tells R_w from sensor faults
 (one test where the paper uses G_O_T1, G_O_T2, G_O2). (iii) tau_m faults of +15..+50 % trigger no
-GLRT test in this plant: F5 shares the "system OK" leaf. Measured with the same runs: complete
-tree sensitivity 67.5 % up to the leaf groups (15.3 % exact leaf), specificity 100 % (400
-nominal runs); full diagnoser (with the estimate splitting the groups) 68.6 % exact on 20 runs
-per faulty class; SVM error 0.14 % (1 of 720 fresh patterns, improved pipeline); the
-unreliable-test tree on the learned Pd/Pf (misdiagnosis cost 100) 60.0 % / 100 %, Go-path G_O1. Table V's
-99.9 % is out of reach because F5 is undetected and the small I_w (+2..10 %, and -2..-5 %),
-K_f and R_w faults drawn in their classes do not fire G_O1 (F4: 142 of 200 runs missed).
+GLRT test in this plant: F5 shares the "system OK" leaf. Measured with the same runs (observer with
+the held output injection of eq. (32), :class:`fdikit.residuals.abs_residuals.ABSObserver`): complete
+tree sensitivity 74.6 % up to the leaf groups (22.4 % exact leaf), specificity 100 % (400 nominal
+runs); full diagnoser (with the estimate splitting the groups) 74.3 % exact on 10 runs per faulty
+class; SVM error 0.14 % (1 of 720 fresh patterns, improved pipeline); the unreliable-test tree on
+the learned Pd/Pf (misdiagnosis cost 100) 66.4 % / 100 %, Go-path G_O1. (Before the held injection:
+67.5 %, 15.3 %, 100 %, 68.6 %, 60.0 %.) Table V's 99.9 % is out of reach because F5 is undetected and
+the small I_w faults drawn in their class do not fire G_O1 (F4: 79 of 200 runs missed; I_w changes
+fire it from about ±6 %, Pd 0.55-0.74 there and 1.0 from ±8 %, 23 dB).
 Subset estimation (oracle isolation, 20 runs per class, mean relative error): k_ws 0.24 / 0.13 %
 (F1.1 / F1.2), R_w 0.13 / 0.13 %, K_f 0.19 %, I_w 0.84 %, tau_m 38 % (not identifiable under
 23 dB process noise, see :mod:`fdikit.estimate.output_error`); Table VI's subset column: K_f 1.05,

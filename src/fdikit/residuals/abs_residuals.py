@@ -20,7 +20,10 @@ where needed, the known inputs ``P_m`` (MPa, nominal master-cylinder pressure), 
 * :class:`ABSObserver` -- eqs. (29)-(33): a Luenberger observer on x1..x5 with P_m as input and
   sample-and-hold measurements, integrated at 1 ms (the plant's own Euler scheme, with the
   exact orifice step for x5), residuals ``r3 = y1 - x1_hat`` and ``r4 = y2 - x2_hat`` at each
-  sample before the correction over the next interval. The gain comes from
+  sample before the correction over the next interval. The output injection is eq. (32)'s
+  ``L (y^h - x_hat^h)`` with the estimate held as well as the measurement (without that hold
+  the nominal noise-free residuals carried a deterministic bias of ``-s dt/2`` for a speed
+  falling at ``s`` rad/s^2, larger than the faults of Table II's minimum sizes). The gain comes from
   :func:`observer_gain` (steady-state Kalman-Bucy gain of the linear part A of eq. (30), the
   documented method; or pole placement).
 """
