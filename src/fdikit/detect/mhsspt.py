@@ -11,7 +11,11 @@ sample::
     phi_j = F_j (1 - q) + F_0 p pi_j
     F_j  <- phi_j f_j(x_k) / sum_i phi_i f_i(x_k)
 
-computed with log-sum-exp so that likelihoods of 1e-300 neither underflow nor give 0/0.
+computed with log-sum-exp so that likelihoods of 1e-300 neither underflow nor give 0/0. Terms
+more than :data:`NEGLIGIBLE_NATS` below the largest are left out of the sums (they are below its
+rounding). The densities are evaluated exactly or, with ``tabulate``, by interpolation in tables
+(:func:`tabulate_umg`); many independent streams (runs) are advanced in one compiled call, in
+parallel threads when the call has enough work.
 """
 
 from __future__ import annotations
@@ -350,6 +354,15 @@ def mhsspt_update(logF, ll, phi, P, h0, h1, log1mp, logp_pi, logq, log1mq):  # p
     ``logF`` (log posteriors) is updated in place from the log likelihoods ``ll``; ``P`` receives
     the posterior probabilities (0 for hypotheses more than :data:`NEGLIGIBLE_NATS` below the
     most probable); ``phi`` is scratch. Shared by :class:`MHSSPT` and the fused car monitor.
+
+    Examples
+    --------
+    >>> logF, ll = np.array([0.0, -np.inf]), np.array([0.0, np.log(4.0)])
+    >>> P = np.empty(2)
+    >>> mhsspt_update(logF, ll, np.empty(2), P, 0, 2, np.log1p(-0.2), np.array([-np.inf, np.log(0.2)]),
+    ...               -np.inf, 0.0)
+    >>> P.round(6).tolist()          # (0.8 * 1, 0.2 * 4) / 1.6
+    [0.5, 0.5]
     """
     # propagation (notes, residual-processing: phi_0, phi_j)
     if logq == -np.inf:  # q = 0: phi_0 = F_0 (1 - p) exactly
@@ -446,7 +459,8 @@ class MHSSPT(ResidualProcessor):
         With :class:`UniformMeanGaussian` densities: evaluate them by linear interpolation in
         tables of spacing ``tabulate`` times each feature's smallest std (:func:`tabulate_umg`;
         error <= tabulate^2 / 8 nats per component, measured as ``table_error``) instead of the
-        exact formula -- about 20 times faster. ``None`` (default): exact.
+        exact formula -- more than ten times faster (benchmarks/bench_car_monitor.py); the table and
+        the recursion then run in one compiled call. ``None`` (default): exact.
 
     Outputs ``"P:<hypothesis>"`` for every hypothesis, then ``"P:<group>"`` for every group.
 

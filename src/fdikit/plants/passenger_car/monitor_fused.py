@@ -532,7 +532,15 @@ class FusedCarMonitor(ResidualGenerator):
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> FusedCarMonitor:
         """Rebuild from :meth:`to_dict` (nothing is redesigned or recalibrated); every array's
-        shape is checked against the channel, feature and hypothesis counts."""
+        shape is checked against the channel, feature and hypothesis counts, and a mismatch is
+        refused with a :class:`~fdikit.errors.DataError` naming the array.
+
+        Examples
+        --------
+        >>> same = FusedCarMonitor.from_dict(fused.to_dict())       # doctest: +SKIP
+        >>> np.array_equal(same.run(log).values, fused.run(log).values)   # doctest: +SKIP
+        True
+        """
         if d.get("format") != FUSED_FORMAT:
             raise DataError(f"FusedCarMonitor payload format {d.get('format')!r}, this fdikit reads "
                             f"{FUSED_FORMAT}")
