@@ -203,16 +203,86 @@ def test_pattern_table_rows_distinct(pt):
         assert pt["rows"][k][j2] == 1 and pt["rows"][k][j1] == 0
 
 
-@pytest.mark.xfail(strict=True, reason="known shortfall: the front and rear wheel-speed-difference "
-                   "faults give nearly parallel lateral residual patterns (cosine ~0.999) with these UIOs")
 def test_lateral_patterns_not_parallel(pt):
-    # (the lateral binary rows of steer/yaw and of the two wheel differences coincide: the
-    # low-gain UIOs respond to every fault they do not block)
+    """The lateral filters block a sensor nuisance by not reading it (output projection) and their
+    residuals are whitened: the front and rear wheel-speed-difference faults no longer give parallel
+    patterns (cosine 0.999 with the state-space blocking [f, A f] and raw norms; 0.90 now)."""
     lat = ["steering_actuator", "lateral_accelerometer", "yaw_rate", "front_wheel_diff", "rear_wheel_diff"]
     Z = np.array([np.clip(pt["ratio"][k], 0, None) for k in lat])
     Z /= np.linalg.norm(Z, axis=1, keepdims=True)
     cos = Z @ Z.T - 2 * np.eye(len(lat))
-    assert cos.max() < 0.99, cos.max()
+    assert cos.max() < 0.95, cos.max()
+    # every lateral fault has its own binary row, with a zero where the filter blocking it sits
+    rows = {k: tuple(pt["rows"][k]) for k in lat}
+    assert len(set(rows.values())) == len(lat), pt["text"]
+
+
+def test_lateral_filters_one_per_blocked_fault(des):
+    """The exact UIO depends on its nuisance only: set 6's accelerometer filter (nuisance the rear
+    wheel-speed difference) is set 5's yaw-rate filter and gives no feature of its own; the five
+    lateral features block the five lateral faults one each (the nuisance transmission recomputed
+    from the internal form, the target's and the other faults' from the plant)."""
+    a, b = des.designs[6]["sensor:a_y"], des.designs[5]["sensor:yaw_rate"]
+    assert np.allclose(a.C, b.C) and np.allclose(a.Dy, b.Dy) and np.allclose(a.By, b.By)
+    groups = des.residual_groups(LATERAL_SETS)
+    assert "|set6/sensor:a_y|" not in groups and len(groups) == 5
+    model = des.models["lateral"]
+    z = np.exp(2j * np.pi * FREQS * des.dt)
+    blocked = []
+    for s in LATERAL_SETS:
+        for target, d in des.designs[s].items():
+            if f"|{d.residual_names[0].rsplit(':', 1)[0]}|" not in groups:
+                continue
+            Gf = np.abs(_response(internal_form(d, model), "f", z)).max(axis=(0, 1))  # per fault
+            blocked.append(model.fault_names[int(np.argmin(Gf))])
+            assert np.sort(Gf)[1] > 1e6 * Gf.min(), (s, target, Gf)   # one fault blocked, all others seen
+    assert sorted(blocked) == sorted(model.fault_names)
+
+
+def test_lateral_residuals_whitened(des):
+    """The whitened lateral residuals have unit covariance on their range under the sensor noise:
+    sample covariance of the filters driven by simulated white noise (independent of the Lyapunov
+    equation used to whiten)."""
+    from fdikit.plants.passenger_car.monitor import SENSOR_NOISE_STD
+    from fdikit.residuals import FaultDetectionFilter
+
+    rng = np.random.default_rng(3)
+    for s in LATERAL_SETS:
+        for d in des.designs[s].values():
+            T = 40000
+            v = rng.normal(size=(1, T, len(d.y_names))) * np.array([SENSOR_NOISE_STD[y] for y in d.y_names])
+            u = np.zeros((1, T, len(d.u_names)))
+            sig = Signals(np.arange(T) * d.dt, np.concatenate([u, v], axis=2), d.u_names + d.y_names)
+            r = FaultDetectionFilter(d).run(sig).values[0, 2000:]
+            w = np.linalg.eigvalsh(np.cov(r.T))
+            k = d.info["noise_rank"]
+            assert np.allclose(w[-k:], 1.0, atol=0.05), (s, w)
+            assert np.all(w[:-k] < 1e-6), (s, w)
+
+
+def test_steering_separates_from_accelerometer(des):
+    """Root cause of the steering shortfall: a steering step enters the lateral acceleration
+    instantly (the tyre force, D = 67 m/s^2/rad), so at the first sample it is an accelerometer bias;
+    only the yaw dynamics tell them apart. The residual that blocks the accelerometer must see the
+    smallest calibrated steering fault (0.01 rad) within a few samples, in noise standard deviations
+    (whitened): step response of the recomputed internal form, by direct recursion."""
+    model = des.models["lateral"]
+    d = des.designs[6]["sensor:w_rear_diff"]
+    M = internal_form(d, model)
+    js, ja = M.fault_names.index("actuator:steer"), M.fault_names.index("sensor:a_y")
+    x, xa = np.zeros(M.n_states), np.zeros(M.n_states)
+    steer, acc = [], []
+    for _ in range(6):
+        steer.append(np.linalg.norm((M.C @ x + M.D_of("f")[:, js]) * 0.01))
+        acc.append(np.linalg.norm(M.C @ xa + M.D_of("f")[:, ja]))
+        x = M.A @ x + M.B_of("f")[:, js]
+        xa = M.A @ xa + M.B_of("f")[:, ja]
+    assert max(acc) < 1e-9                   # the accelerometer is blocked
+    assert steer[0] < 0.2                    # the first sample cannot tell them apart
+    assert steer[1] > 1.5 and steer[3] > 5.0, steer   # the yaw dynamics can, within 30 ms
+    # the plant itself: steer -> a_y feedthrough (what makes the first sample ambiguous)
+    iy = model.output_index(["a_y"])[0]
+    assert model.D_of("f")[iy, model.fault_names.index("actuator:steer")] > 50.0
 
 
 def test_cli_parser():
@@ -275,9 +345,7 @@ def test_fused_monitor_equals_stagewise(des):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("name,delay", [("brake_actuator_short", 0.5), ("brake_actuator", 0.5),
-                                        pytest.param("steering_actuator", 0.2, marks=pytest.mark.xfail(
-                                            strict=True, reason="known shortfall: the steering fault "
-                                            "looks like a lateral-accelerometer fault for ~0.4 s"))])
+                                        ("steering_actuator", 0.2)])
 def test_actuator_scenarios(name, delay):
     from fdikit.plants.passenger_car.scenarios import run_scenario
 
