@@ -49,7 +49,7 @@ __all__ = ["FusedCarMonitor"]
 
 
 #: Runs advanced together by one kernel call (the filter's multiply-adds run across them).
-CHUNK = 8
+CHUNK = 16
 
 
 #: Segments of the packed integer and float parameter vectors of the kernel (one array each: a
@@ -123,28 +123,46 @@ def _fused_chunk(i0, i1, V, xi_all, par_all, feat_all, logF_all, cnt_all, out_al
                 DV[j, w] = V[i0 + w, kk, j] - v0[j]
         RR[:, :] = 0.0
         TMP[:, :] = 0.0
-        for j in range(nf):
-            o = C_o[j] - C_l[j]
-            for ii in range(C_l[j], C_h[j]):
-                cij = C_x[o + ii]
-                for w in range(W):
-                    RR[ii, w] += cij * XI[j, w]
-            o = A_o[j] - A_l[j]
-            for ii in range(A_l[j], A_h[j]):
-                aij = A_x[o + ii]
-                for w in range(W):
-                    TMP[ii, w] += aij * XI[j, w]
-        for j in range(nv):
-            o = D_o[j] - D_l[j]
-            for ii in range(D_l[j], D_h[j]):
-                dij = D_x[o + ii]
-                for w in range(W):
-                    RR[ii, w] += dij * DV[j, w]
-            o = B_o[j] - B_l[j]
-            for ii in range(B_l[j], B_h[j]):
-                bij = B_x[o + ii]
-                for w in range(W):
-                    TMP[ii, w] += bij * DV[j, w]
+        if W == 1:  # one run (streaming): the same products and sums without the loop over runs
+            for j in range(nf):
+                x = XI[j, 0]
+                o = C_o[j] - C_l[j]
+                for ii in range(C_l[j], C_h[j]):
+                    RR[ii, 0] += C_x[o + ii] * x
+                o = A_o[j] - A_l[j]
+                for ii in range(A_l[j], A_h[j]):
+                    TMP[ii, 0] += A_x[o + ii] * x
+            for j in range(nv):
+                x = DV[j, 0]
+                o = D_o[j] - D_l[j]
+                for ii in range(D_l[j], D_h[j]):
+                    RR[ii, 0] += D_x[o + ii] * x
+                o = B_o[j] - B_l[j]
+                for ii in range(B_l[j], B_h[j]):
+                    TMP[ii, 0] += B_x[o + ii] * x
+        else:
+            for j in range(nf):
+                o = C_o[j] - C_l[j]
+                for ii in range(C_l[j], C_h[j]):
+                    cij = C_x[o + ii]
+                    for w in range(W):
+                        RR[ii, w] += cij * XI[j, w]
+                o = A_o[j] - A_l[j]
+                for ii in range(A_l[j], A_h[j]):
+                    aij = A_x[o + ii]
+                    for w in range(W):
+                        TMP[ii, w] += aij * XI[j, w]
+            for j in range(nv):
+                o = D_o[j] - D_l[j]
+                for ii in range(D_l[j], D_h[j]):
+                    dij = D_x[o + ii]
+                    for w in range(W):
+                        RR[ii, w] += dij * DV[j, w]
+                o = B_o[j] - B_l[j]
+                for ii in range(B_l[j], B_h[j]):
+                    bij = B_x[o + ii]
+                    for w in range(W):
+                        TMP[ii, w] += bij * DV[j, w]
         XI[:, :] = TMP
         for w in range(W):
             i = i0 + w
