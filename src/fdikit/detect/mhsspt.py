@@ -432,6 +432,35 @@ def _mhsspt_recursion_parallel(loglik, logF, log1mp, logp_pi, logq, log1mq, out)
         _mhsspt_recursion_stream(r, loglik, logF, log1mp, logp_pi, logq, log1mq, out)
 
 
+@njit(cache=True)
+def _probabilities_row(L, gmat, out, n):  # pragma: no cover - compiled
+    """Row n: exp of the log posteriors (0 below exp's range, as exp itself gives), then group sums."""
+    H = L.shape[1]
+    for j in range(H):
+        v = L[n, j]
+        out[n, j] = math.exp(v) if v > -746.0 else 0.0
+    for g in range(gmat.shape[0]):
+        acc = 0.0
+        for e in range(gmat.shape[1]):
+            if gmat[g, e] >= 0:
+                acc += out[n, gmat[g, e]]
+        out[n, H + g] = acc
+
+
+@njit(cache=True)
+def _probabilities(L, gmat, out):  # pragma: no cover - compiled
+    """Posterior probabilities and group sums: L (N, H) log posteriors -> out (N, H + G)."""
+    for n in range(L.shape[0]):
+        _probabilities_row(L, gmat, out, n)
+
+
+@njit(cache=True, parallel=True)
+def _probabilities_parallel(L, gmat, out):  # pragma: no cover - compiled
+    """As :func:`_probabilities`, rows in parallel threads."""
+    for n in prange(L.shape[0]):
+        _probabilities_row(L, gmat, out, n)
+
+
 #: Work (samples x components) above which a call shares the streams among threads; below it the
 #: thread start-up costs more than it saves (a streaming step).
 PARALLEL_MIN_WORK = 4096
@@ -512,6 +541,10 @@ class MHSSPT(ResidualProcessor):
                     raise DataError(f"group {g!r} names unknown hypothesis {h!r}; "
                                     f"hypotheses: {self.hypotheses}")
         self._gidx = [[self.hypotheses.index(h) for h in m] for m in self.groups.values()]
+        width = max([len(g) for g in self._gidx], default=1)
+        self._gmat = np.full((len(self._gidx), width), -1, np.int64)
+        for i, g in enumerate(self._gidx):
+            self._gmat[i, :len(g)] = g
         self.output_names = [f"P:{h}" for h in self.hypotheses] + [f"P:{g}" for g in self.groups]
         with np.errstate(divide="ignore"):
             self._logp_pi = np.r_[-np.inf, np.log(self.p) + np.log(pi)]
@@ -576,10 +609,13 @@ class MHSSPT(ResidualProcessor):
         self._k = 0
 
     def _outputs(self, logF: np.ndarray) -> np.ndarray:
-        P = np.exp(logF)
-        if not self._gidx:
-            return P
-        return np.concatenate([P] + [P[..., i].sum(axis=-1, keepdims=True) for i in self._gidx], axis=-1)
+        """Probabilities of the hypotheses, then the group sums: logF (..., H) -> (..., H + G)."""
+        H = logF.shape[-1]
+        L = np.ascontiguousarray(logF.reshape(-1, H))
+        out = np.empty((L.shape[0], H + len(self._gidx)))
+        kern = _probabilities_parallel if L.size > PARALLEL_MIN_WORK else _probabilities
+        kern(L, self._gmat, out)
+        return out.reshape((*logF.shape[:-1], out.shape[1]))
 
     def _advance(self, x: np.ndarray) -> np.ndarray:
         bad = ~np.isfinite(x)
