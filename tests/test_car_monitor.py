@@ -377,6 +377,24 @@ def test_accelerometer_delay_falls_with_the_bias():
     assert delays[0] > delays[1] > delays[2], delays
 
 
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason=(
+    "known shortfall: the 're-tuned faster' accelerometer filter (100x Riccati state weight) detects the "
+    "0.6 m/s^2 bias in 0.55 s, the default in 0.15 s. In this exact UIO the bias reaches the residual "
+    "only through the integration of the acceleration against the wheel speeds: the first 10 samples of "
+    "its response do not depend on the weight, and a larger weight lowers the settled response (whitened "
+    "5.95 -> 0.88 per 0.6 m/s^2: the observer absorbs the bias) while shortening its rise (63 %: 0.25 -> "
+    "0.09 s). The paper's faster-but-noisier filter needs the target weighting of the optimal stochastic "
+    "filter, which fdf.py does not model"))
+def test_faster_accelerometer_filter_detects_sooner():
+    """Paper Fig. 4, second column: the re-tuned filter detects the 0.6 m/s^2 bias sooner."""
+    from fdikit.plants.passenger_car.scenarios import run_scenario
+
+    d = [run_scenario(n)["summary"] for n in ("accel_bias_0.6", "accel_bias_0.6_fast")]
+    assert all(s["isolated"] == "accelerometer" and not s["false_announcements"] for s in d), d
+    assert d[1]["detection_delay_s"] < d[0]["detection_delay_s"], [s["detection_delay_s"] for s in d]
+
+
 # ---------------------------------------------------------------------------------- real RAV4 minute
 def _rav4_available():
     from fdikit.plants.passenger_car.rav4 import default_data_path
@@ -422,8 +440,6 @@ def test_rav4_injected_faults_isolated(spec, fault):
 
 
 @rav4
-@pytest.mark.xfail(strict=True, reason="known shortfall: real lateral-accelerometer events the fitted model "
-                   "does not explain are announced as accelerometer faults (3 times in the minute)")
 def test_rav4_no_false_announcements():
     from fdikit.plants.passenger_car.monitor_rav4 import run_rav4_log
 

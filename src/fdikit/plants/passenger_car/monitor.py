@@ -19,12 +19,16 @@ Residual generator (Section IV-B..D):
 
   (each filter of a set takes the other target of the set as a nuisance too). The road slope is
   an unknown disturbance of the longitudinal block (the curve of Section V is built on a slope);
-  it is blocked like the nonlinearity.
+  it is blocked like the nonlinearity. The lateral filters (sets 4-6) are low-gain observers
+  (:data:`LATERAL_Q_WEIGHT`) that block a sensor nuisance by not reading that sensor, with their
+  residuals whitened (:func:`whiten_design`); the exact UIO depends on its nuisance only, so the
+  six lateral filters are five distinct ones, each blind to one lateral fault (set 6's
+  accelerometer filter is set 5's yaw-rate filter and gives no feature of its own).
 * two parity equations (Section IV-D): throttle command vs throttle measurement, brake command
   through the brake actuator model (first-order lag ``tau_b``) vs brake-pressure measurement.
 
-Residual processor (Section IV-E): the Euclidean norm of each filter's residual and the absolute
-value of each parity residual (low-pass smoothed) form the feature vector of a multiple-hypothesis
+Residual processor (Section IV-E): the Euclidean norm of each distinct filter's residual and the
+absolute value of each parity residual (low-pass smoothed) form the feature vector of a multiple-hypothesis
 Shiryayev test (:class:`~fdikit.detect.MHSSPT`) whose uniform-mean Gaussian densities are
 calibrated by simulating every fault over a range of magnitudes on the nonlinear car
 (:func:`calibrate_monitor`): 15 longitudinal hypotheses (no fault + small/large for throttle,
