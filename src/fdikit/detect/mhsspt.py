@@ -152,8 +152,10 @@ def _loglik_table(x, tab, g0, inv_h, nG, toff, low, high, std, point, logw, out)
 
 @njit(cache=True)
 def _mhsspt_table_stream(r, x, tab, g0, inv_h, nG, toff, dens, point, logF, log1mp, logp_pi, logq, log1mq,
-                         out):  # pragma: no cover - compiled
-    """Stream ``r``: tabulated log likelihoods and the recursion for all its samples."""
+                         gmat, probs, out):  # pragma: no cover - compiled
+    """Stream ``r``: tabulated log likelihoods and the recursion for all its samples. ``out``
+    receives the log posteriors or, with ``probs``, the outputs of :meth:`MHSSPT._outputs`
+    (probabilities, then group sums; the same arithmetic as :func:`_probabilities_row`)."""
     T, C = x.shape[1], x.shape[2]
     H = logF.shape[1]
     ll = np.empty(H)
@@ -177,26 +179,38 @@ def _mhsspt_table_stream(r, x, tab, g0, inv_h, nG, toff, dens, point, logF, log1
             else:
                 umg_table_add(xc, c, tab, g0, inv_h, nG, toff, low, high, std, point, logw, ll, 0, H)
         mhsspt_update(lf, ll, phi, P, 0, H, log1mp, logp_pi, logq, log1mq)
-        for j in range(H):
-            out[r, k, j] = lf[j]
+        o = out[r, k]
+        if probs:
+            for j in range(H):
+                v = lf[j]
+                o[j] = math.exp(v) if v > -746.0 else 0.0
+            for g in range(gmat.shape[0]):
+                acc = 0.0
+                for e in range(gmat.shape[1]):
+                    if gmat[g, e] >= 0:
+                        acc += o[gmat[g, e]]
+                o[H + g] = acc
+        else:
+            for j in range(H):
+                o[j] = lf[j]
 
 
 @njit(cache=True)
 def _mhsspt_table_run(x, tab, g0, inv_h, nG, toff, dens, point, logF, log1mp, logp_pi, logq, log1mq,
-                      out):  # pragma: no cover - compiled
+                      gmat, probs, out):  # pragma: no cover - compiled
     """Tabulated MHSSPT over x (R, T, C), streams one after the other."""
     for r in range(x.shape[0]):
         _mhsspt_table_stream(r, x, tab, g0, inv_h, nG, toff, dens, point, logF, log1mp, logp_pi, logq, log1mq,
-                             out)
+                             gmat, probs, out)
 
 
 @njit(cache=True, parallel=True)
 def _mhsspt_table_run_parallel(x, tab, g0, inv_h, nG, toff, dens, point, logF, log1mp, logp_pi, logq, log1mq,
-                               out):  # pragma: no cover - compiled
+                               gmat, probs, out):  # pragma: no cover - compiled
     """Tabulated MHSSPT over x (R, T, C), streams in parallel threads (the arithmetic of the serial one)."""
     for r in prange(x.shape[0]):
         _mhsspt_table_stream(r, x, tab, g0, inv_h, nG, toff, dens, point, logF, log1mp, logp_pi, logq, log1mq,
-                             out)
+                             gmat, probs, out)
 
 
 def _component_logpdf(x: np.ndarray, low: float, high: float, std: float, point: bool) -> np.ndarray:
@@ -627,10 +641,7 @@ class MHSSPT(ResidualProcessor):
             raise DataError(f"sample has {x.shape[0]} runs; the test was reset for {self._logF.shape[0]}")
         if self._table is not None:  # one compiled call: table look-up and recursion, streams in parallel
             out = np.empty((*x.shape[:2], len(self.hypotheses)))
-            par = x.shape[0] > 1 and x.size > PARALLEL_MIN_WORK
-            kern = _mhsspt_table_run_parallel if par else _mhsspt_table_run
-            kern(np.ascontiguousarray(x, dtype=float), *self._table, self._dens, self._umg[3], self._logF,
-                 self._log1mp, self._logp_pi, self._logq, self._log1mq, out)
+            self._table_call(x, False, out)
         else:
             ll = np.ascontiguousarray(self.loglik(x))
             out = np.empty_like(ll)
@@ -640,13 +651,41 @@ class MHSSPT(ResidualProcessor):
         self._k += x.shape[1]
         return out
 
+    def _table_call(self, x: np.ndarray, probs: bool, out: np.ndarray) -> None:
+        par = x.shape[0] > 1 and x.size > PARALLEL_MIN_WORK
+        kern = _mhsspt_table_run_parallel if par else _mhsspt_table_run
+        kern(np.ascontiguousarray(x, dtype=float), *self._table, self._dens, self._umg[3], self._logF,
+             self._log1mp, self._logp_pi, self._logq, self._log1mq, self._gmat, probs, out)
+
+    def _direct(self, x: np.ndarray) -> np.ndarray | None:
+        """Outputs straight from the tabulated kernel (no log-posterior intermediate), bitwise
+        equal to ``_outputs(_advance(x))``; None where that path is needed (exact densities, or a
+        subclass that changes ``_advance``)."""
+        if self._table is None or type(self)._advance is not MHSSPT._advance:
+            return None
+        bad = ~np.isfinite(x)
+        if bad.any():
+            run, k, c = np.argwhere(bad)[0]
+            raise DataError(f"MHSSPT input {self.input_names[c]!r} is not finite at sample "
+                            f"{self._k + k} (run {run})")
+        if x.shape[0] != self._logF.shape[0]:
+            raise DataError(f"sample has {x.shape[0]} runs; the test was reset for {self._logF.shape[0]}")
+        out = np.empty((*x.shape[:2], len(self.output_names)))
+        self._table_call(x, True, out)
+        self._k += x.shape[1]
+        return out
+
     def _step(self, r: np.ndarray) -> np.ndarray:
-        return self._outputs(self._advance(r[:, None, :])[:, 0])
+        x = r[:, None, :]
+        out = self._direct(x)
+        return (self._outputs(self._advance(x)) if out is None else out)[:, 0]
 
     def run(self, signals: Signals) -> Signals:
         x = signals.values[:, :, signals.index(self.input_names)]
         self.reset(signals.runs)
-        return Signals(signals.t, self._outputs(self._advance(x)), self.output_names, check=False)
+        out = self._direct(x)
+        return Signals(signals.t, self._outputs(self._advance(x)) if out is None else out, self.output_names,
+                       check=False)
 
     def log_posterior(self) -> np.ndarray:
         """Current log posterior of every hypothesis, (runs, H)."""
