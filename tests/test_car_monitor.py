@@ -226,6 +226,13 @@ def test_lateral_filters_one_per_blocked_fault(des):
     assert np.allclose(a.C, b.C) and np.allclose(a.Dy, b.Dy) and np.allclose(a.By, b.By)
     groups = des.residual_groups(LATERAL_SETS)
     assert "|set6/sensor:a_y|" not in groups and len(groups) == 5
+    assert len(des.residual_groups(LATERAL_SETS, unique=False)) == 6
+    # longitudinal: set 3's brake filter has set 2's front-wheel filter's nuisance (rear wheel-speed
+    # sum, nonlinearity) and is the same filter
+    lon = des.residual_groups(LONGITUDINAL_SETS)
+    assert "|set3/actuator:brake|" not in lon and len(lon) == 5
+    nuis = [des.designs[s][t].info["nuisance"] for s, t in ((3, "actuator:brake"), (2, "sensor:w_front_sum"))]
+    assert nuis[0] == nuis[1], nuis
     model = des.models["lateral"]
     z = np.exp(2j * np.pi * FREQS * des.dt)
     blocked = []
@@ -455,3 +462,24 @@ def test_ten_minute_nominal_drive_no_false_announcement():
     r = nominal_drive(10.0)
     assert abs(r["simulated_s"] - 600.0) < 1.0
     assert r["false_announcements"] == 0, r["segments"]
+
+
+def test_sensor_nuisance_blocked_by_projection_keeps_the_other_wheel(des):
+    """Blocking the front wheel-speed difference through its state-space equivalent [f, A f] also
+    hides most of the rear wheel-speed difference's fault; projecting the front sensor out does not.
+    DC gain of the whitened residual of the filter blind to the front sensor (set 4, target steering)
+    to a 0.6 rad/s rear bias, from the internal form: C (I - A)^-1 B + D."""
+    from fdikit.plants.passenger_car.monitor import design_car_monitor
+
+    def dc(d):
+        M = internal_form(d, des.models["lateral"])
+        j = M.fault_names.index("sensor:w_rear_diff")
+        g = M.C @ np.linalg.solve(np.eye(M.n_states) - M.A, M.B_of("f")[:, j]) + M.D_of("f")[:, j]
+        jf = M.fault_names.index("sensor:w_front_diff")
+        gf = M.C @ np.linalg.solve(np.eye(M.n_states) - M.A, M.B_of("f")[:, jf]) + M.D_of("f")[:, jf]
+        assert np.linalg.norm(gf) < 1e-8 * max(1.0, np.linalg.norm(g))   # the front sensor is blocked
+        return 0.6 * np.linalg.norm(g)
+
+    state = design_car_monitor(20.0, lateral_sensor_nuisance="state")
+    g_out, g_state = dc(des.designs[4]["actuator:steer"]), dc(state.designs[4]["actuator:steer"])
+    assert g_out > 5.0 and g_state < 3.0, (g_out, g_state)

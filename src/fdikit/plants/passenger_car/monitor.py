@@ -23,7 +23,8 @@ Residual generator (Section IV-B..D):
   (:data:`LATERAL_Q_WEIGHT`) that block a sensor nuisance by not reading that sensor, with their
   residuals whitened (:func:`whiten_design`); the exact UIO depends on its nuisance only, so the
   six lateral filters are five distinct ones, each blind to one lateral fault (set 6's
-  accelerometer filter is set 5's yaw-rate filter and gives no feature of its own).
+  accelerometer filter is set 5's yaw-rate filter and gives no feature of its own; likewise set 3's
+  brake filter is set 2's front wheel-speed filter, :meth:`CarMonitorDesign.residual_groups`).
 * two parity equations (Section IV-D): throttle command vs throttle measurement, brake command
   through the brake actuator model (first-order lag ``tau_b``) vs brake-pressure measurement.
 
@@ -443,10 +444,12 @@ class CarMonitorDesign:
         """Feature name ``"|<set>/<target>|"`` -> the filter's residual channels.
 
         With ``unique``, a filter identical to an earlier one (same matrices to 1e-12: the exact
-        unknown input observer depends on its nuisance only, not on its target, so set 6's
-        accelerometer filter, nuisance the rear wheel-speed difference, is set 5's yaw-rate
-        filter) gives no feature of its own: the MHSSPT densities treat the features as
-        independent, and a duplicated residual would count its evidence twice."""
+        unknown input observer depends on its nuisance only, not on its target) gives no feature
+        of its own: the MHSSPT densities treat the features as independent, and a duplicated
+        residual would count its evidence twice. Set 6's accelerometer filter (nuisance the rear
+        wheel-speed difference) is set 5's yaw-rate filter, and set 3's brake filter (nuisance
+        the rear wheel-speed sum and the nonlinearity; the slope is not separable from either
+        target) is set 2's front wheel-speed filter."""
         out: dict[str, list[str]] = {}
         seen: list[FilterDesign] = []
         for d in self.filters(sets):
@@ -580,6 +583,12 @@ def design_car_monitor(speed: float = 20.0, dt: float = 0.01, *, fast_accelerome
     """
     from .nonlinearity import nonlinearity_directions
 
+    if lateral_sensor_nuisance not in ("output", "state"):
+        raise ModelError("lateral_sensor_nuisance must be 'output' or 'state', "
+                         f"got {lateral_sensor_nuisance!r}")
+    bad = [b for b in whiten if b not in ("longitudinal", "lateral")]
+    if bad:
+        raise ModelError(f"whiten names unknown blocks {bad}; blocks: 'longitudinal', 'lateral'")
     t0 = time.perf_counter()
     lin = linearize_car(float(speed))
     nd = nonlinearity_directions(lin, "longitudinal", k=1, duration=nl_duration, dt=2.5e-3)
