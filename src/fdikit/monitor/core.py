@@ -17,6 +17,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from itertools import pairwise
 from typing import Any
 
 import numpy as np
@@ -183,7 +184,8 @@ class Monitor:
     processors : sequence of ResidualProcessor
         Each reads named residual channels (and outputs of earlier processors).
     decision : Decision, optional
-        Announcement rule over the processors' outputs.
+        Announcement rule over the processors' outputs (or the generators', e.g. a generator that
+        computes probabilities and announcements itself).
     validate : bool
         Check every incoming sample for NaN/inf (and time for monotonicity).
     on_invalid : {"raise", "hold"}
@@ -192,6 +194,9 @@ class Monitor:
         state (nothing non-finite enters a filter or a probability), the previous residuals and
         statistics are repeated, and processing resumes with the next good sample. ``"hold"``
         is for recorded or live data of one run (a Monte Carlo batch has no bad samples).
+        At the first good sample after held ones, every generator and processor that has a
+        ``resume(n_held)`` method is called first: a component whose state went stale over the
+        gap (a filter tracking a plant that moved on) can re-enter its warm-up there.
 
     Batch (:meth:`run`) and streaming (:meth:`reset` / :meth:`step`) give identical outputs.
     """
@@ -223,14 +228,27 @@ class Monitor:
                 raise DataError(f"processor {type(p).__name__} needs channels {missing} that no "
                                 f"generator or earlier processor produces; have {sorted(avail)}")
             avail |= set(p.output_names)
+        # the pool: every channel a stage produces, residuals first, then each processor's outputs
+        self._pool_names = [*self.residual_names, *self.stat_names]
+        col = {n: i for i, n in enumerate(self._pool_names)}
+        if len(col) != len(self._pool_names):
+            raise DataError(f"statistic channel names collide with each other or with residuals: "
+                            f"{self.stat_names}")
         if decision is not None:
-            missing = [c for c in decision.alarm_channels if c not in self.stat_names]
+            missing = [c for c in decision.alarm_channels if c not in col]
             if missing:
-                raise DataError(f"decision needs channels {missing}; statistics are {self.stat_names}")
+                raise DataError(f"decision needs channels {missing}; the monitor produces "
+                                f"{self._pool_names}")
+            self._dec_idx = np.array([col[c] for c in decision.alarm_channels], np.intp)
+        self._proc_idx = [np.array([col[n] for n in p.input_names], np.intp) for p in self.processors]
+        starts = np.cumsum([len(self.residual_names)] + [len(p.output_names) for p in self.processors])
+        self._proc_out = [slice(int(a), int(b)) for a, b in pairwise(starts)]
         self.input_names = sorted({n for g in self.generators for n in (*g.u_names, *g.y_names)})
+        self._plans: dict[tuple[str, ...], tuple] = {}
         self._k = 0
         self._t_prev: float | None = None
         self._on: np.ndarray | None = None
+        self._held = 0
 
     # ------------------------------------------------------------------ batch
     def run(self, signals: Signals) -> MonitorResult:
@@ -252,7 +270,7 @@ class Monitor:
             pool = pool.concat_channels(s)
         st = pool.select(self.stat_names) if self.stat_names else Signals(
             signals.t, np.zeros((signals.runs, signals.n_samples, 0)), [], check=False)
-        events = self.decision.events(signals.t, st) if self.decision is not None else []
+        events = self.decision.events(signals.t, r.concat_channels(st)) if self.decision is not None else []
         return MonitorResult(r, st, events, np.ones((signals.runs, signals.n_samples), bool))
 
     # ------------------------------------------------------------------ streaming
@@ -264,6 +282,7 @@ class Monitor:
         self._k = 0
         self._t_prev = None
         self._on = None
+        self._held = 0
         self._runs = runs
         self._last: tuple[np.ndarray, np.ndarray] | None = None
         self.last_invalid: str | None = None
@@ -285,20 +304,20 @@ class Monitor:
         if not np.isfinite(t):
             raise DataError(f"time is not finite at sample {self._k}: {t}")
         if isinstance(sample, dict):
-            names = list(sample)
-            vals = np.column_stack([np.broadcast_to(np.asarray(sample[n], float), (self._runs,))
-                                    for n in names])
+            key = tuple(sample)
+            vals = np.empty((self._runs, len(key)))
+            for i, n in enumerate(key):
+                vals[:, i] = sample[n]
         else:
             if names is None:
                 raise DataError("give channel names with an array sample")
-            names = list(names)
-            vals = _as_batch(sample, len(names), "monitor", names)
-        lookup = {n: i for i, n in enumerate(names)}
-        for n in self.input_names:
-            if n not in lookup:
-                raise DataError(f"sample {self._k} lacks channel {n!r}; it has {names}")
+            key = tuple(names)
+            vals = _as_batch(sample, len(key), "monitor", key)
+        plan = self._plans.get(key)
+        if plan is None:
+            plan = self._plan(key)
+        sel, gen_idx = plan
         if self.validate:
-            sel = [lookup[n] for n in self.input_names]
             bad = ~np.isfinite(vals[:, sel])
             if bad.any():
                 run, c = np.argwhere(bad)[0]
@@ -307,40 +326,59 @@ class Monitor:
                 if self.on_invalid == "raise":
                     raise DataError(msg)
                 return self._hold(msg, t)
-        outs = []
-        for g in self.generators:
-            u = vals[:, [lookup[n] for n in g.u_names]]
-            y = vals[:, [lookup[n] for n in g.y_names]]
-            outs.append(g.step(u, y))
-        r = np.concatenate(outs, axis=1) if outs else np.zeros((vals.shape[0], 0))
-        pool = dict(zip(self.residual_names, r.T))
-        stats = []
-        for p in self.processors:
-            r_in = np.column_stack([pool[n] for n in p.input_names])
+        if self._held:  # good data again after held samples: components that care are told
+            for c in (*self.generators, *self.processors):
+                if hasattr(c, "resume"):
+                    c.resume(self._held)
+            self._held = 0
+        pool = np.empty((vals.shape[0], len(self._pool_names)))
+        j = 0
+        for g, (ui, yi) in zip(self.generators, gen_idx):
+            out = g.step(vals[:, ui], vals[:, yi])
+            pool[:, j:j + out.shape[1]] = out
+            j += out.shape[1]
+        for p, idx, sl in zip(self.processors, self._proc_idx, self._proc_out):
+            r_in = pool[:, idx]
             # processors whose rule depends on time (e.g. TimeGated) take it with the sample
-            s = p.step_at(float(t), r_in) if getattr(p, "needs_time", False) else p.step(r_in)
-            stats.append(s)
-            pool.update(zip(p.output_names, s.T))
-        st = np.concatenate(stats, axis=1) if stats else np.zeros((vals.shape[0], 0))
+            pool[:, sl] = p.step_at(float(t), r_in) if getattr(p, "needs_time", False) else p.step(r_in)
+        nr = len(self.residual_names)
+        r, st = pool[:, :nr], pool[:, nr:]
         events: list[Event] = []
         if self.decision is not None:
-            idx = [self.stat_names.index(c) for c in self.decision.alarm_channels]
-            on = st[:, idx] >= self.decision.level
-            prev = self._on if self._on is not None else np.zeros_like(on)
-            for run, a in np.argwhere(on & ~prev):
-                ch = self.decision.alarm_channels[a]
-                events.append(Event(int(run), self._k, float(t), self.decision.names.get(ch, ch),
-                                    float(st[run, idx[a]])))
-            events.sort(key=lambda e: (e.run, e.k, e.hypothesis))
+            on = pool[:, self._dec_idx] >= self.decision.level
+            new = on if self._on is None else on & ~self._on
+            if new.any():
+                for run, a in np.argwhere(new):
+                    ch = self.decision.alarm_channels[a]
+                    events.append(Event(int(run), self._k, float(t), self.decision.names.get(ch, ch),
+                                        float(pool[run, self._dec_idx[a]])))
+                events.sort(key=lambda e: (e.run, e.k, e.hypothesis))
             self._on = on
         self._k += 1
         self._t_prev = t
         self._last = (r, st)
         return r, st, events
 
+    def _plan(self, key: tuple[str, ...]) -> tuple:
+        """Column indices of one sample layout (cached per tuple of channel names)."""
+        lookup = {n: i for i, n in enumerate(key)}
+        if len(lookup) != len(key):
+            raise DataError(f"sample {self._k} names a channel twice: {list(key)}")
+        for n in self.input_names:
+            if n not in lookup:
+                raise DataError(f"sample {self._k} lacks channel {n!r}; it has {list(key)}")
+        sel = np.array([lookup[n] for n in self.input_names], np.intp)
+        gen_idx = [(np.array([lookup[n] for n in g.u_names], np.intp),
+                    np.array([lookup[n] for n in g.y_names], np.intp)) for g in self.generators]
+        if len(self._plans) > 64:  # a stream whose layout keeps changing: do not grow without bound
+            self._plans.clear()
+        self._plans[key] = (sel, gen_idx)
+        return sel, gen_idx
+
     def _hold(self, reason: str, t: float | None = None):
         """Skip a bad sample: components keep their state, outputs repeat the last good ones."""
         self.last_invalid = reason
+        self._held += 1
         if self._last is None:
             R = np.zeros((self._runs, len(self.residual_names)))
             S = np.zeros((self._runs, len(self.stat_names)))
@@ -357,6 +395,7 @@ class Monitor:
         return {
             "k": self._k,
             "t_prev": self._t_prev,
+            "held": getattr(self, "_held", 0),
             "on": None if self._on is None else self._on.copy(),
             "runs": getattr(self, "_runs", 1),
             "generators": [g.get_state() for g in self.generators],
@@ -381,6 +420,7 @@ class Monitor:
         for p, s in zip(self.processors, state["processors"]):
             p.set_state(s)
         self._k, self._t_prev, self._runs = int(state["k"]), state["t_prev"], int(state["runs"])
+        self._held = int(state.get("held", 0))
         self._on = None if state["on"] is None else np.array(state["on"], dtype=bool)
         last = state.get("last")
         self._last = None if last is None else (np.array(last[0]), np.array(last[1]))

@@ -4,8 +4,7 @@
 ``[design.params]`` and saves what it returns as artifacts: the whole calibrated car monitor
 (both blocks: six filter sets, two parity equations, features, both MHSSPTs, warm-up and
 hold-then-announce) as one :class:`~fdikit.plants.passenger_car.monitor_fused.FusedCarMonitor`,
-and a pass-through :class:`~fdikit.detect.Hold` that exposes its announcement channels to the
-config's ``[decision]`` (a :class:`~fdikit.monitor.Decision` reads processor outputs).
+whose announcement channels ``A:<fault>`` the config's ``[decision]`` reads directly.
 
 The monitor reads deviations from the operating point (paper 1, Section V: "the nominal values
 of the control commands and measurements have to be subtracted from the vehicle generated
@@ -17,7 +16,6 @@ from __future__ import annotations
 
 from typing import Any
 
-from ...detect import Hold
 from ...errors import DataError
 from .monitor import calibrate_monitor, design_car_monitor
 from .monitor_fused import FusedCarMonitor
@@ -46,7 +44,7 @@ def operating_point(speed: float = 20.0) -> dict[str, float]:
 
 
 def design(params: dict | None = None) -> dict[str, Any]:
-    """Design and calibrate the car monitor: ``{"car": FusedCarMonitor, "announce": Hold}``.
+    """Design and calibrate the car monitor: ``{"car": FusedCarMonitor}``.
 
     Parameters
     ----------
@@ -66,8 +64,7 @@ def design(params: dict | None = None) -> dict[str, Any]:
     dict
         ``"car"``: the :class:`FusedCarMonitor` (``deviations=True``), outputs ``P:<fault>``
         (probability) and ``A:<fault>`` (announced, 0/1) for the 7 longitudinal and 5 lateral
-        faults; ``"announce"``: ``Hold(["A:<fault>", ...], 0.5, Z=1)`` whose outputs
-        ``A:<fault>:alarm`` equal the announcements.
+        faults.
 
     Examples
     --------
@@ -91,6 +88,4 @@ def design(params: dict | None = None) -> dict[str, Any]:
     # the fused runtime needs fixed-speed filters: no speed schedule
     blocks = [calibrate_monitor(b, speed, duration=dur, seed=seed, schedule=()) for b in ("longitudinal",
                                                                                           "lateral")]
-    car = FusedCarMonitor(blocks, deviations=True)
-    announce = Hold([f"A:{f}" for f in car.faults], 0.5, Z=1, absolute=False)
-    return {"car": car, "announce": announce}
+    return {"car": FusedCarMonitor(blocks, deviations=True)}
