@@ -2,17 +2,18 @@
 
 The monitor is the calibrated design of the example config (``examples/passenger-car``, recipe
 :func:`fdikit.plants.passenger_car.recipe.design` at 20 m/s: six filter sets, two parity
-equations, residual-norm features, the longitudinal (15 hypotheses x 8 features) and lateral
-(11 x 6) MHSSPTs, warm-up, hold). Inputs are realistic: eight simulated 30 s drives on the sloped
-curve at 20 m/s with sensor noise (nominal and seven faults), repeated to fill 200 runs.
+equations, residual-norm features (one per distinct filter, plus the parity residuals), the
+longitudinal (15 hypotheses) and lateral (11) MHSSPTs, warm-up, hold). Inputs are realistic:
+eight simulated 30 s drives on the sloped curve at 20 m/s with sensor noise (nominal and
+seven faults), repeated to fill 200 runs.
 
 Measured, each against a baseline run in this process:
 
 * **streaming** cost per sample, one run: the stage-by-stage :class:`~fdikit.monitor.Monitor`
   of the two calibrated blocks (baseline); :class:`FusedCarMonitor` ``step``; and the **config
-  path** -- ``Monitor.step`` with the fused monitor as its generator, the pass-through
-  announcement processor and the decision, as ``fdikit monitor --follow`` runs it (issue 9
-  target <= 20 us per sample);
+  path** -- ``Monitor.step`` with the fused monitor as its generator and the decision on its
+  announcement channels, as ``fdikit monitor --follow`` runs it (issue 9 target <= 20 us per
+  sample);
 * **batch** throughput in run-samples per second (runs x samples / wall time): stage-by-stage
   Monitor (baseline), the fused kernel on one thread, and on all cores (runs in parallel
   threads; issue 8 target >= 1e6);
@@ -41,7 +42,7 @@ import time
 import numpy as np
 
 from fdikit import Signals
-from fdikit.detect import MHSSPT, Hold, mhsspt
+from fdikit.detect import MHSSPT, mhsspt
 from fdikit.faults import Bias
 from fdikit.monitor import Decision, Monitor
 from fdikit.plants.passenger_car.driving import simulate_drive
@@ -88,7 +89,8 @@ def main() -> dict:
     names = sig.names
     out: dict = {"load_average_1min": round(os.getloadavg()[0], 2), "cpus": os.cpu_count(),
                  "design_seconds": round(t_design, 1), "batch_runs": RUNS, "batch_samples": T,
-                 "hypotheses": [15, 11], "features": [8, 6],
+                 "hypotheses": [len(b.monitor.processors[1].hypotheses) for b in blocks],
+                 "features": [len(b.monitor.processors[0].output_names) for b in blocks],
                  "filter_states": int(fused._a["A"].shape[0]), "table_error_nats": fused.table_error}
 
     # ------------------------------------------------------------ baseline: stage by stage
@@ -121,9 +123,8 @@ def main() -> dict:
     out["fused_stream_cpu_us_per_sample"] = round(cpu / T * 1e6, 2)
 
     # ------------------------------------------------------------ config path: Monitor.step, fused generator
-    announce = Hold([f"A:{f}" for f in fused.faults], 0.5, Z=1, absolute=False)
-    cfg_mon = Monitor([fused], [announce], Decision(announce.output_names, 0.5,
-                                                    {f"A:{f}:alarm": f for f in fused.faults}))
+    cfg_mon = Monitor([fused], [], Decision([f"A:{f}" for f in fused.faults], 0.5,
+                                            {f"A:{f}": f for f in fused.faults}))
     Vn = one.values
 
     def stream_config():
@@ -210,7 +211,7 @@ def main() -> dict:
           "(baseline); "
           f"FusedCarMonitor.step {out['fused_stream_us_per_sample']} us "
           f"(CPU {out['fused_stream_cpu_us_per_sample']} us)")
-    print(f"config path (Monitor.step + fused generator + announce + decision): "
+    print(f"config path (Monitor.step + fused generator + decision): "
           f"{out['config_stream_us_per_sample']} us/sample (CPU {out['config_stream_cpu_us_per_sample']} us; "
           f"target <= 20); events {out['config_stream_events']}")
     print(f"batch: stage-by-stage {out['stage_batch_run_samples_per_s']:.3g} run-samples/s (baseline); fused "

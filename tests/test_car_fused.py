@@ -123,7 +123,7 @@ def test_artifact_round_trip_is_bitwise(setup, tmp_path):
     ref = fused.run(log)
     path = save_artifact(tmp_path / "car", fused, units={"a_x": "m/s^2"})
     back = load_artifact(path, kind="FusedCarMonitor",
-                         expect_inputs=fused.u_names + fused.y_names + fused.input_names,
+                         expect_inputs=fused.u_names + fused.y_names,
                          expect_outputs=fused.output_names)
     assert isinstance(back, FusedCarMonitor)
     assert (back.u_names, back.y_names, back.output_names, back.hypotheses) == \

@@ -93,7 +93,7 @@ def artifact_channels(obj: Any) -> dict[str, list[str]]:
     """Channel names a design reads (``inputs``) and writes (``outputs``), where it has them."""
     ins: list[str] = []
     for attr in ("u_names", "y_names", "input_names"):
-        ins += [str(s) for s in getattr(obj, attr, None) or []]
+        ins += [str(s) for s in getattr(obj, attr, None) or [] if str(s) not in ins]
     outs: list[str] = []
     for attr in ("residual_names", "output_names"):
         v = getattr(obj, attr, None)
