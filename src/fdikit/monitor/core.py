@@ -15,6 +15,7 @@ decision rule.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from itertools import pairwise
@@ -45,6 +46,11 @@ def _as_batch(x: Any, n: int, what: str, names: Sequence[str]) -> np.ndarray:
         raise DataError(f"{what} sample must have shape (runs, {n}) for channels {list(names)}, "
                         f"got {x.shape}")
     return x
+
+
+def _plain_step(obj: Any, base: type) -> bool:
+    """True when ``obj.step`` is the base class's checked wrapper around ``obj._step``."""
+    return isinstance(obj, base) and type(obj).step is base.step and hasattr(obj, "_step")
 
 
 class ResidualGenerator(Stateful):
@@ -245,6 +251,13 @@ class Monitor:
         self._proc_out = [slice(int(a), int(b)) for a, b in pairwise(starts)]
         self.input_names = sorted({n for g in self.generators for n in (*g.u_names, *g.y_names)})
         self._plans: dict[tuple[str, ...], tuple] = {}
+        # per-sample entry points: the sample reaching a stage is already a checked (runs, n) float
+        # array, so a stage's own step arithmetic is called without re-checking shapes -- unless
+        # the class overrides the public step (then that is what it means by a step)
+        self._gen_steps = [(g._step_joined, True) if hasattr(g, "_step_joined") else
+                           (g._step, False) if _plain_step(g, ResidualGenerator) else (g.step, False)
+                           for g in self.generators]
+        self._proc_steps = [p._step if _plain_step(p, ResidualProcessor) else p.step for p in self.processors]
         self._k = 0
         self._t_prev: float | None = None
         self._on: np.ndarray | None = None
@@ -317,7 +330,9 @@ class Monitor:
         if plan is None:
             plan = self._plan(key)
         sel, gen_idx = plan
-        if self.validate:
+        # (a finite sum of the whole sample proves every input finite; otherwise look closely:
+        # a channel the monitor does not read may be NaN, or the sum may have overflowed)
+        if self.validate and not math.isfinite(float(vals.sum())):
             bad = ~np.isfinite(vals[:, sel])
             if bad.any():
                 run, c = np.argwhere(bad)[0]
@@ -333,21 +348,21 @@ class Monitor:
             self._held = 0
         pool = np.empty((vals.shape[0], len(self._pool_names)))
         j = 0
-        for g, (ui, yi) in zip(self.generators, gen_idx):
-            out = g.step(vals[:, ui], vals[:, yi])
+        for (fn, joined), (ui, yi, uyi) in zip(self._gen_steps, gen_idx):
+            out = fn(vals[:, uyi]) if joined else fn(vals[:, ui], vals[:, yi])
             pool[:, j:j + out.shape[1]] = out
             j += out.shape[1]
-        for p, idx, sl in zip(self.processors, self._proc_idx, self._proc_out):
+        for p, fn_p, idx, sl in zip(self.processors, self._proc_steps, self._proc_idx, self._proc_out):
             r_in = pool[:, idx]
             # processors whose rule depends on time (e.g. TimeGated) take it with the sample
-            pool[:, sl] = p.step_at(float(t), r_in) if getattr(p, "needs_time", False) else p.step(r_in)
+            pool[:, sl] = p.step_at(float(t), r_in) if getattr(p, "needs_time", False) else fn_p(r_in)
         nr = len(self.residual_names)
         r, st = pool[:, :nr], pool[:, nr:]
         events: list[Event] = []
         if self.decision is not None:
             on = pool[:, self._dec_idx] >= self.decision.level
-            new = on if self._on is None else on & ~self._on
-            if new.any():
+            if self._on is None or on.tobytes() != self._on.tobytes():  # something switched
+                new = on if self._on is None else on & ~self._on
                 for run, a in np.argwhere(new):
                     ch = self.decision.alarm_channels[a]
                     events.append(Event(int(run), self._k, float(t), self.decision.names.get(ch, ch),
@@ -369,7 +384,9 @@ class Monitor:
                 raise DataError(f"sample {self._k} lacks channel {n!r}; it has {list(key)}")
         sel = np.array([lookup[n] for n in self.input_names], np.intp)
         gen_idx = [(np.array([lookup[n] for n in g.u_names], np.intp),
-                    np.array([lookup[n] for n in g.y_names], np.intp)) for g in self.generators]
+                    np.array([lookup[n] for n in g.y_names], np.intp),
+                    np.array([lookup[n] for n in (*g.u_names, *g.y_names)], np.intp))
+                   for g in self.generators]
         if len(self._plans) > 64:  # a stream whose layout keeps changing: do not grow without bound
             self._plans.clear()
         self._plans[key] = (sel, gen_idx)

@@ -642,6 +642,11 @@ class FusedCarMonitor(ResidualGenerator):
         self._k += V.shape[1]
         return out
 
+    def _step_joined(self, v: np.ndarray) -> np.ndarray:
+        """One checked sample (runs, len(input_names)) -> (runs, outputs); the entry point of
+        :class:`fdikit.monitor.Monitor` (no re-checks, no split and re-join of u and y)."""
+        return self._advance(np.ascontiguousarray(v[:, None]))[:, 0]
+
     def _step(self, u: np.ndarray, y: np.ndarray) -> np.ndarray:
         v = np.concatenate((u, y), axis=1) if u.shape[1] else y
         return self._advance(np.ascontiguousarray(v[:, None]))[:, 0]
