@@ -406,3 +406,61 @@ def test_generic_linearisation_of_the_plant(plant):
     d = -p["beta_s"] / p["V_s"] * p["C_in"] * 0.5 * p["A_0"] * np.sqrt(2 / p["rho"]) / (2 * np.sqrt(dP)) * 1e6
     assert A[4, 4] == pytest.approx(d, rel=1e-5)
     assert lm.B_of("f")[3, 0] == pytest.approx(p["omega_n"] ** 2 * 11.0, rel=1e-6)  # d/dK_f
+
+
+# ------------------------------------------------------------------ opt-in pedal ramp (experiment)
+def test_pedal_ramp_force_is_linear_then_held(plant):
+    T, tb, Kp = 3.0, 0.5, plant.params["K_p"]
+    t = np.linspace(0.0, 6.0, 601)
+    F = plant.pedal_force(t, tb, ramp=T)
+    closed = np.clip((t - tb) / T, 0.0, 1.0) * Kp  # K_p reached linearly over T, then held
+    assert np.allclose(F, closed, rtol=0, atol=1e-12)
+    on = (t > tb) & (t < tb + T)
+    assert np.allclose(np.diff(F[on]) / np.diff(t[on]), Kp / T)  # constant slope K_p/T kN/s
+    # the step of eq. (4) is the default profile
+    assert np.allclose(plant.pedal_force(t, tb), np.where(t >= tb, Kp * (1 - np.exp(-(t - tb) / 0.02)), 0))
+
+
+def test_pedal_ramp_drives_plant_and_nominal_pm_input_alike(plant):
+    T, tb = 3.0, 0.5
+    sc = Scenario(pedal="ramp", pedal_ramp=T, t_end=5.0, **QUIET)
+    res = simulate(plant, sc, keep_states=True, state_stride=10)
+    p = plant.params
+    # first-order lag (5) of a ramp, closed form: P_ss/T (s - tau (1 - exp(-s/tau))), then the held value
+    tau, pss = p["tau_m"], p["K_m"] * p["K_p"] / p["A_m"] / 1e3
+    t = res.u.t
+    s = np.clip(t - tb, 0.0, None)
+    sr = np.minimum(s, T)
+    ramp_part = pss / T * (sr - tau * (1 - np.exp(-sr / tau)))
+    closed = np.where(s <= T, ramp_part, pss - (pss - ramp_part) * np.exp(-(s - T) / tau))
+    assert np.max(np.abs(res.u["P_m"][0] - closed)) < 5e-3 * pss  # Euler at 1 ms vs exact
+    # the plant's true P_m (no fault) is the same trajectory as the observer's nominal input
+    assert np.max(np.abs(res.x.values[0, :, 5] - res.u["P_m"][0])) < 1e-9
+    # the ABS engages later than with the step (the point of the experiment)
+    step = simulate(plant, Scenario(t_end=5.0, **QUIET))
+    assert res.events["t_abs_on"][0] > step.events["t_abs_on"][0] + 1.0
+
+
+def test_default_pedal_is_bitwise_the_step(plant):
+    kw = {"fault": "F5", "magnitude": 0.2, "t_end": 3.0, "v0": 15.0}
+    a = simulate(plant, Scenario(**kw), runs=3, seed=4, keep_states=True)
+    b = simulate(plant, Scenario(pedal="step", **kw), runs=3, seed=4, keep_states=True)
+    assert np.array_equal(a.y.values, b.y.values) and np.array_equal(a.u.values, b.u.values)
+    assert np.array_equal(a.x.values, b.x.values)
+    c = simulate(plant, Scenario(pedal="ramp", pedal_ramp=1.0, **kw), runs=3, seed=4)
+    assert not np.array_equal(a.y.values, c.y.values)
+
+
+def test_pedal_ramp_bad_arguments(capsys):
+    from fdikit.cli import main
+
+    with pytest.raises(DataError, match="pedal_ramp > 0"):
+        Scenario(pedal="ramp")
+    with pytest.raises(DataError, match="only used with pedal='ramp'"):
+        Scenario(pedal_ramp=3.0)
+    with pytest.raises(DataError, match="'step' or 'ramp'"):
+        Scenario(pedal="sine")
+    rc = main(["abs", "simulate", "--pedal-ramp", "2", "--t-end", "4", "--v0", "12", "--json"])
+    assert rc == 0
+    out = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert out["pedal"] == "ramp" and out["pedal_ramp"] == 2.0

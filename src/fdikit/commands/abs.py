@@ -53,6 +53,9 @@ def register(subparsers) -> argparse.ArgumentParser:
     s.add_argument("--noise-hold", type=float, default=None,
                    help="process-noise hold time, s (default: a new sample every 1 ms step; 0.01: one per "
                    "10 ms sample)")
+    s.add_argument("--pedal-ramp", type=float, default=None, metavar="SECONDS",
+                   help="opt-in experiment: pedal force rising linearly to K_p over SECONDS after the brake "
+                   "is applied, then held (default: the step of eq. (4))")
     s.add_argument("--v0", type=float, default=28.0, help="initial speed, m/s (default 28)")
     s.add_argument("--t-brake", type=float, default=0.5, help="brake application time, s (default 0.5)")
     s.add_argument("--t-end", type=float, default=12.5, help="record length, s (default 12.5)")
@@ -72,7 +75,8 @@ def _simulate(args) -> int:
     if args.runs < 1:
         raise DataError(f"--runs must be >= 1, got {args.runs}")
     sc = Scenario(fault=args.fault, magnitude=args.magnitude, snr_db=args.snr, meas_var=args.meas_var,
-                  v0=args.v0, t_brake=args.t_brake, t_end=args.t_end, noise_hold=args.noise_hold)
+                  v0=args.v0, t_brake=args.t_brake, t_end=args.t_end, noise_hold=args.noise_hold,
+                  pedal="step" if args.pedal_ramp is None else "ramp", pedal_ramp=args.pedal_ramp)
     res = simulate(None, sc, runs=args.runs, seed=args.seed, keep_states=bool(args.plot))
     out = summarize(res)
     if args.plot:

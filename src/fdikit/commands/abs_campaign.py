@@ -51,6 +51,9 @@ def add_campaign_parser(abs_subparsers) -> argparse.ArgumentParser:
     p.add_argument("--noise-hold", type=float, default=None,
                    help="process-noise hold time, s (default: a new sample every 1 ms step; 0.01: one per "
                    "10 ms sample, the alternative reading of Section III-A)")
+    p.add_argument("--pedal-ramp", type=float, default=None, metavar="SECONDS",
+                   help="opt-in experiment: pedal force rising linearly to K_p over SECONDS after the brake "
+                   "is applied, then held (default: the step of eq. (4))")
     p.add_argument("--gate", type=float, default=0.5, help="gate time T of G_O_T1/G_O_T2, s (default 0.5)")
     p.add_argument("--progress", dest="progress", action="store_true", default=None,
                    help="show a progress bar on stderr (default: when stderr is a terminal)")
@@ -76,12 +79,16 @@ def _campaign(args) -> int:
 
     if args.runs < 1:
         raise DataError(f"--runs must be >= 1, got {args.runs}")
+    if args.pedal_ramp is not None and not args.pedal_ramp > 0:
+        raise DataError(f"--pedal-ramp must be > 0 s, got {args.pedal_ramp}")
+    if args.complete and args.pedal_ramp is not None:
+        raise DataError("--complete does not support --pedal-ramp (the complete diagnoser uses the step)")
     if args.window is not None and args.window < 1:
         raise DataError(f"--window must be >= 1, got {args.window}")
     res = run_campaign(args.runs, nominal_runs=args.nominal_runs, design_runs=args.design_runs,
                        snr_db=args.snr, seed=args.seed, W=args.window, gate=args.gate,
                        magnitudes=args.magnitudes, pfa=args.pfa, margin=args.margin,
-                       noise_hold=args.noise_hold,
+                       noise_hold=args.noise_hold, pedal_ramp=args.pedal_ramp,
                        progress=sys.stderr.isatty() if args.progress is None else args.progress)
     out = res.to_dict()
     if args.complete:

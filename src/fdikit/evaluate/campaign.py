@@ -284,11 +284,13 @@ def _progress(enabled: bool, total: int, what: str):
 
 
 def _simulate_residuals(fault: str, magnitude, runs: int, seed: int, snr_db, batch: int, generators,
-                        on_batch=None, first_run: int = 0, noise_hold: float | None = None):
+                        on_batch=None, first_run: int = 0, noise_hold: float | None = None,
+                        pedal_ramp: float | None = None):
     """Yield residual Signals batch by batch for one class (magnitude None: drawn per run)."""
     from ..plants.abs import FAULT_CLASSES, Scenario, simulate
 
     fc = FAULT_CLASSES[fault]
+    pedal = {} if pedal_ramp is None else {"pedal": "ramp", "pedal_ramp": pedal_ramp}
     done = 0
     while done < runs:
         n = min(batch, runs - done)
@@ -300,14 +302,14 @@ def _simulate_residuals(fault: str, magnitude, runs: int, seed: int, snr_db, bat
             for sign, mask in ((1.0, ~neg), (-1.0, neg)):
                 if mask.any():
                     sc = Scenario(fault=fault, magnitude=sign * abs(magnitude), snr_db=snr_db,
-                                  noise_hold=noise_hold)
+                                  noise_hold=noise_hold, **pedal)
                     res = simulate(None, sc, runs=int(mask.sum()), seed=seed, first_run=int(ids[mask][0]))
                     parts.append(res.y.concat_channels(res.u))
             sig = parts[0] if len(parts) == 1 else Signals(
                 parts[0].t, np.concatenate([p.values for p in parts]), parts[0].names, check=False)
         else:
             sc = Scenario(fault=fault, magnitude=magnitude, snr_db=snr_db,
-                          grid_step=0.01 if fc.symmetric else None, noise_hold=noise_hold)
+                          grid_step=0.01 if fc.symmetric else None, noise_hold=noise_hold, **pedal)
             res = simulate(None, sc, runs=n, seed=seed, first_run=first_run + done)
             sig = res.y.concat_channels(res.u)
         r = abs_residuals(sig, generators)
@@ -319,7 +321,7 @@ def _simulate_residuals(fault: str, magnitude, runs: int, seed: int, snr_db, bat
 
 def design_tests(specs: Sequence[TestSpec] | None = None, *, design_runs: int = 2000, snr_db=23.0,
                  seed: int = 0, pfa: float = 0.0, margin: float = 0.1, batch: int = 1000, skip: int = 0,
-                 progress=None, noise_hold: float | None = None) -> TestBank:
+                 progress=None, noise_hold: float | None = None, pedal_ramp: float | None = None) -> TestBank:
     """Calibrate mu0/sigma^2 and design every threshold from nominal runs.
 
     Parameters
@@ -338,6 +340,9 @@ def design_tests(specs: Sequence[TestSpec] | None = None, *, design_runs: int = 
         Samples left out at the start of each run when calibrating mu0/sigma^2.
     noise_hold : float or None
         Process-noise hold time of the plant (:class:`fdikit.plants.abs.Scenario`; None: 1 ms).
+    pedal_ramp : float or None
+        None (default): the step pedal force of eq. (4). A duration, s: the opt-in ramp profile
+        (``Scenario(pedal="ramp", pedal_ramp=...)``).
 
     Returns
     -------
@@ -358,7 +363,7 @@ def design_tests(specs: Sequence[TestSpec] | None = None, *, design_runs: int = 
     chunks = []
     cb = (lambda n: progress(n)) if progress is not None else None
     for r in _simulate_residuals("F0", None, design_runs, seed + 1_000_003, snr_db, batch, gens, cb,
-                                 noise_hold=noise_hold):
+                                 noise_hold=noise_hold, pedal_ramp=pedal_ramp):
         chunks.append(r.values)
     vals = np.concatenate(chunks)
     res = Signals(r.t, vals, r.names, check=False)
@@ -526,7 +531,8 @@ def run_campaign(runs: int = 200, *, nominal_runs: int | None = None, design_run
                  snr_db: float | None = 23.0, seed: int = 0, W: int | None = None, gate: float = 0.5,
                  magnitudes: str = "draw", pfa: float = 0.0, margin: float = 0.1, batch: int = 1000,
                  t_detect: float = 7.0, progress: bool = False,
-                 bank: TestBank | None = None, noise_hold: float | None = None) -> CampaignResult:
+                 bank: TestBank | None = None, noise_hold: float | None = None,
+                 pedal_ramp: float | None = None) -> CampaignResult:
     """Monte Carlo campaign over the fault universe: Pd/Pf, D-matrix, sensitivity, specificity.
 
     Parameters
@@ -560,6 +566,10 @@ def run_campaign(runs: int = 200, *, nominal_runs: int | None = None, design_run
     noise_hold : float or None
         Process-noise hold time of the plant, s (None: a new sample every 1 ms step, the default
         reading of Section III-A; 0.01: one per 10 ms sample). See :mod:`fdikit.plants.abs`.
+    pedal_ramp : float or None
+        None (default): the step pedal force of eq. (4). A duration T, s: the opt-in experiment
+        ``Scenario(pedal="ramp", pedal_ramp=T)`` (K_p reached linearly over T), for the design
+        and every class. A given ``bank`` must have been designed on the same manoeuvre.
 
     Returns
     -------
@@ -598,12 +608,13 @@ def run_campaign(runs: int = 200, *, nominal_runs: int | None = None, design_run
             adv = None
         if bank is None:
             bank = design_tests(paper_tests(W, gate=gate), design_runs=design_runs, snr_db=snr_db, seed=seed,
-                                pfa=pfa, margin=margin, batch=batch, progress=adv, noise_hold=noise_hold)
+                                pfa=pfa, margin=margin, batch=batch, progress=adv, noise_hold=noise_hold,
+                                pedal_ramp=pedal_ramp)
         gens = (ParityR1(0.01), ABSObserver(0.01))
         for ci, c in enumerate(FAULT_CLASSES):
             fs, ts = [], []
             for r in _simulate_residuals(c, mags[c], counts[c], seed + 7919 * ci, snr_db, batch, gens, adv,
-                                         noise_hold=noise_hold):
+                                         noise_hold=noise_hold, pedal_ramp=pedal_ramp):
                 a, b = bank.alarms(r)
                 fs.append(a)
                 ts.append(b)

@@ -135,6 +135,16 @@ PARAMS: dict[str, float] = {
     "t_s": 1e-3,  # s, controller sampling interval, Table I
     "lam_star": 0.2,  # target slip, Table I
     # pedal and master cylinder, eqs. (4)-(5)
+    # Pedal-force profile (Scenario.pedal). Default "step": eq. (4)'s lagged step, K_p reached
+    # within ~5 tau_p = 0.1 s, so P_m has settled long before the ABS valves act (~2 s after
+    # t_brake here) and a tau_m change (F5) leaves no trace when the valves start. The paper
+    # says "A fault in tau_m can be detected by a GLRT on residual r3 at the beginning of the
+    # valve operation ... The GLRT for r3 shows a change at 5 s" and "after the ABS engages the
+    # valve at around 7 s" (Section IV); Fig. 3 shows valve activity at 5-7 s. That timing fits
+    # a pedal force rising slowly over seconds, not eq. (4) with tau_p = 0.02 s; the text never
+    # states such a ramp (only that "the same brake torque was applied" to both models of
+    # Fig. 3). Opt-in experiment: Scenario(pedal="ramp", pedal_ramp=T) rises linearly to K_p
+    # over T seconds and holds it; plant and nominal P_m input share it (only tau_m differs).
     "tau_p": 0.02,  # s, Table I
     # kN. Table I prints K_p = 4.2 (unitless), giving P_m = K_m K_p/A_m = 8.4 kPa (or 8.4 MPa if
     # read as kN), i.e. at most K_f P_m = 840 N·m of brake torque, less than the 1.1 kN·m the
@@ -353,10 +363,37 @@ class ABSPlant(NonlinearModel):
             P[:, _PI[k]] = v
         return P
 
-    def pedal_force(self, t: Any, t_brake: float) -> np.ndarray:
-        """Pedal force ``F_p(t)`` in kN: the step response of eq. (4) applied at ``t_brake``."""
+    def pedal_force(self, t: Any, t_brake: float, ramp: float | None = None) -> np.ndarray:
+        """Pedal force ``F_p(t)`` in kN (0 before ``t_brake``).
+
+        Parameters
+        ----------
+        t : array_like
+            Times, s, any shape.
+        t_brake : float
+            Brake application time, s.
+        ramp : float or None
+            None (default): the step response of eq. (4), ``K_p (1 - exp(-(t - t_brake)/tau_p))``.
+            A duration ``T_ramp > 0`` (s): the opt-in ramp profile of :class:`Scenario`,
+            ``K_p min((t - t_brake)/T_ramp, 1)``.
+
+        Returns
+        -------
+        ndarray
+            ``F_p``, same shape as ``t``.
+
+        Examples
+        --------
+        >>> from fdikit.plants.abs import ABSPlant
+        >>> ABSPlant().pedal_force([0.0, 2.0, 4.0, 9.0], 0.5, ramp=3.0).round(3).tolist()
+        [0.0, 3.5, 7.0, 7.0]
+        """
         t = np.asarray(t, dtype=float)
         tt = np.maximum(t - t_brake, 0.0)
+        if ramp is not None:
+            if not ramp > 0:
+                raise DataError(f"pedal ramp duration must be > 0 s, got {ramp}")
+            return np.where(t >= t_brake, self.params["K_p"] * np.minimum(tt / ramp, 1.0), 0.0)
         return np.where(t >= t_brake, self.params["K_p"] * (1.0 - np.exp(-tt / self.params["tau_p"])), 0.0)
 
 
@@ -454,6 +491,15 @@ class Scenario:
         Time over which one process-noise sample is held, s (a multiple of ``dt``). None (the
         default, the reading Table III supports; see the module docstring): a new sample every
         integration step of 1 ms. 0.01: one per 10 ms measurement sample (ten times the power).
+    pedal : {"step", "ramp"}
+        Driver's pedal-force profile. ``"step"`` (default): the step response of eq. (4) with
+        ``tau_p`` (K_p reached within ~0.1 s). ``"ramp"`` (opt-in experiment): ``F_p`` rises
+        linearly from 0 at ``t_brake`` to ``K_p`` at ``t_brake + pedal_ramp`` and is then held
+        (no ``tau_p`` lag). The same profile drives the plant and the nominal P_m input the
+        observer receives (only ``tau_m`` differs between them under F5). See the comment beside
+        ``tau_p`` in :data:`PARAMS`.
+    pedal_ramp : float or None
+        Ramp duration T_ramp, s (> 0); required with ``pedal="ramp"``, must be None with "step".
     """
 
     fault: str = "F0"
@@ -468,6 +514,8 @@ class Scenario:
     v_off: float = 2.0
     grid_step: float | None = None
     noise_hold: float | None = None
+    pedal: str = "step"
+    pedal_ramp: float | None = None
 
     def __post_init__(self):
         if self.fault not in FAULT_CLASSES:
@@ -488,6 +536,12 @@ class Scenario:
             if self.noise_hold <= 0 or abs(nh - round(nh)) > 1e-9:
                 raise DataError(f"noise_hold ({self.noise_hold} s) must be a positive multiple of dt "
                                 f"({self.dt} s)")
+        if self.pedal not in ("step", "ramp"):
+            raise DataError(f"pedal must be 'step' or 'ramp', got {self.pedal!r}")
+        if self.pedal == "ramp" and (self.pedal_ramp is None or not self.pedal_ramp > 0):
+            raise DataError(f"pedal='ramp' needs pedal_ramp > 0 s, got {self.pedal_ramp}")
+        if self.pedal == "step" and self.pedal_ramp is not None:
+            raise DataError(f"pedal_ramp ({self.pedal_ramp} s) is only used with pedal='ramp'")
         if self.v0 <= self.v_off:
             raise DataError(f"initial speed v0 = {self.v0} m/s must exceed v_off = {self.v_off} m/s")
 
@@ -502,6 +556,11 @@ class Scenario:
     @property
     def substeps(self) -> int:
         return round(self.sample_dt / self.dt)
+
+    @property
+    def ramp_time(self) -> float:
+        """Pedal ramp duration, s, as the kernel takes it (0.0: the step of eq. (4))."""
+        return float(self.pedal_ramp) if self.pedal == "ramp" else 0.0
 
     @property
     def noise_hold_steps(self) -> int:
@@ -629,7 +688,7 @@ def _orifice_step(P, P_up, k, dt):
 
 @njit(cache=True)
 def _run_one(p, x0, s, q_std, r_std, dt, n_steps, sub, t_brake, v_off, stride, tab,
-             y, uv, xs, ev, nsw, swt, noise, nhold):
+             y, uv, xs, ev, nsw, swt, noise, nhold, ramp):
     x = x0.copy()
     wk = np.zeros(6)  # process-noise sample w_k, held over nhold steps
     dx = np.empty(6)
@@ -669,7 +728,12 @@ def _run_one(p, x0, s, q_std, r_std, dt, n_steps, sub, t_brake, v_off, stride, t
                 xs[jx, i] = x[i]
             jx += 1
         braking = t >= t_brake
-        F_p = p[_KP] * (1.0 - math.exp(-(t - t_brake) / p[_TAUP])) if braking else 0.0  # eq. (4)
+        if not braking:
+            F_p = 0.0
+        elif ramp > 0.0:  # opt-in ramp profile (Scenario.pedal = "ramp"), see PARAMS["tau_p"]
+            F_p = p[_KP] * min((t - t_brake) / ramp, 1.0)
+        else:
+            F_p = p[_KP] * (1.0 - math.exp(-(t - t_brake) / p[_TAUP]))  # eq. (4)
         lam = _slip_nb(x[0], x[1])
         # sliding-mode PWM controller, eqs. (1)-(3); backward difference for de/dt
         e = p[_LAMS] - lam
@@ -770,11 +834,11 @@ def _run_one(p, x0, s, q_std, r_std, dt, n_steps, sub, t_brake, v_off, stride, t
 
 @njit(cache=True, parallel=True)
 def _mc_kernel(P, X0, S, q_std, r_std, dt, n_steps, sub, t_brake, v_off, stride, tab,
-               y, uv, xs, ev, nsw, swt, noise, nhold):
+               y, uv, xs, ev, nsw, swt, noise, nhold, ramp):
     for i in prange(P.shape[0]):
         s = S[i].copy()
         _run_one(P[i], X0[i], s, q_std, r_std, dt, n_steps, sub, t_brake, v_off, stride, tab,
-                 y[i], uv[i], xs[i], ev[i], nsw[i], swt[i], noise, nhold)
+                 y[i], uv[i], xs[i], ev[i], nsw[i], swt[i], noise, nhold, ramp)
 
 
 # --------------------------------------------------------------------------------------------
@@ -853,7 +917,7 @@ def _nominal_pm(plant: ABSPlant, sc: Scenario) -> np.ndarray:
 
     p = plant.params
     t = np.arange(sc.n_steps + 1) * sc.dt
-    F_p = plant.pedal_force(t, sc.t_brake)
+    F_p = plant.pedal_force(t, sc.t_brake, sc.pedal_ramp if sc.pedal == "ramp" else None)
     a = 1.0 - sc.dt / p["tau_m"]
     b = sc.dt * p["K_m"] * 1e-3 / (p["A_m"] * p["tau_m"])
     return lfilter([0.0, b], [1.0, -a], F_p)
@@ -869,7 +933,7 @@ def _run_kernel(plant, sc, P, X0, S, q_std, r_std, keep_states, stride, max_ev, 
     nsw = np.zeros((runs, 2), dtype=np.int64)
     swt = np.full((runs, 2, max_ev), np.nan)
     _mc_kernel(P, X0, S, q_std, r_std, sc.dt, sc.n_steps, sc.substeps, sc.t_brake, sc.v_off, stride,
-               _MU_TAB, y, uv, xs, ev, nsw, swt, noise, sc.noise_hold_steps)
+               _MU_TAB, y, uv, xs, ev, nsw, swt, noise, sc.noise_hold_steps, sc.ramp_time)
     return y, uv, xs, ev, nsw, swt
 
 
@@ -883,7 +947,7 @@ def state_mean_square(plant: ABSPlant, scenario: Scenario) -> np.ndarray:
     ndarray (6,)
     """
     key = (tuple(plant.params.values()), scenario.v0, scenario.t_brake, scenario.t_end, scenario.dt,
-           scenario.v_off)
+           scenario.v_off, scenario.ramp_time)
     if key not in plant._ms_cache:
         sc = replace(scenario, fault="F0", magnitude=None, snr_db=None, meas_var=0.0)
         P = plant.param_matrix(1)
@@ -1033,6 +1097,8 @@ def summarize(res: ABSResult) -> dict[str, Any]:
         "snr_db": sc.snr_db,
         "meas_var": sc.meas_var,
         "noise_hold": sc.noise_hold,
+        "pedal": sc.pedal,
+        "pedal_ramp": sc.pedal_ramp,
     }
 
 
