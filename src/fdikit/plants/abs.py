@@ -145,6 +145,11 @@ PARAMS: dict[str, float] = {
     # states such a ramp (only that "the same brake torque was applied" to both models of
     # Fig. 3). Opt-in experiment: Scenario(pedal="ramp", pedal_ramp=T) rises linearly to K_p
     # over T seconds and holds it; plant and nominal P_m input share it (only tau_m differs).
+    # Measured, it does not reveal F5: a slower pedal *shrinks* the tau_m signature, since two
+    # lags (5) differing by d·tau_m differ by ~d·tau_m·dP_m/dt = d·tau_m·P_ss/T (noise-free max
+    # |dP_m| at +15 %: 0.549 MPa with the step, 0.014 with T = 3 s, 0.008 with T = 5 s; ABS on at
+    # 2.7/4.5/6.0 s). Table V setting, 23 dB, 500 runs/class: F5 and F4 (+-2 %) Pd <= 0.004 on
+    # every test (Pf level) for step, 3 s and 5 s; sensitivity 71.4/71.4/71.3 %.
     "tau_p": 0.02,  # s, Table I
     # kN. Table I prints K_p = 4.2 (unitless), giving P_m = K_m K_p/A_m = 8.4 kPa (or 8.4 MPa if
     # read as kN), i.e. at most K_f P_m = 840 N·m of brake torque, less than the 1.1 kN·m the
