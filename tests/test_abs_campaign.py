@@ -174,7 +174,7 @@ def test_observer_residual_calibration_matches_table_iii():
     from fdikit.evaluate import PAPER_TABLE_III
 
     for r, test in (("r3", "G_O1"), ("r4", "G_O2")):
-        mu0, s2 = PAPER_TABLE_III[test][:2]
+        _mu0, s2 = PAPER_TABLE_III[test][:2]
         # the calibration pools the zero samples below v_min (about 15 % of a record) with the rest
         assert b.sigma2[r] == pytest.approx(s2, rel=0.25), (r, b.sigma2[r])
         assert abs(b.mu0[r]) < 0.05 * np.sqrt(s2), (r, b.mu0[r])

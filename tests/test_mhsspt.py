@@ -205,8 +205,10 @@ def test_tabulated_densities_match_exact_and_round_trip():
 
 
 def test_tabulated_direct_outputs_equal_the_log_posterior_path():
-    """The bulk path (probabilities straight from the compiled kernel) = log posteriors then
-    probabilities (the path a subclass that changes ``_advance`` takes), bitwise."""
+    """The bulk path (the normalised posteriors the recursion forms, straight from the compiled
+    kernel) = log posteriors then exp (the path a subclass that changes ``_advance`` takes), to
+    rounding: the two differ in the last bits, and hypotheses more than 40 nats below the lead
+    (probability < 4.3e-18) are exactly 0 on the bulk path."""
 
     class Via(MHSSPT):
         def _advance(self, x):
@@ -220,5 +222,6 @@ def test_tabulated_direct_outputs_equal_the_log_posterior_path():
     s = Signals(np.arange(400.0), x, ["r"])
     kw = {"groups": {"ab": ["a", "b"]}, "tabulate": 1 / 32, "q": 0.01}
     direct, via = MHSSPT(["r"], dens, 1e-3, **kw).run(s).values, Via(["r"], dens, 1e-3, **kw).run(s).values
-    np.testing.assert_array_equal(direct, via)
+    np.testing.assert_allclose(direct, via, rtol=1e-13, atol=1e-17)
+    assert (direct[..., :3] == via[..., :3]).mean() > 0.3  # most values agree bitwise even so
     np.testing.assert_allclose(direct[..., 3], direct[..., 1] + direct[..., 2], rtol=0, atol=0)

@@ -154,8 +154,9 @@ def _loglik_table(x, tab, g0, inv_h, nG, toff, low, high, std, point, logw, out)
 def _mhsspt_table_stream(r, x, tab, g0, inv_h, nG, toff, dens, point, logF, log1mp, logp_pi, logq, log1mq,
                          gmat, probs, out):  # pragma: no cover - compiled
     """Stream ``r``: tabulated log likelihoods and the recursion for all its samples. ``out``
-    receives the log posteriors or, with ``probs``, the outputs of :meth:`MHSSPT._outputs`
-    (probabilities, then group sums; the same arithmetic as :func:`_probabilities_row`)."""
+    receives the log posteriors or, with ``probs``, the probabilities (the normalised
+    posteriors :func:`mhsspt_update` forms, as the fused car monitor uses them) then the group
+    sums -- :meth:`MHSSPT._outputs` of the log posteriors to rounding."""
     T, C = x.shape[1], x.shape[2]
     H = logF.shape[1]
     ll = np.empty(H)
@@ -180,10 +181,9 @@ def _mhsspt_table_stream(r, x, tab, g0, inv_h, nG, toff, dens, point, logF, log1
                 umg_table_add(xc, c, tab, g0, inv_h, nG, toff, low, high, std, point, logw, ll, 0, H)
         mhsspt_update(lf, ll, phi, P, 0, H, log1mp, logp_pi, logq, log1mq)
         o = out[r, k]
-        if probs:
+        if probs:  # the normalised posteriors the update just formed (no second exp per hypothesis)
             for j in range(H):
-                v = lf[j]
-                o[j] = math.exp(v) if v > -746.0 else 0.0
+                o[j] = P[j]
             for g in range(gmat.shape[0]):
                 acc = 0.0
                 for e in range(gmat.shape[1]):
@@ -658,9 +658,10 @@ class MHSSPT(ResidualProcessor):
              self._log1mp, self._logp_pi, self._logq, self._log1mq, self._gmat, probs, out)
 
     def _direct(self, x: np.ndarray) -> np.ndarray | None:
-        """Outputs straight from the tabulated kernel (no log-posterior intermediate), bitwise
-        equal to ``_outputs(_advance(x))``; None where that path is needed (exact densities, or a
-        subclass that changes ``_advance``)."""
+        """Outputs straight from the tabulated kernel: the normalised posteriors the recursion
+        forms (no log-posterior intermediate and no second exp), equal to
+        ``_outputs(_advance(x))`` to rounding (probabilities below 4.3e-18 are 0 here); None where
+        that path is needed (exact densities, or a subclass that changes ``_advance``)."""
         if self._table is None or type(self)._advance is not MHSSPT._advance:
             return None
         bad = ~np.isfinite(x)
