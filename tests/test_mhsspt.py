@@ -225,3 +225,21 @@ def test_tabulated_direct_outputs_equal_the_log_posterior_path():
     np.testing.assert_allclose(direct, via, rtol=1e-13, atol=1e-17)
     assert (direct[..., :3] == via[..., :3]).mean() > 0.3  # most values agree bitwise even so
     np.testing.assert_allclose(direct[..., 3], direct[..., 1] + direct[..., 2], rtol=0, atol=0)
+
+
+def test_bulk_call_refuses_the_first_non_finite_input():
+    """A bulk run (checked by the parallel scan) names the first bad value: run, then sample, then
+    channel -- the same as the element-wise check of a small call."""
+    dens = {"H0": UniformMeanGaussian([0.0, 0.0], [0.0, 0.0], [0.1, 0.1]),
+            "a": UniformMeanGaussian([0.5, 0.5], [1.0, 1.0], [0.1, 0.1])}
+    x = np.zeros((8, 600, 2))
+    x[5, 2, 0] = np.inf
+    x[3, 50, 1] = np.nan
+    x[3, 70, 0] = np.nan
+    for tab in (None, 1 / 32):
+        test = MHSSPT(["r1", "r2"], dens, 1e-3, tabulate=tab)
+        with pytest.raises(DataError, match=r"'r2' is not finite at sample 50 \(run 3\)"):
+            test.run(Signals(np.arange(600.0), x, ["r1", "r2"], check=False))
+        # the channel order of the record differs from the test's: the copy path, same answer
+        with pytest.raises(DataError, match=r"'r2' is not finite at sample 50 \(run 3\)"):
+            test.run(Signals(np.arange(600.0), x[:, :, ::-1], ["r2", "r1"], check=False))
