@@ -26,6 +26,16 @@ def _snr(text: str) -> float | None:
         raise argparse.ArgumentTypeError(f"--snr expects a number of dB or 'none', got {text!r}") from exc
 
 
+def add_manoeuvre_args(p: argparse.ArgumentParser) -> None:
+    """``--noise-hold`` and ``--pedal-ramp``: shared by ``abs simulate`` and ``abs campaign``."""
+    p.add_argument("--noise-hold", type=float, default=None,
+                   help="process-noise hold time, s (default: a new sample every 1 ms step; 0.01: one per "
+                   "10 ms sample, the alternative reading of Section III-A)")
+    p.add_argument("--pedal-ramp", type=float, default=None, metavar="SECONDS",
+                   help="opt-in experiment: pedal force rising linearly to K_p over SECONDS after the brake "
+                   "is applied, then held (default: the step of eq. (4))")
+
+
 def register(subparsers) -> argparse.ArgumentParser:
     """Add the ``abs`` command and its actions; returns the ``abs`` parser's action subparsers.
 
@@ -50,12 +60,7 @@ def register(subparsers) -> argparse.ArgumentParser:
                    help="process-noise SNR in dB (23, 20, 17 in the paper) or 'none' (default 23)")
     s.add_argument("--meas-var", type=float, default=0.004,
                    help="measurement noise variance, (rad/s)^2 (default 0.004)")
-    s.add_argument("--noise-hold", type=float, default=None,
-                   help="process-noise hold time, s (default: a new sample every 1 ms step; 0.01: one per "
-                   "10 ms sample)")
-    s.add_argument("--pedal-ramp", type=float, default=None, metavar="SECONDS",
-                   help="opt-in experiment: pedal force rising linearly to K_p over SECONDS after the brake "
-                   "is applied, then held (default: the step of eq. (4))")
+    add_manoeuvre_args(s)
     s.add_argument("--v0", type=float, default=28.0, help="initial speed, m/s (default 28)")
     s.add_argument("--t-brake", type=float, default=0.5, help="brake application time, s (default 0.5)")
     s.add_argument("--t-end", type=float, default=12.5, help="record length, s (default 12.5)")

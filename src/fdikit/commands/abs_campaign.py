@@ -13,7 +13,7 @@ from __future__ import annotations
 import argparse
 
 from ..errors import DataError
-from .abs import _snr
+from .abs import _snr, add_manoeuvre_args
 
 __all__ = ["add_campaign_parser"]
 
@@ -48,12 +48,7 @@ def add_campaign_parser(abs_subparsers) -> argparse.ArgumentParser:
                    help="target per-run false-alarm probability of each test (default 0: thresholds "
                    "above every nominal design run, plus the margin)")
     p.add_argument("--margin", type=float, default=0.1, help="relative threshold margin (default 0.1)")
-    p.add_argument("--noise-hold", type=float, default=None,
-                   help="process-noise hold time, s (default: a new sample every 1 ms step; 0.01: one per "
-                   "10 ms sample, the alternative reading of Section III-A)")
-    p.add_argument("--pedal-ramp", type=float, default=None, metavar="SECONDS",
-                   help="opt-in experiment: pedal force rising linearly to K_p over SECONDS after the brake "
-                   "is applied, then held (default: the step of eq. (4))")
+    add_manoeuvre_args(p)
     p.add_argument("--gate", type=float, default=0.5, help="gate time T of G_O_T1/G_O_T2, s (default 0.5)")
     p.add_argument("--progress", dest="progress", action="store_true", default=None,
                    help="show a progress bar on stderr (default: when stderr is a terminal)")
