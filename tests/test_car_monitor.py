@@ -483,3 +483,74 @@ def test_sensor_nuisance_blocked_by_projection_keeps_the_other_wheel(des):
     state = design_car_monitor(20.0, lateral_sensor_nuisance="state")
     g_out, g_state = dc(des.designs[4]["actuator:steer"]), dc(state.designs[4]["actuator:steer"])
     assert g_out > 5.0 and g_state < 3.0, (g_out, g_state)
+
+
+def test_extend_ranges_path_clips_the_rise_to_the_way_from_no_fault():
+    """With ``path`` (the no-fault mean) a hypothesis's range covers the rise between the no-fault
+    mean and its settled range, and neither an overshoot above the settled range nor a window below
+    the no-fault mean; without it the whole rise. Hand-computed boxes, two features."""
+    from fdikit.detect import UniformMeanGaussian
+    from fdikit.detect.mhsspt import MHSSPTCalibration
+    from fdikit.plants.passenger_car.monitor import extend_ranges
+
+    cal = MHSSPTCalibration({"none": UniformMeanGaussian([1.0, 1.0], [1.0, 1.0], [0.1, 0.1]),
+                             "f:small": UniformMeanGaussian([2.0, 0.9], [3.0, 1.1], [0.1, 0.1]),
+                             "f:large": UniformMeanGaussian([4.0, 0.9], [5.0, 1.1], [0.1, 0.1])},
+                            {"f": ["f:small", "f:large"]}, {})
+    # feature 0 rises 1 -> 2.5 with a spike to 9 at the onset; feature 1 (not moved) is noise
+    rise = {"f": {1.0: np.array([[9.0, 1.4], [1.5, 0.7], [2.5, 1.0]]),
+                  2.0: np.array([[1.2, 1.3]]), 3.0: np.array([[4.5, 0.6]])}}
+    box = extend_ranges(cal, rise)
+    assert box.densities["f:small"].low.tolist() == [1.2, 0.7]
+    assert box.densities["f:small"].high.tolist() == [9.0, 1.4]
+    e = extend_ranges(cal, rise, path=np.array([1.0, 1.0]))
+    s, g = e.densities["f:small"], e.densities["f:large"]
+    assert s.low.tolist() == [1.2, 0.9] and s.high.tolist() == [3.0, 1.1]   # hull [1, 3] x [0.9, 1.1]
+    assert g.low.tolist() == [1.2, 0.9] and g.high.tolist() == [5.0, 1.1]   # magnitudes 2 and 3
+    assert np.array_equal(s.std, cal.densities["f:small"].std)
+
+
+@pytest.fixture(scope="module")
+def lon_isolation():
+    from fdikit.plants.passenger_car.monitor import isolation_study
+
+    return isolation_study("longitudinal")
+
+
+#: the one run the calibration does not isolate: its features at 1.5 rad/s sit within about one
+#: no-fault standard deviation of the accelerometer hypothesis's during the rise (|set2/w_front_sum|
+#: 1.1 against 0.75 +- 0.86), and the narrower accelerometer density takes 0.4 s of it
+FRONT_SUM_SMALLEST = ("front_wheel_sum", "1.5")
+
+
+@pytest.mark.slow
+def test_longitudinal_isolation_at_the_calibration_magnitudes(lon_isolation):
+    """Every longitudinal fault at every magnitude of MAGNITUDES, on noise the calibration did not
+    see (curve, onset 6 s): its own probability >= 0.95 at the end, every other <= 0.05, and no
+    other fault announced; the nominal run announces nothing. Before the rise coverage the brake
+    actuator at 0.3 and 0.9 MPa was announced as the brake sensor, the engine-speed sensor at
+    10 rpm as a front wheel-speed sum and the rear wheel-speed sum at 1.5 as the accelerometer.
+    The front wheel-speed sum at 1.5 ends isolated but passes through an accelerometer announcement
+    (strict xfail below)."""
+    from fdikit.plants.passenger_car.monitor import LONGITUDINAL_FAULTS, MAGNITUDES
+
+    r = lon_isolation
+    assert r["nominal_wrong"] == [] and r["nominal_max_probability"] < 0.5, r["nominal_max_probability"]
+    for name, f in LONGITUDINAL_FAULTS.items():
+        assert sorted(float(m) for m in r["runs"][name]) == sorted(MAGNITUDES[f])
+    bad = {(n, m): v for n, d in r["runs"].items() for m, v in d.items()
+           if not v["isolated"] and (n, m) != FRONT_SUM_SMALLEST}
+    assert not bad, bad
+    v = r["runs"][FRONT_SUM_SMALLEST[0]][FRONT_SUM_SMALLEST[1]]
+    assert v["final_own"] >= 0.95 and v["final_max_other"] <= 0.05, v
+    assert {h for _t, h in v["wrong"]} <= {"accelerometer"}, v
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason=(
+    "known shortfall: the front wheel-speed sum at 1.5 rad/s is announced as the accelerometer for "
+    "0.4 s during its rise before its own announcement (0.8 s); its features are within one no-fault "
+    "standard deviation of the accelerometer hypothesis's there"))
+def test_front_wheel_sum_smallest_isolated(lon_isolation):
+    v = lon_isolation["runs"][FRONT_SUM_SMALLEST[0]][FRONT_SUM_SMALLEST[1]]
+    assert v["isolated"], v
