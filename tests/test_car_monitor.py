@@ -554,3 +554,26 @@ def test_longitudinal_isolation_at_the_calibration_magnitudes(lon_isolation):
 def test_front_wheel_sum_smallest_isolated(lon_isolation):
     v = lon_isolation["runs"][FRONT_SUM_SMALLEST[0]][FRONT_SUM_SMALLEST[1]]
     assert v["isolated"], v
+
+
+def test_warmup_mhsspt_restarts_its_warmup_after_a_gap():
+    """resume(n_held) (called by Monitor after held samples) makes the next ``warmup`` samples see
+    the no-fault features again; sample numbering (and a checkpoint) keep counting."""
+    from fdikit.detect import UniformMeanGaussian
+    from fdikit.plants.passenger_car.monitor import WarmupMHSSPT
+
+    dens = {"none": UniformMeanGaussian([0], [0], [1]), "bias": UniformMeanGaussian([2], [4], [1])}
+    t = WarmupMHSSPT(["r"], dens, p=1e-3, warmup=3)
+    t.reset(1)
+    for _ in range(3):
+        t.step([0.0])
+    assert t.step([9.0])[0, 1] > 0.5          # after the warm-up a large feature counts
+    t.reset(1)
+    for _ in range(5):
+        t.step([0.0])
+    t.resume(2)
+    state = t.get_state()
+    assert t.step([9.0])[0, 1] < 0.01         # warm-up again: ignored
+    t.set_state(state)                        # the restart survives a checkpoint
+    assert t.step([9.0])[0, 1] < 0.01
+    assert t._k == 6

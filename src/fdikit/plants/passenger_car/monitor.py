@@ -407,14 +407,27 @@ class WarmupMHSSPT(MHSSPT):
     True
     """
 
+    _state_attrs = (*MHSSPT._state_attrs, "_warm_from")
+
     def __init__(self, *args, warmup: int = 0, **kw):
         super().__init__(*args, **kw)
         self.warmup = int(warmup)
         d0 = self.densities[0]
         self._x0 = np.asarray(getattr(d0, "low", np.zeros(len(self.input_names))), float)
 
+    def reset(self, runs: int = 1) -> None:
+        super().reset(runs)
+        self._warm_from = 0
+
+    def resume(self, n_held: int) -> None:
+        """Data returns after ``n_held`` held samples (:class:`fdikit.monitor.Monitor`,
+        ``on_invalid="hold"``): the filters' states went stale over the gap, so the warm-up
+        starts again from the next sample (as :meth:`FusedCarMonitor.resume`)."""
+        if n_held > 0:
+            self._warm_from = self._k
+
     def _advance(self, x):
-        n = self.warmup - self._k
+        n = self.warmup - (self._k - self._warm_from)
         if n > 0:
             x = x.copy()
             x[:, :n] = self._x0

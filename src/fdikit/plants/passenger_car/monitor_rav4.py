@@ -577,7 +577,7 @@ class Rav4MHSSPT(WarmupMHSSPT):
                 getattr(self, "_table", None) is not None:
             return super()._advance(x)
         # streaming: one sample, the serial kernel (same arithmetic as the batch path)
-        if self.warmup - self._k > 0:
+        if self.warmup - (self._k - self._warm_from) > 0:  # (the warm-up restarts after a gap: resume)
             x = np.broadcast_to(self._x0, x.shape)
         x0 = np.ascontiguousarray(x[:, 0], dtype=float)
         if not np.all(np.isfinite(x0)):
