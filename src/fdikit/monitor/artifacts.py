@@ -25,14 +25,13 @@ from __future__ import annotations
 import importlib
 import json
 import os
-import tempfile
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from ..errors import DataError
-from .state import _flatten, _unflatten
+from .state import _atomic_write, _flatten, _unflatten
 
 __all__ = ["ARTIFACT_FORMAT", "KINDS", "artifact_channels", "load_artifact", "save_artifact"]
 
@@ -106,20 +105,6 @@ def artifact_channels(obj: Any) -> dict[str, list[str]]:
 def _stem(path: str | os.PathLike) -> Path:
     p = Path(path)
     return p.with_suffix("") if p.suffix in (".json", ".npz") else p
-
-
-def _atomic_write(path: Path, write) -> None:
-    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            write(fh)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
 
 
 def save_artifact(path: str | os.PathLike, obj: Any, *, meta: dict | None = None,

@@ -123,6 +123,22 @@ def _unflatten(d: Any, arrays: dict[str, np.ndarray]) -> Any:
     return d
 
 
+def _atomic_write(path: Path, write) -> None:
+    """Write a file through ``write(fh)`` atomically: a temporary file beside it, fsync, rename
+    (a crash mid-write never leaves a corrupt file; shared by checkpoints and artifacts)."""
+    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            write(fh)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
 def save_state(path: str | os.PathLike, state: Any, *, meta: dict | None = None) -> Path:
     """Write ``state`` to ``path`` (``.npz``) atomically; ``meta`` is stored beside it (JSON).
 
@@ -142,17 +158,7 @@ def save_state(path: str | os.PathLike, state: Any, *, meta: dict | None = None)
     names = dict(zip(arrays, payload))
     manifest["arrays"] = names
     payload["__manifest__"] = np.array(json.dumps(manifest))
-    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            np.savez(fh, **payload)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    _atomic_write(path, lambda fh: np.savez(fh, **payload))
     return path
 
 
