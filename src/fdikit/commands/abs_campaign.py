@@ -1,10 +1,11 @@
 """``fdikit abs campaign``: Monte Carlo evaluation of the ABS diagnosis (paper luo-et-al, Section VII).
 
-Designs the five GLRT tests (G_P1, G_O1, G_O2, G_O_T1, G_O_T2) for a target false-alarm
-probability from nominal runs, runs ``--runs`` simulations of every fault class (twice as many
-nominal ones), and reports per-test Pd and Pf, the learned D-matrix, the diagnosis sensitivity
-and specificity and the wall time. ``--complete`` adds the complete diagnoser (tree with the SVM
-tests S_Kf/S_Iw, SVM error, severity-estimation errors; :mod:`fdikit.evaluate.abs_diagnoser`).
+Designs the five GLRT tests (G_P1, G_O1, G_O2, G_O_T1, G_O_T2; with ``--tests extended`` also the
+directional GLRT G_D_Iw) for a target false-alarm probability from nominal runs, runs ``--runs``
+simulations of every fault class (twice as many nominal ones), and reports per-test Pd and Pf,
+the learned D-matrix, the diagnosis sensitivity and specificity and the wall time.
+``--complete`` adds the complete diagnoser (tree with the SVM tests S_Kf/S_Iw, SVM error,
+severity-estimation errors; :mod:`fdikit.evaluate.abs_diagnoser`).
 Wire it into ``fdikit abs`` with ``add_campaign_parser(abs_actions)``.
 """
 
@@ -50,6 +51,9 @@ def add_campaign_parser(abs_subparsers) -> argparse.ArgumentParser:
     p.add_argument("--margin", type=float, default=0.1, help="relative threshold margin (default 0.1)")
     add_manoeuvre_args(p)
     p.add_argument("--gate", type=float, default=0.5, help="gate time T of G_O_T1/G_O_T2, s (default 0.5)")
+    p.add_argument("--tests", choices=["paper", "extended"], default="paper",
+                   help="test set: the paper's five GLRT tests (default), or 'extended': those plus the "
+                   "directional GLRT G_D_Iw of r3 along its I_w signature (detects the I_w fault F4)")
     p.add_argument("--progress", dest="progress", action="store_true", default=None,
                    help="show a progress bar on stderr (default: when stderr is a terminal)")
     p.add_argument("--no-progress", dest="progress", action="store_false", help="no progress bar")
@@ -83,7 +87,7 @@ def _campaign(args) -> int:
     res = run_campaign(args.runs, nominal_runs=args.nominal_runs, design_runs=args.design_runs,
                        snr_db=args.snr, seed=args.seed, W=args.window, gate=args.gate,
                        magnitudes=args.magnitudes, pfa=args.pfa, margin=args.margin,
-                       noise_hold=args.noise_hold, pedal_ramp=args.pedal_ramp,
+                       noise_hold=args.noise_hold, pedal_ramp=args.pedal_ramp, tests=args.tests,
                        progress=sys.stderr.isatty() if args.progress is None else args.progress)
     out = res.to_dict()
     if args.complete:

@@ -1,5 +1,6 @@
-"""Residual processors: threshold rules, GLRT, MHSSPT."""
+"""Residual processors: threshold rules, GLRT, directional GLRT, MHSSPT."""
 
+from .directional import DirectionalGLRT, directional_statistic
 from .glrt import GLRT, ThresholdDesign, TimeGated, design_threshold, glrt_statistic
 from .mhsspt import MHSSPT, MHSSPTCalibration, UniformMeanGaussian, calibrate_densities
 from .threshold import Hold, consecutive_count
@@ -7,6 +8,7 @@ from .threshold import Hold, consecutive_count
 __all__ = [
     "GLRT",
     "MHSSPT",
+    "DirectionalGLRT",
     "Hold",
     "MHSSPTCalibration",
     "ThresholdDesign",
@@ -15,5 +17,6 @@ __all__ = [
     "calibrate_densities",
     "consecutive_count",
     "design_threshold",
+    "directional_statistic",
     "glrt_statistic",
 ]

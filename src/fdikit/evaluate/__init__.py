@@ -13,10 +13,13 @@ from .campaign import (
     design_tests,
     diagnose_ml,
     diagnose_tree,
+    extended_tests,
     gp1_grid,
     min_magnitudes,
     paper_tests,
+    residual_generators,
     run_campaign,
+    test_set,
 )
 
 __all__ = [
@@ -33,8 +36,11 @@ __all__ = [
     "design_tests",
     "diagnose_ml",
     "diagnose_tree",
+    "extended_tests",
     "gp1_grid",
     "min_magnitudes",
     "paper_tests",
+    "residual_generators",
     "run_campaign",
+    "test_set",
 ]

@@ -76,7 +76,7 @@ import numpy as np
 
 from ..errors import DataError
 from ..signals import Signals
-from .campaign import TestBank, abs_residuals, design_tests, paper_tests
+from .campaign import TestBank, abs_residuals, design_tests, paper_tests, residual_generators
 
 __all__ = [
     "ESTIMATED_PARAM",
@@ -379,9 +379,10 @@ class ABSDiagnoser:
         iso = SVMIsolator(svm).fit(X, lab)
         rates = svm_rates(iso, svm_per_size, seed + 2, snr_db)
         fired, labels = {}, {}
+        gens = residual_generators(bank.specs)
         for ci, c in enumerate(FAULT_CLASSES):
             sig, _ = _simulate_class(c, None, runs if c != "F0" else 2 * runs, seed + 7919 * ci, snr_db)
-            fired[c] = bank.alarms(abs_residuals(sig))[0]
+            fired[c] = bank.alarms(abs_residuals(sig, gens))[0]
             labels[c] = iso.predict(sig.select(["omega_w", "omega_v"]).values)
         dm = learn_dmatrix(fired, labels, bank.names, level=level)
         tree = abs_tree(dm, prior)
@@ -398,34 +399,33 @@ class ABSDiagnoser:
         -------
         Monitor, dict test -> alarm channel
         """
-        from ..detect import GLRT, Hold, TimeGated
+        from ..detect import Hold, TimeGated
         from ..monitor import Decision, Monitor
-        from ..residuals.abs_residuals import ABSObserver, ParityR1
 
         procs, chan, made = [], {}, {}
         for s in self.bank.specs:
-            key = (s.residual, s.W, s.Z, self.bank.thresholds[s.name])
+            key = (s.residual, s.W, s.Z, s.signature, self.bank.thresholds[s.name])
             if key not in made:
-                if any(k[0] == s.residual for k in made):
+                if any(k[0] == s.residual and k[3] == s.signature for k in made):
                     raise DataError(f"test {s.name}: two ungated tests on residual {s.residual} with "
                                     "different settings cannot share one Monitor channel; use "
                                     "TestBank.alarms")
-                procs.append(GLRT([s.residual], self.bank.mu0[s.residual], self.bank.sigma2[s.residual], s.W))
-                procs.append(Hold([f"{s.residual}:glrt"], self.bank.thresholds[s.name], s.Z, absolute=False))
-                made[key] = f"{s.residual}:glrt:alarm"
+                procs.append(self.bank.processor(s))
+                procs.append(Hold([s.statistic_channel], self.bank.thresholds[s.name], s.Z, absolute=False))
+                made[key] = f"{s.statistic_channel}:alarm"
             if s.gate is None:
                 chan[s.name] = made[key]
             else:
                 procs.append(TimeGated([made[key]], 0.5, s.gate))
                 chan[s.name] = f"{made[key]}:gated"
         dec = Decision(list(chan.values()), names={v: k for k, v in chan.items()})
-        return Monitor([ParityR1(dt), ABSObserver(dt)], procs, dec), chan
+        return Monitor(list(residual_generators(self.bank.specs, dt)), procs, dec), chan
 
     # ---------------------------------------------------------------- diagnosis
     def outcomes(self, record) -> tuple[np.ndarray, np.ndarray]:
         """GLRT outcomes (runs, 5) and first alarm times (s, NaN if none) of a record."""
         sig, _ = _record(record)
-        return self.bank.alarms(abs_residuals(sig))
+        return self.bank.alarms(abs_residuals(sig, residual_generators(self.bank.specs)))
 
     def estimate_param(self, y: np.ndarray, param: str, scenario=None) -> dict[str, float]:
         """Subset output-error estimate of one parameter from one record's measurements (T, 2)."""
@@ -466,7 +466,7 @@ class ABSDiagnoser:
         if not 0 <= run < sig.runs:
             raise DataError(f"run {run} out of range: the record has {sig.runs} runs")
         one = Signals(sig.t, sig.values[run:run + 1], sig.names, check=False)
-        fired, first = self.bank.alarms(abs_residuals(one))
+        fired, first = self.bank.alarms(abs_residuals(one, residual_generators(self.bank.specs)))
         names = self.bank.names
         out_glrt = dict(zip(names, fired[0].tolist()))
         svm_label = {}
@@ -560,10 +560,11 @@ def complete_campaign(runs: int = 200, *, nominal_runs: int | None = None, bank:
     iso = SVMIsolator(svm).fit(X, lab)
     rates = svm_rates(iso, svm_per_size, seed + 2, snr_db)
     fired, label, sigs, truth = {}, {}, {}, {}
+    gens = residual_generators(bank.specs)
     for ci, c in enumerate(FAULT_CLASSES):
         n = nominal_runs if c == "F0" else runs
         sig, par = _simulate_class(c, mags[c], n, seed + 7919 * ci, snr_db)
-        fired[c] = bank.alarms(abs_residuals(sig))[0]
+        fired[c] = bank.alarms(abs_residuals(sig, gens))[0]
         label[c] = iso.predict(sig.select(["omega_w", "omega_v"]).values)
         sigs[c], truth[c] = sig, par
     dm = learn_dmatrix(fired, label, bank.names, level=level)

@@ -20,12 +20,14 @@ from .fdf import (
     stack_designs,
 )
 from .observer import ObserverDesign, ObserverResidual, design_observer_residual
+from .sensitivity import ParameterSensitivity
 
 __all__ = [
     "FaultDetectionFilter",
     "FilterDesign",
     "ObserverDesign",
     "ObserverResidual",
+    "ParameterSensitivity",
     "design_filter_set",
     "design_observer_residual",
     "design_optimal_fdf",

@@ -26,6 +26,12 @@ where needed, the known inputs ``P_m`` (MPa, nominal master-cylinder pressure), 
   falling at ``s`` rad/s^2, larger than the faults of Table II's minimum sizes). The gain comes from
   :func:`observer_gain` (steady-state Kalman-Bucy gain of the linear part A of eq. (30), the
   documented method; or pole placement).
+* :func:`observer_sensitivity` -- the observer with twins on perturbed models
+  (:class:`~fdikit.residuals.sensitivity.ParameterSensitivity`): r3, r4 and their signatures for
+  small changes of named plant parameters, for the directional tests of
+  :class:`fdikit.detect.DirectionalGLRT` (an I_w change of 2 % leaves the mean of r3 unchanged,
+  its signature flips sign with every slip cycle, but its evidence summed over a stop is
+  about 5 standard deviations at 23 dB).
 """
 
 from __future__ import annotations
@@ -55,6 +61,7 @@ __all__ = [
     "ParityR2",
     "linear_part",
     "observer_gain",
+    "observer_sensitivity",
     "r2_magnitude_study",
 ]
 
@@ -703,3 +710,58 @@ class ABSObserver(ResidualGenerator):
         _obs_batch(np.ascontiguousarray(y), np.ascontiguousarray(u), self._x, self.q, self.L, self._tab, out)
         out = self._valid(out, y)
         return Signals(signals.t, out, self.output_names, self.output_units, check=False)
+
+
+#: Observer-model parameters a signature can be taken for (those :func:`_pack` reads; ``tau_m``
+#: and the pedal parameters are not in the observer, whose P_m is an input).
+OBSERVER_PARAMS = ("R_w", "N_v", "M_v", "I_w", "K_f", "omega_n", "zeta", "C_in", "C_out", "P_lp", "rho",
+                   "beta_s", "V_s", "A_0")
+
+
+def observer_sensitivity(dt: float, names: Sequence[str] = ("I_w",), *, rel_step: float = 0.01,
+                         params: Mapping[str, float] | None = None, L=None,
+                         outputs: Sequence[str] = ("r3", "r4"), **observer_kw):
+    """The ABS observer with its residual signatures for relative changes of plant parameters.
+
+    Builds :class:`ABSObserver` on the nominal parameters and one twin per name with that
+    parameter scaled by ``1 + rel_step``, all with the *same* gain ``L`` (default
+    :func:`observer_gain` of the nominal parameters), wrapped in
+    :class:`~fdikit.residuals.sensitivity.ParameterSensitivity`.
+
+    Parameters
+    ----------
+    dt : float
+        Sample interval, s.
+    names : sequence of str
+        Parameters of :data:`OBSERVER_PARAMS` (e.g. ``["I_w", "K_f"]``).
+    rel_step : float
+        Relative finite-difference step (1 %: the signature of a 2 % fault is then within
+        about 1 % of the measured response, since the response is nearly linear at that size).
+    params, L, **observer_kw
+        Nominal parameters, gain and further :class:`ABSObserver` options.
+
+    Returns
+    -------
+    ParameterSensitivity
+        Outputs ``r3``, ``r4`` and ``sig:<r>:<name>`` (rad/s per unit relative change).
+
+    Examples
+    --------
+    >>> observer_sensitivity(0.01, ["I_w", "K_f"], outputs=["r3"]).output_names
+    ['r3', 'r4', 'sig:r3:I_w', 'sig:r3:K_f']
+    """
+    from .sensitivity import ParameterSensitivity
+
+    p = _params(params)
+    names = [str(n) for n in names]
+    bad = [n for n in names if n not in OBSERVER_PARAMS]
+    if bad:
+        raise DataError(f"no observer signature for {bad}: the observer model contains "
+                        f"{list(OBSERVER_PARAMS)} "
+                        "(tau_m and the pedal act through its P_m input)")
+    if len(set(names)) != len(names):
+        raise DataError(f"parameter names repeat: {names}")
+    L = observer_gain(p, dt_sample=dt) if L is None else np.asarray(L, float)
+    base = ABSObserver(dt, p, L=L, **observer_kw)
+    twins = {n: ABSObserver(dt, dict(p, **{n: p[n] * (1.0 + rel_step)}), L=L, **observer_kw) for n in names}
+    return ParameterSensitivity(base, twins, rel_step, outputs=outputs)
