@@ -68,8 +68,10 @@ def register(subparsers) -> argparse.ArgumentParser:
     s.add_argument("--plot", metavar="FILE", default=None, help="write a figure like Fig. 3 (first run)")
     s.set_defaults(func=_simulate)
     from .abs_campaign import add_campaign_parser
+    from .abs_detectability import add_detectability_parser
 
     add_campaign_parser(actions)
+    add_detectability_parser(actions)
     return actions
 
 

@@ -1,0 +1,71 @@
+"""``fdikit abs detectability``: the best any detector can do for one ABS fault (Neyman-Pearson bound).
+
+For a fault of known class and size, compares the noise-free measurements of the faulty and the
+nominal stop over a window before the ABS engages, estimates the noise covariance of the same
+quantities from nominal Monte Carlo runs, and prints ``d'`` and the detection probability of the
+likelihood-ratio test for that known change at a false-alarm probability ``--pfa``: an upper
+bound for every residual generator and test (:mod:`fdikit.evaluate.detectability`). When the
+faulty parameter no longer acts after the window (tau_m once the master-cylinder pressure has
+settled), the bound covers the whole record.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+from ..errors import DataError
+from .abs import _snr
+
+__all__ = ["add_detectability_parser"]
+
+
+def add_detectability_parser(abs_subparsers) -> argparse.ArgumentParser:
+    """Add the ``detectability`` action to the ``fdikit abs`` action subparsers.
+
+    Examples
+    --------
+    >>> import argparse
+    >>> sub = argparse.ArgumentParser().add_subparsers()
+    >>> a = add_detectability_parser(sub).parse_args(["--fault", "F5", "--magnitude", "0.15", "--json"])
+    >>> a.fault, a.magnitude, a.window
+    ('F5', 0.15, [0.5, 2.6])
+    """
+    p = abs_subparsers.add_parser(
+        "detectability", help="Neyman-Pearson bound on detecting one ABS fault (known-signal d')",
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--fault", required=True, help="fault class: F1.1, F1.2, F2.1, F2.2, F3, F4 or F5")
+    p.add_argument("--magnitude", type=float, required=True, help="relative parameter change (e.g. 0.15)")
+    p.add_argument("--snr", type=_snr, default=23.0, help="process-noise SNR in dB, or 'none' (default 23)")
+    p.add_argument("--window", type=float, nargs=2, default=[0.5, 2.6], metavar=("START", "END"),
+                   help="window of the record, s (default 0.5 2.6: braking before the ABS engages)")
+    p.add_argument("--block", type=int, default=5, help="samples averaged per quantity (default 5)")
+    p.add_argument("--runs", type=int, default=4000, help="nominal runs for the covariance (default 4000)")
+    p.add_argument("--pfa", type=float, default=1e-4, help="false-alarm probability (default 1e-4)")
+    p.add_argument("--seed", type=int, default=0, help="master seed (default 0)")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=_detectability)
+    return p
+
+
+def _detectability(args) -> int:
+    from ..cli import print_json
+    from ..evaluate.detectability import abs_detectability
+
+    if args.runs < 2:
+        raise DataError(f"--runs must be >= 2, got {args.runs}")
+    out = abs_detectability(args.fault, args.magnitude, snr_db=args.snr, window=tuple(args.window),
+                            block=args.block, runs=args.runs, seed=args.seed, pfa=args.pfa)
+    if args.json:
+        print_json(out)
+        return 0
+    w = out["window"]
+    print(f"{args.fault} {args.magnitude:+g} at {args.snr} dB, window {w[0]}-{w[1]} s, "
+          f"{out['quantities']} quantities, {out['runs']} nominal runs")
+    print(f"d' = {out['d_prime']:.2f} (measurement noise only: {out['d_prime_measurement_only']:.2f}); "
+          f"Pd <= {out['pd_bound']:.4f} at Pfa {args.pfa:g} for any detector using this window")
+    if out["d_prime_whole_record_bound"] is not None:
+        print(f"the parameter no longer acts after the window: whole-record bound d' = "
+              f"{out['d_prime_whole_record_bound']:.2f}, Pd <= {out['pd_bound_whole_record']:.4f}")
+    else:
+        print("the parameter still acts after the window: the bound covers the window only")
+    return 0
