@@ -196,7 +196,7 @@ def test_directional_test_detects_the_iw_fault_the_glrt_misses():
         res = simulate(None, Scenario(fault="F4", magnitude=m), runs=40, seed=14)
         r = abs_residuals(res.y.concat_channels(res.u), gens)
         fired[m] = b.alarms(r)[0]
-        spec = specs[-1]
+        spec = next(s for s in specs if s.name == "G_D_Iw")
         eta[m] = b.processor(spec).run(r)[f"{spec.name}:eta"][:, -1]
     j = b.names.index("G_D_Iw")
     jo = b.names.index("G_O1")
@@ -209,3 +209,28 @@ def test_directional_test_detects_the_iw_fault_the_glrt_misses():
     assert f0[:, j].mean() <= 0.05
     with pytest.raises(DataError, match="only for directional tests"):
         TestSpec("x", "r3", None, 5)
+    with pytest.raises(DataError, match="only for directional tests"):
+        TestSpec("x", "r3+r4", 10, 5)
+    with pytest.raises(DataError, match="also a nuisance"):
+        TestSpec("x", "r3", None, 5, signature="K_f", nuisance=("K_f",))
+
+
+def test_decoupled_directional_tests_tell_k_f_from_small_r_w():
+    """F2.1 (R_w -2 %) and F3 (K_f +-2 %) fire the same GLRT tests (and the plain directional tests
+    alike: their signatures have a cosine of -0.94); G_D_Kf (K_f with R_w free) and G_D_Rw (R_w with
+    K_f free) split them."""
+    from fdikit.evaluate import extended_tests, residual_generators
+
+    specs = extended_tests(40)
+    b = design_tests(specs, design_runs=300, pfa=0.01, seed=17)
+    gens = residual_generators(specs)
+    jk, jr = b.names.index("G_D_Kf"), b.names.index("G_D_Rw")
+    out = {}
+    for f, m in (("F2.1", -0.02), ("F3", 0.02), ("F3", -0.02)):
+        res = simulate(None, Scenario(fault=f, magnitude=m), runs=40, seed=18)
+        out[(f, m)] = b.alarms(abs_residuals(res.y.concat_channels(res.u), gens))[0]
+    f21 = out[("F2.1", -0.02)]
+    assert f21[:, jr].mean() >= 0.9 and f21[:, jk].mean() <= 0.25
+    for m in (0.02, -0.02):
+        f3 = out[("F3", m)]
+        assert f3[:, jk].mean() >= 0.9 and f3[:, jr].mean() <= 0.1

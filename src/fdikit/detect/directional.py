@@ -20,6 +20,16 @@ at sample ``j``::
   :class:`~fdikit.detect.GLRT`. With one channel and ``s_i = 1`` this *is* eq. (24) (a test
   checks it).
 
+Decoupling (``nuisance=``): when other faults have signatures ``s'_i, s''_i, ...`` that overlap
+the tested one (for the ABS, the r3 signatures of K_f and R_w have a cosine of -0.94), their
+amplitudes are left free as nuisance parameters and the statistic is the likelihood ratio for
+``eta`` alone, ``g = eta_hat^2 / (2 [G^-1]_00)`` with ``G = sum_i S_i' Sigma^-1 S_i`` the
+information matrix of all amplitudes (tested signature first) and ``eta_hat`` the first entry of
+the joint least-squares estimate ``G^-1 sum_i S_i' Sigma^-1 (r_i - mu_0)``: a fault along a
+nuisance signature leaves it at its no-fault distribution. This costs the part of the tested
+signature that the nuisances can mimic (the information drops from ``G_00`` to
+``1 / [G^-1]_00``).
+
 ``sum b_i`` is the Fisher information about ``eta`` in the window; where it does not exceed
 ``min_information`` (e.g. before any signature has appeared) the statistic and the estimate are
 0. Under the no-fault hypothesis with white residuals, ``2 g_k`` is chi-square with one degree
@@ -101,6 +111,135 @@ def _dglrt_batch(r, s, mu0, w, W, min_info, out_g, out_eta, A, B, pos, counts): 
         counts[run] = count
 
 
+@njit(cache=True)
+def _solve_first(G, A, m, work):  # pragma: no cover - compiled
+    """Cholesky of the m x m ``G``; returns (eta_0, [G^-1]_00) or (0, -1) if G is not positive definite.
+
+    ``work`` (m, m + 2) scratch: L, then the solves of ``L y = A`` and ``L z = e_0``. A pivot
+    below 1e-10 of the largest diagonal entry counts as singular (signatures that are linearly
+    dependent over the window carry no separate information).
+    """
+    big = 0.0
+    for j in range(m):
+        big = max(big, G[j, j])
+    if not big > 0.0:
+        return 0.0, -1.0
+    for j in range(m):
+        d = G[j, j]
+        for k in range(j):
+            d -= work[j, k] * work[j, k]
+        if not d > 1e-10 * big:
+            return 0.0, -1.0
+        ljj = np.sqrt(d)
+        work[j, j] = ljj
+        for i in range(j + 1, m):
+            v = G[i, j]
+            for k in range(j):
+                v -= work[i, k] * work[j, k]
+            work[i, j] = v / ljj
+    # forward: y = L^-1 A, z = L^-1 e_0; then eta = L^-T y (first entry), [G^-1]_00 = |z|^2
+    for i in range(m):
+        y = A[i]
+        z = 1.0 if i == 0 else 0.0
+        for k in range(i):
+            y -= work[i, k] * work[k, m]
+            z -= work[i, k] * work[k, m + 1]
+        work[i, m] = y / work[i, i]
+        work[i, m + 1] = z / work[i, i]
+    # backward for the first entry of L^-T y: solve L^T x = y, keep x_0
+    x = np.empty(m)
+    for i in range(m - 1, -1, -1):
+        v = work[i, m]
+        for k in range(i + 1, m):
+            v -= work[k, i] * x[k]
+        x[i] = v / work[i, i]
+    v00 = 0.0
+    for i in range(m):
+        v00 += work[i, m + 1] * work[i, m + 1]
+    return x[0], v00
+
+
+@njit(cache=True)
+def _dglrt_multi(r, S, mu0, w, W, min_info, out_g, out_eta, A, G, pos, counts):  # pragma: no cover
+    """Decoupled form: S (runs, T, C, m) with the tested signature at m-index 0.
+
+    Anchored (``W == 0``): ``A[run, 0]`` (m,) and ``G[run, 0]`` (m, m) are the running sums;
+    windowed: prefix sums (runs, 2W + 1, ...) re-anchored every W samples as in the GLRT.
+    """
+    R, T, C, m = S.shape
+    top = 2 * W
+    a = np.empty(m)
+    g2 = np.empty((m, m))
+    dA = np.empty(m)
+    dG = np.empty((m, m))
+    a0 = np.empty(m)
+    g0 = np.empty((m, m))
+    work = np.zeros((m, m + 2))
+    for run in range(R):
+        Ar = A[run]
+        Gr = G[run]
+        p = pos[run]
+        count = counts[run]
+        for k in range(T):
+            a[:] = 0.0
+            g2[:, :] = 0.0
+            for c in range(C):
+                e = (r[run, k, c] - mu0[c]) * w[c]
+                for i in range(m):
+                    si = S[run, k, c, i]
+                    a[i] += si * e
+                    for j in range(m):
+                        g2[i, j] += si * S[run, k, c, j] * w[c]
+            if W == 0:
+                for i in range(m):
+                    Ar[0, i] += a[i]
+                    for j in range(m):
+                        Gr[0, i, j] += g2[i, j]
+                eta, v00 = _solve_first(Gr[0], Ar[0], m, work)
+                if v00 > 0.0 and 1.0 / v00 > min_info:
+                    out_g[run, k] = 0.5 * eta * eta / v00
+                    out_eta[run, k] = eta
+                else:
+                    out_g[run, k] = 0.0
+                    out_eta[run, k] = 0.0
+                continue
+            if p == top:  # re-anchor: keep the last W + 1 prefix sums, the oldest becomes 0
+                for i in range(m):
+                    a0[i] = Ar[top - W, i]
+                    for j in range(m):
+                        g0[i, j] = Gr[top - W, i, j]
+                for q in range(W + 1):
+                    for i in range(m):
+                        Ar[q, i] = Ar[top - W + q, i] - a0[i]
+                        for j in range(m):
+                            Gr[q, i, j] = Gr[top - W + q, i, j] - g0[i, j]
+                p = W
+            for i in range(m):
+                Ar[p + 1, i] = Ar[p, i] + a[i]
+                for j in range(m):
+                    Gr[p + 1, i, j] = Gr[p, i, j] + g2[i, j]
+            p += 1
+            if count < W:
+                count += 1
+            best = 0.0
+            best_eta = 0.0
+            for L in range(1, count + 1):
+                for i in range(m):
+                    dA[i] = Ar[p, i] - Ar[p - L, i]
+                    for j in range(m):
+                        dG[i, j] = Gr[p, i, j] - Gr[p - L, i, j]
+                eta, v00 = _solve_first(dG, dA, m, work)
+                if v00 > 0.0 and 1.0 / v00 > min_info:
+                    v = 0.5 * eta * eta / v00
+                    if v > best:
+                        best = v
+                        best_eta = eta
+            out_g[run, k] = best
+            out_eta[run, k] = best_eta
+        pos[run] = p
+        counts[run] = count
+
+
 class DirectionalGLRT(ResidualProcessor):
     """GLRT for a change along a known signature with unknown amplitude (see the module docstring).
 
@@ -117,8 +256,11 @@ class DirectionalGLRT(ResidualProcessor):
         ``None``: anchored at the first sample (the change present from the start, O(1) per
         sample); an integer >= 1: moving window over the candidate change times (O(W)).
     min_information : float
-        The statistic is 0 where ``sum b_i`` (the information about ``eta``, in 1/eta^2) does not
-        exceed this value (>= 0).
+        The statistic is 0 where ``sum b_i`` (the information about ``eta``, in 1/eta^2; with
+        nuisances ``1 / [G^-1]_00``) does not exceed this value (>= 0).
+    nuisance : sequence of sequences of str
+        Signatures of other faults to decouple from, each with one channel per residual channel
+        (see the module docstring); default none.
     name : str, optional
         Prefix of the outputs (default: the first signature channel).
 
@@ -140,15 +282,20 @@ class DirectionalGLRT(ResidualProcessor):
     """
 
     def __init__(self, inputs: Sequence[str], signatures: Sequence[str], mu0=0.0, sigma2=1.0,
-                 W: int | None = None, *, min_information: float = 0.0, name: str | None = None):
+                 W: int | None = None, *, min_information: float = 0.0, name: str | None = None,
+                 nuisance: Sequence[Sequence[str]] = ()):
         self.residual_names = [str(x) for x in inputs]
         self.signature_names = [str(x) for x in signatures]
+        if isinstance(nuisance, str) or any(isinstance(n, str) for n in nuisance):
+            raise DataError("nuisance must be a list of signature-channel lists, e.g. [['sig:r3:R_w']]")
+        self.nuisance_names = [[str(x) for x in n] for n in nuisance]
         c = len(self.residual_names)
         if c == 0:
             raise DataError("DirectionalGLRT needs at least one residual channel")
-        if len(self.signature_names) != c:
-            raise DataError(f"DirectionalGLRT: {c} residual channels {self.residual_names} need {c} "
-                            f"signature channels, got {self.signature_names}")
+        for sig in [self.signature_names, *self.nuisance_names]:
+            if len(sig) != c:
+                raise DataError(f"DirectionalGLRT: {c} residual channels {self.residual_names} need {c} "
+                                f"signature channels, got {sig}")
         if W is not None and (int(W) != W or W < 1):
             raise DataError(f"DirectionalGLRT window W must be None (anchored) or an integer >= 1, got {W}")
         self.W = None if W is None else int(W)
@@ -164,7 +311,10 @@ class DirectionalGLRT(ResidualProcessor):
             raise DataError(f"min_information must be finite and >= 0, got {min_information}")
         self.min_information = float(min_information)
         self.name = str(name) if name is not None else self.signature_names[0]
-        self.input_names = self.residual_names + self.signature_names
+        self.input_names = self.residual_names + self.signature_names + [x for n in self.nuisance_names
+                                                                        for x in n]
+        if len(set(self.input_names)) != len(self.input_names):
+            raise DataError(f"DirectionalGLRT: input channels repeat: {self.input_names}")
         self.output_names = [f"{self.name}:dglrt", f"{self.name}:eta"]
         self.reset(1)
 
@@ -174,28 +324,48 @@ class DirectionalGLRT(ResidualProcessor):
         """Configuration as plain data (a design artifact, :mod:`fdikit.monitor.artifacts`)."""
         return {"inputs": list(self.residual_names), "signatures": list(self.signature_names),
                 "mu0": self.mu0.tolist(), "sigma2": self.sigma2.tolist(), "W": self.W,
-                "min_information": self.min_information, "name": self.name}
+                "min_information": self.min_information, "name": self.name,
+                "nuisance": [list(n) for n in self.nuisance_names]}
 
     @classmethod
     def from_dict(cls, d: dict) -> DirectionalGLRT:
         return cls(d["inputs"], d["signatures"], d["mu0"], d["sigma2"], d["W"],
-                   min_information=d.get("min_information", 0.0), name=d.get("name"))
+                   min_information=d.get("min_information", 0.0), name=d.get("name"),
+                   nuisance=d.get("nuisance", ()))
+
+    @property
+    def n_directions(self) -> int:
+        """1 + the number of nuisance signatures."""
+        return 1 + len(self.nuisance_names)
 
     def reset(self, runs: int = 1) -> None:
         n = 1 if self.W is None else 2 * self.W + 1
-        self._A = np.zeros((runs, n))
-        self._B = np.zeros((runs, n))
+        m = self.n_directions
+        if m == 1:
+            self._A = np.zeros((runs, n))
+            self._B = np.zeros((runs, n))
+        else:
+            self._A = np.zeros((runs, n, m))
+            self._B = np.zeros((runs, n, m, m))
         self._pos = np.zeros(runs, np.int64)
         self._counts = np.zeros(runs, np.int64)
         self._k = 0
 
     def _compute(self, r: np.ndarray, s: np.ndarray) -> np.ndarray:
-        R, T, _ = r.shape
+        """r (runs, T, C) residuals, s (runs, T, C * m) signatures: tested first, then each nuisance."""
+        R, T, C = r.shape
         g = np.empty((R, T))
         eta = np.empty((R, T))
-        _dglrt_batch(np.ascontiguousarray(r, float), np.ascontiguousarray(s, float), self.mu0,
-                     1.0 / self.sigma2, 0 if self.W is None else self.W, self.min_information, g, eta,
-                     self._A, self._B, self._pos, self._counts)
+        W = 0 if self.W is None else self.W
+        m = self.n_directions
+        if m == 1:
+            _dglrt_batch(np.ascontiguousarray(r, float), np.ascontiguousarray(s, float), self.mu0,
+                         1.0 / self.sigma2, W, self.min_information, g, eta,
+                         self._A, self._B, self._pos, self._counts)
+        else:
+            S = np.ascontiguousarray(np.moveaxis(s.reshape(R, T, m, C), 2, 3), float)
+            _dglrt_multi(np.ascontiguousarray(r, float), S, self.mu0, 1.0 / self.sigma2, W,
+                         self.min_information, g, eta, self._A, self._B, self._pos, self._counts)
         return np.stack([g, eta], axis=-1)
 
     def _check(self, x: np.ndarray, k0: int) -> None:

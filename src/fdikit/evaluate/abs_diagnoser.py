@@ -404,9 +404,9 @@ class ABSDiagnoser:
 
         procs, chan, made = [], {}, {}
         for s in self.bank.specs:
-            key = (s.residual, s.W, s.Z, s.signature, self.bank.thresholds[s.name])
+            key = (s.residual, s.W, s.Z, s.signature, s.nuisance, self.bank.thresholds[s.name])
             if key not in made:
-                if any(k[0] == s.residual and k[3] == s.signature for k in made):
+                if any(k[0] == s.residual and k[3:5] == (s.signature, s.nuisance) for k in made):
                     raise DataError(f"test {s.name}: two ungated tests on residual {s.residual} with "
                                     "different settings cannot share one Monitor channel; use "
                                     "TestBank.alarms")

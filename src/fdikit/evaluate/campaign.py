@@ -83,6 +83,7 @@ from ..errors import DataError
 from ..signals import Signals
 
 __all__ = [
+    "DIRECTIONAL_TESTS",
     "PAPER_TABLE_III",
     "PAPER_TABLE_IV",
     "PAPER_TABLE_V",
@@ -126,9 +127,11 @@ class TestSpec:
     With ``signature`` (a plant parameter, e.g. ``"I_w"``) the test is the directional GLRT
     (:class:`fdikit.detect.DirectionalGLRT`) of the residual along its signature channel
     ``"sig:<residual>:<signature>"`` (:func:`fdikit.residuals.abs_residuals.observer_sensitivity`);
-    ``W = None`` anchors it at the start of the record (the parametric fault present throughout),
-    and ``min_information`` keeps it silent until the information about the amplitude reaches
-    that value (1/eta^2: 2500 means a standard deviation of 2 % for the relative change).
+    ``residual`` may then name several channels joined by ``"+"`` (``"r3+r4"``). ``W = None``
+    anchors it at the start of the record (the parametric fault present throughout),
+    ``min_information`` keeps it silent until the information about the amplitude reaches that
+    value (1/eta^2: 2500 means a standard deviation of 2 % for the relative change), and
+    ``nuisance`` names parameters whose signatures it is decoupled from.
     """
 
     __test__ = False  # not a pytest class
@@ -139,6 +142,7 @@ class TestSpec:
     gate: float | None = None
     signature: str | None = None
     min_information: float = 0.0
+    nuisance: tuple[str, ...] = ()
 
     def __post_init__(self):
         if self.W is None and self.signature is None:
@@ -148,11 +152,32 @@ class TestSpec:
             raise DataError(f"test {self.name}: GLRT window W must be an integer >= 1, got {self.W}")
         if int(self.Z) != self.Z or self.Z < 1:
             raise DataError(f"test {self.name}: hold Z must be an integer >= 1, got {self.Z}")
+        if self.signature is None and ("+" in self.residual or self.nuisance):
+            raise DataError(f"test {self.name}: several residuals and nuisance signatures are only for "
+                            "directional tests (signature=)")
+        if self.signature is not None and self.signature in self.nuisance:
+            raise DataError(f"test {self.name}: the tested signature {self.signature!r} is also a nuisance")
+        object.__setattr__(self, "nuisance", tuple(str(n) for n in self.nuisance))
 
     @property
-    def signature_channel(self) -> str | None:
-        """``"sig:<residual>:<signature>"`` for a directional test, else None."""
-        return None if self.signature is None else f"sig:{self.residual}:{self.signature}"
+    def residuals(self) -> list[str]:
+        """The residual channels (``"r3+r4"`` -> ``["r3", "r4"]``)."""
+        return self.residual.split("+")
+
+    @property
+    def signature_channels(self) -> list[str]:
+        """``"sig:<residual>:<signature>"`` per residual channel of a directional test, else []."""
+        return [] if self.signature is None else [f"sig:{r}:{self.signature}" for r in self.residuals]
+
+    @property
+    def nuisance_channels(self) -> list[list[str]]:
+        """Per nuisance parameter, its signature channel for each residual channel."""
+        return [[f"sig:{r}:{q}" for r in self.residuals] for q in self.nuisance]
+
+    @property
+    def parameters(self) -> list[str]:
+        """Parameters whose signatures the test reads (tested first)."""
+        return [] if self.signature is None else [self.signature, *self.nuisance]
 
     @property
     def statistic_channel(self) -> str:
@@ -175,30 +200,41 @@ def paper_tests(W: int | None = None, *, gate: float = 0.5) -> list[TestSpec]:
             TestSpec("G_O_T1", "r3", w2, 5, gate), TestSpec("G_O_T2", "r4", w2, 5, gate)]
 
 
-def extended_tests(W: int | None = None, *, gate: float = 0.5, signatures: Sequence[str] = ("I_w",),
-                   Z: int = 5, resolution: float = 0.02) -> list[TestSpec]:
-    """The paper's five tests plus one directional GLRT of r3 per parameter in ``signatures``.
+#: Directional tests of :func:`extended_tests`: (parameter, nuisance parameters). K_f and R_w have
+#: nearly collinear signatures (cosine -0.94 on r3), so each is tested with the other left free.
+DIRECTIONAL_TESTS: tuple[tuple[str, tuple[str, ...]], ...] = (
+    ("I_w", ()), ("K_f", ("R_w",)), ("R_w", ("K_f",)))
 
-    ``G_D_<p>`` (``"I_w"`` -> ``G_D_Iw``) tests r3 along its signature for a change of plant
-    parameter ``p``, anchored at the start of the record (:class:`fdikit.detect.DirectionalGLRT`):
-    the test this plant needs for the I_w fault F4, which no change-in-mean test sees (its r3
-    signature changes sign with every slip cycle; see :mod:`fdikit.evaluate.campaign`). It
-    speaks once the amplitude estimate's standard deviation is below ``resolution`` (default
-    2 %, the smallest F3/F4 size; ``min_information = 1 / resolution^2``). Measured on 1000
-    nominal runs at 23 dB: without that floor, the largest nominal statistics all fell in the
-    first second of braking, where the information is below 100 (99.9 % quantile of the
-    record maximum 15.4); the value at the end of the record follows chi-square/2 (99.9 %
-    quantile 4.19 against 5.41).
+
+def extended_tests(W: int | None = None, *, gate: float = 0.5,
+                   directional: Sequence[tuple[str, Sequence[str]]] = DIRECTIONAL_TESTS,
+                   residuals: str = "r3+r4", Z: int = 5, resolution: float = 0.02) -> list[TestSpec]:
+    """The paper's five tests plus directional GLRTs of the observer residuals.
+
+    ``G_D_<p>`` (``"I_w"`` -> ``G_D_Iw``) tests r3 and r4 along their signatures for a change of
+    plant parameter ``p``, anchored at the start of the record
+    (:class:`fdikit.detect.DirectionalGLRT`), decoupled from the listed nuisance parameters.
+    ``G_D_Iw`` is the test this plant needs for the I_w fault F4, which no change-in-mean test
+    sees (its r3 signature changes sign with every slip cycle; see :mod:`fdikit.evaluate.campaign`);
+    ``G_D_Kf`` (K_f with R_w free) and ``G_D_Rw`` (R_w with K_f free) tell the K_f fault F3 from
+    the small R_w fault F2.1, which fire the same GLRT tests. Each speaks once its amplitude
+    estimate's standard deviation is below ``resolution`` (default 2 %, the smallest F3/F4 size;
+    ``min_information = 1 / resolution^2``). Measured on 1000 nominal runs at 23 dB (I_w test on
+    r3): without that floor, the largest nominal statistics all fell in the first second of
+    braking, where the information is below 100 (99.9 % quantile of the record maximum 15.4);
+    the value at the end of the record follows chi-square/2 (99.9 % quantile 4.19 against 5.41).
 
     Examples
     --------
     >>> [t.name for t in extended_tests()]
-    ['G_P1', 'G_O1', 'G_O2', 'G_O_T1', 'G_O_T2', 'G_D_Iw']
+    ['G_P1', 'G_O1', 'G_O2', 'G_O_T1', 'G_O_T2', 'G_D_Iw', 'G_D_Kf', 'G_D_Rw']
+    >>> extended_tests()[-1].nuisance
+    ('K_f',)
     """
     if not resolution > 0:
         raise DataError(f"resolution must be > 0, got {resolution}")
-    extra = [TestSpec(f"G_D_{p.replace('_', '')}", "r3", None, Z, signature=p,
-                      min_information=1.0 / resolution**2) for p in signatures]
+    extra = [TestSpec(f"G_D_{p.replace('_', '')}", residuals, None, Z, signature=p,
+                      min_information=1.0 / resolution**2, nuisance=tuple(nu)) for p, nu in directional]
     return paper_tests(W, gate=gate) + extra
 
 
@@ -217,7 +253,7 @@ def residual_generators(specs: Sequence[TestSpec], dt: float = 0.01) -> tuple:
     (:func:`~fdikit.residuals.abs_residuals.observer_sensitivity`)."""
     from ..residuals.abs_residuals import ABSObserver, ParityR1, observer_sensitivity
 
-    sigs = list(dict.fromkeys(s.signature for s in specs if s.signature is not None))
+    sigs = list(dict.fromkeys(p for s in specs for p in s.parameters))
     obs = observer_sensitivity(dt, sigs) if sigs else ABSObserver(dt)
     return ParityR1(dt), obs
 
@@ -297,11 +333,12 @@ class TestBank:
 
     def processor(self, spec: TestSpec):
         """The statistic's processor: :class:`GLRT`, or :class:`DirectionalGLRT` for a directional test."""
-        m, v = self.mu0[spec.residual], self.sigma2[spec.residual]
         if spec.signature is None:
-            return GLRT([spec.residual], m, v, spec.W)
-        return DirectionalGLRT([spec.residual], [spec.signature_channel], m, v, spec.W, name=spec.name,
-                               min_information=spec.min_information)
+            return GLRT([spec.residual], self.mu0[spec.residual], self.sigma2[spec.residual], spec.W)
+        m = [self.mu0[r] for r in spec.residuals]
+        v = [self.sigma2[r] for r in spec.residuals]
+        return DirectionalGLRT(spec.residuals, spec.signature_channels, m, v, spec.W, name=spec.name,
+                               min_information=spec.min_information, nuisance=spec.nuisance_channels)
 
     def statistic(self, res: Signals, spec: TestSpec) -> Signals:
         """Statistic of ``spec`` on residual signals (the one channel :attr:`TestSpec.statistic_channel`)."""
@@ -322,7 +359,7 @@ class TestBank:
         first = np.full((res.runs, len(self.specs)), np.nan)
         cache: dict[tuple, Signals] = {}
         for j, s in enumerate(self.specs):
-            key = (s.residual, s.W, s.Z, s.signature, self.thresholds[s.name])
+            key = (s.residual, s.W, s.Z, s.signature, s.nuisance, self.thresholds[s.name])
             if key not in cache:
                 st = self.statistic(res, s)
                 cache[key] = Hold(st.names, self.thresholds[s.name], s.Z, absolute=False).run(st)
@@ -452,7 +489,8 @@ def design_tests(specs: Sequence[TestSpec] | None = None, *, design_runs: int = 
     bank = TestBank(specs, mu0, sigma2, {})
     for s in specs:
         base = next((b for b in specs if b.gate is None
-                     and (b.residual, b.W, b.Z, b.signature) == (s.residual, s.W, s.Z, s.signature)), None)
+                     and (b.residual, b.W, b.Z, b.signature, b.nuisance)
+                     == (s.residual, s.W, s.Z, s.signature, s.nuisance)), None)
         if s.gate is not None and base is not None and base.name in bank.thresholds:
             bank.thresholds[s.name] = bank.thresholds[base.name]
             bank.design[s.name] = dict(bank.design[base.name], shared_with=base.name)
