@@ -104,3 +104,47 @@ def test_abs_config_detects_rw_fault_and_stays_quiet_on_nominal(tmp_path):
     S = np.stack([other.step(float(sig.t[k]), sig.values[:, k], sig.names)[1]
                   for k in range(cut, sig.n_samples)], 1)
     np.testing.assert_allclose(S, full.statistics.values[:, cut:], rtol=0, atol=1e-12)
+
+
+def test_abs_extended_config_detects_small_iw_fault(tmp_path):
+    """examples/abs/monitor_extended.toml: the directional GLRTs designed by the recipe and run over CSV
+    logs through fdikit monitor: an I_w fault of -3 % (class F4) fires G_D_Iw and no change-in-mean
+    test; nominal records announce nothing; the config-built monitor fires what TestBank.alarms fires
+    with the same designs."""
+    from fdikit.evaluate.campaign import TestBank, abs_residuals, extended_tests
+    from fdikit.monitor import load_artifact
+    from fdikit.monitor.config import build_monitor, load_config, map_channels, read_log
+
+    shutil.copy(EXAMPLES / "abs" / "monitor_extended.toml", tmp_path / "monitor.toml")
+    out = cli("design", tmp_path / "monitor.toml", "--json")
+    assert out.returncode == 0, out.stderr
+    _abs_csv(tmp_path / "iw.csv", "F4", -0.03, seed=12)
+    for k in range(3):
+        _abs_csv(tmp_path / f"nom{k}.csv", "F0", None, seed=200 + k)
+    out = cli("monitor", tmp_path / "iw.csv", "--config", tmp_path / "monitor.toml", "--json")
+    assert out.returncode == 0, out.stderr
+    fired_names = {e["hypothesis"] for e in json.loads(out.stdout)["events"]}
+    assert "G_D_Iw" in fired_names and not fired_names & {"G_O1", "G_O2", "G_P1"}, fired_names
+    for k in range(3):
+        out = cli("monitor", tmp_path / f"nom{k}.csv", "--config", tmp_path / "monitor.toml", "--json")
+        assert out.returncode == 0, out.stderr
+        assert json.loads(out.stdout)["n_events"] == 0, out.stdout
+    cfg = load_config(tmp_path / "monitor.toml")
+    sig = map_channels(cfg, read_log(cfg, tmp_path / "iw.csv"))
+    d = cfg.artifacts
+    specs = extended_tests()
+    glrt = {r: load_artifact(d / f"glrt_{r}") for r in ("r1", "r3", "r4")}
+    dgl = {s.name: load_artifact(d / f"dglrt_{s.name}") for s in specs if s.signature}
+    mu0 = {r: float(g.mu0[0]) for r, g in glrt.items()}
+    s2 = {r: float(g.sigma2[0]) for r, g in glrt.items()}
+    assert dgl["G_D_Iw"].mu0.tolist() == [mu0["r3"], mu0["r4"]]
+    thr = {s.name: float(load_artifact(d / f"hold_{s.name if s.signature else s.residual}").threshold[0])
+           for s in specs}
+    bank = TestBank(specs, mu0, s2, thr)
+    gens = (load_artifact(d / "r1"), load_artifact(d / "observer"))
+    fired, _ = bank.alarms(abs_residuals(sig, gens))
+    res = build_monitor(cfg).run(sig)
+    chans = ["r1:glrt:alarm", "r3:glrt:alarm", "r4:glrt:alarm", "r3:glrt:alarm:gated", "r4:glrt:alarm:gated",
+             "G_D_Iw:dglrt:alarm", "G_D_Kf:dglrt:alarm", "G_D_Rw:dglrt:alarm"]
+    mine = (res.statistics.values[0][:, res.statistics.index(chans)] > 0.5).any(axis=0)
+    assert mine.tolist() == fired[0].tolist()

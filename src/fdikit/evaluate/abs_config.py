@@ -13,7 +13,15 @@ artifact        stage
 ``glrt_rK``     moving-window GLRT of residual rK, eq. (24), with its calibrated mu0 and sigma^2
 ``hold_rK``     the alarm rule (34): the statistic above the designed threshold Z samples running
 ``gate_NAME``   the time gate (35) of the gated tests G_O_T1 / G_O_T2
+``dglrt_NAME``  with ``tests = "extended"``: the directional GLRT of a test ``G_D_*``
+                (:class:`~fdikit.detect.DirectionalGLRT`), and ``hold_NAME`` its alarm rule
 ==============  ==============================================================================
+
+With ``tests = "extended"`` (:func:`fdikit.evaluate.campaign.extended_tests`) the ``observer``
+artifact is the observer with its parameter signatures
+(:func:`~fdikit.residuals.abs_residuals.observer_sensitivity`, a
+:class:`~fdikit.residuals.ParameterSensitivity`) and the decision gains ``G_D_Iw:dglrt:alarm``,
+``G_D_Kf:dglrt:alarm``, ``G_D_Rw:dglrt:alarm`` (``examples/abs/monitor_extended.toml``).
 
 Decision channels (one per test of Table III): ``r1:glrt:alarm`` = G_P1, ``r3:glrt:alarm`` =
 G_O1, ``r4:glrt:alarm`` = G_O2, ``r3:glrt:alarm:gated`` = G_O_T1, ``r4:glrt:alarm:gated`` =
@@ -38,6 +46,7 @@ PARAMS: dict[str, Any] = {
     "margin": 0.1,         # relative safety margin on each threshold
     "seed": 0,
     "dt": 0.01,            # measurement period (s), the paper's 100 Hz
+    "tests": "paper",      # "paper": the five GLRT tests; "extended": plus the directional GLRTs
 }
 
 
@@ -61,22 +70,28 @@ def design(params: dict[str, Any] | None = None) -> dict[str, Any]:
     ['gate_G_O_T1', 'gate_G_O_T2', 'glrt_r1']
     """
     from ..detect import GLRT, Hold, TimeGated
-    from ..residuals.abs_residuals import ABSObserver, ParityR1
-    from .campaign import design_tests, paper_tests
+    from .campaign import design_tests, residual_generators, test_set
 
     p = dict(PARAMS)
     for k, v in (params or {}).items():
         if k not in PARAMS:
             raise DataError(f"ABS recipe: unknown parameter {k!r}; known: {sorted(PARAMS)}")
         p[k] = v
-    bank = design_tests(paper_tests(), design_runs=int(p["design_runs"]), snr_db=float(p["snr_db"]),
+    specs = test_set(str(p["tests"]))
+    bank = design_tests(specs, design_runs=int(p["design_runs"]), snr_db=float(p["snr_db"]),
                         seed=int(p["seed"]), pfa=float(p["pfa"]), margin=float(p["margin"]))
     dt = float(p["dt"])
-    out: dict[str, Any] = {"r1": ParityR1(dt), "observer": ABSObserver(dt)}
+    r1, obs = residual_generators(specs, dt)
+    out: dict[str, Any] = {"r1": r1, "observer": obs}
     for s in bank.specs:
         r = s.residual
         thr = bank.thresholds[s.name]
-        if s.gate is None:
+        if s.signature is not None:
+            if s.gate is not None:
+                raise DataError(f"test {s.name}: the recipe has no gated directional tests")
+            out[f"dglrt_{s.name}"] = bank.processor(s)
+            out[f"hold_{s.name}"] = Hold([s.statistic_channel], thr, s.Z, absolute=False)
+        elif s.gate is None:
             if f"glrt_{r}" in out:
                 raise DataError(f"test {s.name}: a second ungated test on residual {r}")
             out[f"glrt_{r}"] = GLRT([r], bank.mu0[r], bank.sigma2[r], s.W)
