@@ -66,6 +66,7 @@ def sections() -> dict[str, Callable[[], dict]]:
     for name, module in (("reconstruct", "fdikit.commands.reconstruct"),
                          ("abs", "fdikit.plants.abs"),
                          ("abs_diagnosis", "fdikit.evaluate.abs_diagnoser"),
+                         ("abs_directional", "fdikit.evaluate.detectability"),
                          ("car", "fdikit.plants.passenger_car"),
                          ("car_monitor", "fdikit.plants.passenger_car.monitor")):
         f = _external(module)
