@@ -218,9 +218,10 @@ def demo_summary() -> dict[str, Any]:
     """``fdikit demo`` section: the I_w fault the paper's tests miss, the tau_m fault nobody can see.
 
     Designs the extended ABS tests on 300 nominal runs (pfa 1 % per test), runs 20 nominal stops,
-    20 with I_w -2 % and 20 with tau_m +15 % (23 dB; the tau_m stops with the nominal stops' noise, so
-    that the same tests firing in both shows the fault changes nothing), and reports which tests fired, the directional test's estimate of
-    the I_w change, and the Neyman-Pearson bound of the tau_m fault (800 nominal runs).
+    20 with I_w -2 % and 20 with tau_m +15 % (23 dB; the tau_m stops with the nominal stops' noise,
+    so that the same tests firing in both shows the fault changes nothing), and reports which tests
+    fired, the directional test's estimate of the I_w change, and the Neyman-Pearson bound of the
+    tau_m fault (800 nominal runs).
 
     Returns
     -------
