@@ -129,12 +129,12 @@ def test_bad_input_is_named():
         DirectionalGLRT(["r"], ["s"], W=10).run(sig)
     v = np.ones((1, 5, 2))
     v[0, 3, 1] = np.nan
-    with pytest.raises(DataError, match="input 's' is not finite at sample 3"):
+    with pytest.raises(DataError, match=r"channel .s. has a non-finite value \(nan\) at run 0, sample 3"):
         DirectionalGLRT(["r"], ["s"]).run(Signals(np.arange(5.0), v, ["r", "s"], check=False))
     t = DirectionalGLRT(["r"], ["s"])
     t.reset(1)
     t.step([0.0, 1.0])
-    with pytest.raises(DataError, match="input 'r' is not finite at sample 1"):
+    with pytest.raises(DataError, match=r"channel .r. has a non-finite value \(inf\) at run 0, sample 1"):
         t.step([np.inf, 1.0])
     with pytest.raises(DataError, match="same shape"):
         directional_statistic(np.ones(3), np.ones(4))

@@ -37,10 +37,12 @@ def check_time(t: np.ndarray, *, name: str = "t") -> np.ndarray:
     return t
 
 
-def check_finite(values: np.ndarray, names: Sequence[str], *, what: str = "signal") -> None:
+def check_finite(values: np.ndarray, names: Sequence[str], *, what: str = "signal",
+                 first_sample: int = 0) -> None:
     """Raise :class:`DataError` naming the channel, run and sample of the first NaN or inf.
 
-    ``values`` has shape ``(runs, T, channels)`` (or ``(T, channels)``).
+    ``values`` has shape ``(runs, T, channels)`` (or ``(T, channels)``); samples are numbered from
+    ``first_sample`` (a streaming step passes the index of the sample it is given).
     """
     v = np.asarray(values)
     if v.dtype.kind not in "fc":
@@ -51,10 +53,10 @@ def check_finite(values: np.ndarray, names: Sequence[str], *, what: str = "signa
     idx = np.argwhere(~ok)[0]
     if v.ndim == 3:
         run, k, c = (int(i) for i in idx)
-        where = f"run {run}, sample {k}"
+        where = f"run {run}, sample {k + first_sample}"
     else:
         k, c = (int(i) for i in idx)
-        where = f"sample {k}"
+        where = f"sample {k + first_sample}"
     raise DataError(f"{what} channel {names[c]!r} has a non-finite value ({v[tuple(idx)]}) at {where}")
 
 

@@ -46,7 +46,7 @@ from numba import njit
 
 from ..errors import DataError
 from ..monitor.core import ResidualProcessor
-from ..signals import Signals
+from ..signals import Signals, check_finite
 
 __all__ = ["DirectionalGLRT", "directional_statistic"]
 
@@ -369,11 +369,7 @@ class DirectionalGLRT(ResidualProcessor):
         return np.stack([g, eta], axis=-1)
 
     def _check(self, x: np.ndarray, k0: int) -> None:
-        bad = ~np.isfinite(x)
-        if bad.any():
-            run, k, c = np.argwhere(bad)[0]
-            raise DataError(f"DirectionalGLRT input {self.input_names[c]!r} is not finite at sample "
-                            f"{k0 + k} (run {run})")
+        check_finite(x, self.input_names, what="DirectionalGLRT input", first_sample=k0)
 
     def _step(self, x: np.ndarray) -> np.ndarray:
         if x.shape[0] != self._A.shape[0]:
