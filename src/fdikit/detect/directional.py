@@ -112,10 +112,11 @@ def _dglrt_batch(r, s, mu0, w, W, min_info, out_g, out_eta, A, B, pos, counts): 
 
 
 @njit(cache=True)
-def _solve_first(G, A, m, work):  # pragma: no cover - compiled
+def _solve_first(G, A, m, work, x):  # pragma: no cover - compiled
     """Cholesky of the m x m ``G``; returns (eta_0, [G^-1]_00) or (0, -1) if G is not positive definite.
 
-    ``work`` (m, m + 2) scratch: L, then the solves of ``L y = A`` and ``L z = e_0``. A pivot
+    ``work`` (m, m + 2) scratch: L, then the solves of ``L y = A`` and ``L z = e_0``; ``x`` (m,)
+    scratch for the back substitution (no allocation per call). A pivot
     below 1e-10 of the largest diagonal entry counts as singular (signatures that are linearly
     dependent over the window carry no separate information).
     """
@@ -147,7 +148,6 @@ def _solve_first(G, A, m, work):  # pragma: no cover - compiled
         work[i, m] = y / work[i, i]
         work[i, m + 1] = z / work[i, i]
     # backward for the first entry of L^-T y: solve L^T x = y, keep x_0
-    x = np.empty(m)
     for i in range(m - 1, -1, -1):
         v = work[i, m]
         for k in range(i + 1, m):
@@ -175,6 +175,7 @@ def _dglrt_multi(r, S, mu0, w, W, min_info, out_g, out_eta, A, G, pos, counts): 
     a0 = np.empty(m)
     g0 = np.empty((m, m))
     work = np.zeros((m, m + 2))
+    xs = np.empty(m)
     for run in range(R):
         Ar = A[run]
         Gr = G[run]
@@ -195,7 +196,7 @@ def _dglrt_multi(r, S, mu0, w, W, min_info, out_g, out_eta, A, G, pos, counts): 
                     Ar[0, i] += a[i]
                     for j in range(m):
                         Gr[0, i, j] += g2[i, j]
-                eta, v00 = _solve_first(Gr[0], Ar[0], m, work)
+                eta, v00 = _solve_first(Gr[0], Ar[0], m, work, xs)
                 if v00 > 0.0 and 1.0 / v00 > min_info:
                     out_g[run, k] = 0.5 * eta * eta / v00
                     out_eta[run, k] = eta
@@ -228,7 +229,7 @@ def _dglrt_multi(r, S, mu0, w, W, min_info, out_g, out_eta, A, G, pos, counts): 
                     dA[i] = Ar[p, i] - Ar[p - L, i]
                     for j in range(m):
                         dG[i, j] = Gr[p, i, j] - Gr[p - L, i, j]
-                eta, v00 = _solve_first(dG, dA, m, work)
+                eta, v00 = _solve_first(dG, dA, m, work, xs)
                 if v00 > 0.0 and 1.0 / v00 > min_info:
                     v = 0.5 * eta * eta / v00
                     if v > best:
