@@ -56,6 +56,15 @@ Subset estimation (oracle isolation, 20 runs per class, mean relative error): k_
 23 dB process noise, see :mod:`fdikit.estimate.output_error`); Table VI's subset column: K_f 1.05,
 I_w 0.52, tau_m 2.0, R_w 0.004 %.
 
+With the extended test set (:func:`fdikit.evaluate.campaign.extended_tests`; ``fdikit abs campaign
+--tests extended --complete``), Table V setting (minimum sizes, W = 40, 23 dB, pfa 1e-4 per test,
+10000 design runs, 1000 runs per class for the D-matrix): the learned tree's Go-path becomes
+G_D_Iw (it fires for every class but F5), the tree reaches 81.3 % up to its leaf groups
+(specificity 100 %), and the full diagnoser (tree, SVM, severity estimate splitting the sensor
+leaf) 75.2 % exact on 60 runs per class: F1.1 60/60, F1.2 33/60 (at exactly -5 % it sits on the
+class boundary, 27 runs estimated just above it), F2.1 51/60, F2.2 60/60, F3 60/60, F4 52/60,
+F5 0/60 (undetectable, :mod:`fdikit.evaluate.detectability`).
+
 Monitor
 -------
 :meth:`ABSDiagnoser.monitor` is a :class:`fdikit.monitor.Monitor` with the two residual
