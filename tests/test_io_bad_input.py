@@ -890,6 +890,7 @@ def _candump(draw):
     return "".join(lines), frames
 
 
+@needs_data  # reads the RAV4 DBC
 @HYP
 @given(_candump())
 def test_hypothesis_candump_lines(tmp_path_factory, gen):
