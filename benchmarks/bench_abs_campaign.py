@@ -55,10 +55,13 @@ def _table(res) -> None:
     for s in res.bank.specs:
         pap = PAPER_TABLE_III.get(s.name)
         ps = "" if pap is None else ", ".join(f"{v:g}" for v in pap)
-        mu0, s2 = res.bank.mu0[s.residual], res.bank.sigma2[s.residual]
+        r0 = s.residuals[0]  # a directional test on r3+r4 shows r3's calibration
+        mu0, s2 = res.bank.mu0[r0], res.bank.sigma2[r0]
         w = "anch" if s.W is None else f"{s.W:4d}"
+        extra = "" if s.signature is None else f" ({s.residual} along {s.signature}" + (
+            f" | {', '.join(s.nuisance)} free)" if s.nuisance else ")")
         print(f"{s.name:8s} {mu0:+.3e} {s2:.3e} {w:>4s} {s.Z:3d} "
-              f"{res.bank.thresholds[s.name]:10.4g}  {d['pf'][s.name]:.5f}    | {ps}")
+              f"{res.bank.thresholds[s.name]:10.4g}  {d['pf'][s.name]:.5f}    | {ps}{extra}")
     print("\nPd (fraction of runs in which the test fired)   | paper Table IV row")
     print("class   " + "  ".join(f"{n:>7s}" for n in res.bank.names))
     for c, row in d["pd"].items():
@@ -109,9 +112,12 @@ def main(argv=None) -> int:
     rng = np.random.default_rng(0)
     x = rng.normal(size=(2000, 1250))
     directional_statistic(x[:2, :10], x[:2, :10])  # compile / load cache
-    t0 = time.perf_counter()
-    directional_statistic(x, x)
-    dns = (time.perf_counter() - t0) / x.size * 1e9
+    best = np.inf
+    for _ in range(3):
+        t0 = time.perf_counter()
+        directional_statistic(x, x)
+        best = min(best, time.perf_counter() - t0)
+    dns = best / x.size * 1e9
     print(f"directional GLRT (anchored): {dns:.1f} ns per sample")
     out["directional_glrt_ns_per_sample_anchored"] = dns
 
