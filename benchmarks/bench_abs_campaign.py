@@ -139,7 +139,7 @@ def main(argv=None) -> int:
         "tree": {k: d["tree"][k] for k in ("sensitivity", "specificity", "go_path")},
     })
     if args.table_v:
-        from fdikit.evaluate.detectability import abs_detectability
+        from fdikit.systems.abs.detectability import abs_detectability
 
         tv: dict = {}
         bounds: dict = {}

@@ -1,4 +1,4 @@
-"""Benchmark: ABS Monte Carlo, one fault class, 5000 runs x 12.5 s at 1 ms (paper 2 campaign size).
+"""Benchmark: ABS Monte Carlo, one fault class, 5000 runs x 12.5 s at 1 ms (luo-et-al campaign size).
 
 Goal (issue 4): <= 10 s warm on this 2-core machine, peak memory <= 4 GiB. Reports
 
@@ -28,7 +28,7 @@ import tracemalloc
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from fdikit.plants.abs import ABSPlant, Scenario, simulate, slip, summarize
+from fdikit.systems.abs.plant import ABSPlant, Scenario, simulate, slip, summarize
 
 GOAL_S = 10.0
 GOAL_MEM_GIB = 4.0
@@ -37,7 +37,7 @@ GOAL_MEM_GIB = 4.0
 def cold_compile_time() -> float:
     """Seconds for a 2-run simulation in a fresh interpreter with an empty numba cache."""
     code = ("import time; t=time.perf_counter();"
-            "from fdikit.plants.abs import Scenario, simulate;"
+            "from fdikit.systems.abs.plant import Scenario, simulate;"
             "simulate(None, Scenario(fault='F3', t_end=1.0), runs=2);"
             "print(time.perf_counter()-t)")
     with tempfile.TemporaryDirectory() as d:

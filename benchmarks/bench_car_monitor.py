@@ -1,7 +1,7 @@
-"""Benchmark: the full passenger-car health monitor of paper 1 (issues 8 and 9).
+"""Benchmark: the full passenger-car health monitor of ng-chen-speyer (issues 8 and 9).
 
 The monitor is the calibrated design of the example config (``examples/passenger-car``, recipe
-:func:`fdikit.plants.passenger_car.recipe.design` at 20 m/s: six filter sets, two parity
+:func:`fdikit.systems.car.recipe.design` at 20 m/s: six filter sets, two parity
 equations, residual-norm features (one per distinct filter, plus the parity residuals), the
 longitudinal (15 hypotheses) and lateral (11) MHSSPTs, warm-up, hold). Inputs are realistic:
 eight simulated 30 s drives on the sloped curve at 20 m/s with sensor noise (nominal and
@@ -45,9 +45,9 @@ from fdikit import Signals
 from fdikit.detect import MHSSPT, mhsspt
 from fdikit.faults import Bias
 from fdikit.monitor import Decision, Monitor
-from fdikit.plants.passenger_car.driving import simulate_drive
-from fdikit.plants.passenger_car.monitor import calibrate_monitor, car_signals, sensor_noise
-from fdikit.plants.passenger_car.monitor_fused import FusedCarMonitor
+from fdikit.systems.car.driving import simulate_drive
+from fdikit.systems.car.monitor import calibrate_monitor, car_signals, sensor_noise
+from fdikit.systems.car.monitor_fused import FusedCarMonitor
 
 SPEED = 20.0
 RUNS, T = 200, 3000

@@ -1,4 +1,4 @@
-"""Benchmark: cost of the moving-window GLRT (paper luo-et-al, eq. (24)) per sample.
+"""Benchmark: cost of the moving-window GLRT (luo-et-al, eq. (24)) per sample.
 
     python benchmarks/bench_glrt.py [--runs 2000] [--samples 1250]
 

@@ -46,7 +46,7 @@ def _median_time(fn, repeats=REPEATS):
 def main() -> int:
     from fdikit.cli import main as cli_main
     from fdikit.monitor.config import build_monitor, load_config, map_channels, read_log, run_design
-    from fdikit.plants.passenger_car.rav4 import default_data_path
+    from fdikit.systems.car.rav4 import default_data_path
 
     data = default_data_path()
     blf = data / "drive.blf"
@@ -120,7 +120,7 @@ def main() -> int:
         fresh_cmd_s = json.loads(proc.stdout)["wall_seconds"]
         t0 = time.perf_counter()
         code = ("import fdikit.cli, fdikit.commands.monitor, fdikit.io, pandas, "
-                "fdikit.plants.passenger_car.monitor_rav4; fdikit.cli.build_parser()")
+                "fdikit.systems.car.monitor_rav4; fdikit.cli.build_parser()")
         subprocess.run([sys.executable, "-c", code], check=True, timeout=600, cwd=ROOT)
         import_s = time.perf_counter() - t0
     finally:

@@ -4,7 +4,7 @@
    and the exhaustive subset DP; wall time and equality of the optimal expected cost.
 2. A few random 16 x 12 problems (exhaustive over 65,535 subsets) for scale.
 3. An ABS-sized 6-fault x 5-test problem (rows F0, F1.2, F2.2, F3, F4, F5 and columns G_P1, G_O1,
-   G_O2, G_O_T2, S_Kf of paper luo-et-al Table IV), perfect and unreliable tests, and the full
+   G_O2, G_O_T2, S_Kf of luo-et-al Table IV), perfect and unreliable tests, and the full
    Table IV (8 x 7). Target (issue 6): the ABS tree solved in <= 1 s.
 
 The Pd/Pf used for the unreliable ABS case (Pd 0.98, Pf 0.01 for every test) are illustrative

@@ -1,6 +1,6 @@
 """Benchmark of fdikit.sim.simulate: 5000 Monte Carlo runs of a 6-state quarter-car braking model.
 
-The model (written here, in the spirit of paper luo-et-al eq. (19), with its own sensible
+The model (written here, in the spirit of luo-et-al eq. (19), with its own sensible
 parameters) has the states
 
     omega_w  wheel speed (rad/s)             omega_v  vehicle speed V / R_w (rad/s)
@@ -8,7 +8,7 @@ parameters) has the states
     P_s      wheel-cylinder pressure (MPa)   P_m      master-cylinder pressure (MPa)
 
 with a Burckhardt tyre-road friction mu(slip) = c1 (1 - exp(-c2 slip)) - c3 slip (dry
-asphalt), brake torque second order in the wheel-cylinder pressure (paper luo-et-al eq. (12)),
+asphalt), brake torque second order in the wheel-cylinder pressure (luo-et-al eq. (12)),
 master cylinder a first-order lag of the pedal force, and an ABS valve that fills the wheel
 cylinder from the master cylinder below the target slip and dumps it above, switching
 smoothly (tanh) on the slip error. The input is a pedal-force profile: 35 N from 1 s to 6 s
@@ -65,7 +65,7 @@ class QuarterCarBraking(NonlinearModel):
     def __init__(self):
         params = {
             "M": 1400.0,  # vehicle mass, kg
-            "R_w": 0.318,  # wheel radius, m (paper luo-et-al Table I)
+            "R_w": 0.318,  # wheel radius, m (luo-et-al Table I)
             "I_w": 1.2,  # wheel inertia, kg m^2
             "g": 9.81,
             "K_f": 250.0,  # brake torque gain, N m / MPa
@@ -75,7 +75,7 @@ class QuarterCarBraking(NonlinearModel):
             "tau_out": 0.01,  # wheel-cylinder dump time constant, s
             "tau_m": 0.05,  # master-cylinder time constant, s (paper: tau_m = 0.02 s)
             "k_p": 0.025,  # pedal force to master pressure, MPa / N
-            "lam_star": 0.2,  # ABS target slip (paper luo-et-al Table I)
+            "lam_star": 0.2,  # ABS target slip (luo-et-al Table I)
             "delta": 0.05,  # slip width of the valve switching, -
             "c1": 1.2801, "c2": 23.99, "c3": 0.52,  # Burckhardt dry asphalt
             "c_air": 0.20,  # quarter-car aerodynamic drag coefficient, N s^2 / m^2
@@ -95,7 +95,7 @@ class QuarterCarBraking(NonlinearModel):
         d0, d1, d2, d3, d4, d5 = dx
         lam = np.maximum(w_v, p["w_min"])
         np.subtract(w_v, w_w, out=d2)
-        np.divide(d2, lam, out=lam)  # slip, paper luo-et-al eq. (14)
+        np.divide(d2, lam, out=lam)  # slip, luo-et-al eq. (14)
         a = np.abs(lam)
         mu = np.multiply(a, -p["c2"])
         np.exp(mu, out=mu)

@@ -1,4 +1,4 @@
-"""Benchmark: SVM isolation (paper luo-et-al, Section VI) and output-error estimation (Sec. VIII, Table VI).
+"""Benchmark: SVM isolation (luo-et-al, Section VI) and output-error estimation (Sec. VIII, Table VI).
 
 Figures printed:
 

@@ -21,8 +21,8 @@ from fdikit.evaluate import (
     paper_tests,
     run_campaign,
 )
-from fdikit.evaluate.campaign import _simulate_residuals
-from fdikit.plants.abs import Scenario, simulate
+from fdikit.systems.abs.campaign import _simulate_residuals
+from fdikit.systems.abs.plant import Scenario, simulate
 
 
 @pytest.fixture(scope="module")

@@ -7,7 +7,7 @@ import pytest
 
 from fdikit.errors import DataError
 from fdikit.evaluate import PAPER_TABLE_IV
-from fdikit.evaluate.abs_diagnoser import (
+from fdikit.systems.abs.diagnoser import (
     PAPER_PRIOR,
     SVM_TESTS,
     ABSDiagnoser,
@@ -17,7 +17,7 @@ from fdikit.evaluate.abs_diagnoser import (
     svm_outcomes,
 )
 from fdikit.isolate import DMatrix, compile_python, exhaustive
-from fdikit.plants.abs import PARAMS, Scenario, simulate
+from fdikit.systems.abs.plant import PARAMS, Scenario, simulate
 
 GLRT_TESTS = ["G_P1", "G_O1", "G_O2", "G_O_T1", "G_O_T2"]
 

@@ -1,4 +1,4 @@
-"""ABS benchmark plant (paper 2, Sections II-III): model, faults, noise, determinism."""
+"""ABS benchmark plant (luo-et-al, Sections II-III): model, faults, noise, determinism."""
 
 import json
 import subprocess
@@ -9,8 +9,8 @@ import pytest
 
 from fdikit.errors import DataError, ModelError
 from fdikit.model import NonlinearModelProtocol
-from fdikit.plants import abs as absp
-from fdikit.plants.abs import (
+from fdikit.systems.abs import plant as absp
+from fdikit.systems.abs.plant import (
     FAULT_CLASSES,
     PARAM_NAMES,
     ABSPlant,
@@ -320,7 +320,7 @@ def test_run_identical_across_processes(plant, tmp_path):
     out = tmp_path / "y.npy"
     code = (
         "import numpy as np, json\n"
-        "from fdikit.plants.abs import Scenario, simulate\n"
+        "from fdikit.systems.abs.plant import Scenario, simulate\n"
         "r = simulate(None, Scenario(fault='F2.1', t_end=2.0), runs=1, seed=13, first_run=2)\n"
         f"np.save({str(out)!r}, r.y.values[0])\n"
         "print(json.dumps(float(r.magnitudes[0])))\n"

@@ -1,4 +1,4 @@
-"""ABS residual generators (paper luo-et-al, Section V) and the parity signal helpers."""
+"""ABS residual generators (luo-et-al, Section V) and the parity signal helpers."""
 
 import numpy as np
 import pytest
@@ -6,8 +6,8 @@ from scipy.interpolate import make_smoothing_spline
 from scipy.signal import sosfilt
 
 from fdikit.errors import DataError
-from fdikit.plants.abs import PARAMS, Scenario, mu, simulate, slip
-from fdikit.residuals.abs_residuals import (
+from fdikit.systems.abs.plant import PARAMS, Scenario, mu, simulate, slip
+from fdikit.systems.abs.residuals import (
     ABSObserver,
     ParityR1,
     ParityR2,
@@ -286,7 +286,7 @@ def test_generators_compose_in_a_monitor_batch_equals_streaming(short_runs):
     lambda: ABSObserver(0.01, L=observer_gain(method="place", poles=[-3, -4, -5, -6, -7])),
 ])
 def test_residual_generators_round_trip_as_artifacts(make, short_runs, tmp_path):
-    from fdikit.monitor.artifacts import load_artifact, save_artifact
+    from fdikit.base.artifacts import load_artifact, save_artifact
 
     g = make()
     path = save_artifact(tmp_path / "gen", g)

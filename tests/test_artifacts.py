@@ -11,7 +11,7 @@ from fdikit.detect import GLRT, MHSSPT, Hold, TimeGated, UniformMeanGaussian
 from fdikit.isolate import DMatrix, ao_star
 from fdikit.model import LinearFaultModel
 from fdikit.monitor import load_artifact, save_artifact
-from fdikit.monitor.artifacts import KINDS
+from fdikit.base.artifacts import KINDS
 from fdikit.residuals import FaultDetectionFilter, ObserverResidual, design_observer_residual, design_uio
 
 
@@ -73,7 +73,7 @@ def test_isolation_artifacts(tmp_path):
 
 
 def test_sliding_mode_reconstructor(tmp_path):
-    from fdikit.plants import aircraft
+    from fdikit.systems import aircraft
     from fdikit.residuals.smo import design_reconstructor
 
     rec = design_reconstructor(aircraft.model(), dt=1e-4, hinf_check=False)
@@ -113,7 +113,7 @@ def test_refusals(tmp_path, plant):
         with pytest.raises(DataError, match="Sneaky"):
             load_artifact(p)
     # every registered kind resolves to a class with to_dict / from_dict
-    from fdikit.monitor.artifacts import _resolve
+    from fdikit.base.artifacts import _resolve
 
     for k in KINDS:
         cls = _resolve(k)

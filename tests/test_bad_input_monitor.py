@@ -16,7 +16,7 @@ from fdikit import DataError, Signals
 from fdikit.detect import GLRT, MHSSPT, Hold, UniformMeanGaussian
 from fdikit.faults import Bias
 from fdikit.monitor import Monitor
-from fdikit.plants import two_mass
+from fdikit.systems import two_mass
 from fdikit.residuals import ObserverResidual, design_observer_residual
 
 T = 300

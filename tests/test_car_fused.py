@@ -22,15 +22,15 @@ from fdikit import DataError, Signals
 from fdikit.detect import Hold
 from fdikit.detect.mhsspt import calibrate_densities
 from fdikit.monitor import Monitor
-from fdikit.monitor.artifacts import load_artifact, save_artifact
-from fdikit.plants.passenger_car.monitor import (
+from fdikit.base.artifacts import load_artifact, save_artifact
+from fdikit.systems.car.monitor import (
     LATERAL_SETS,
     LONGITUDINAL_SETS,
     build_monitor,
     car_signals,
     design_car_monitor,
 )
-from fdikit.plants.passenger_car.monitor_fused import FusedCarMonitor
+from fdikit.systems.car.monitor_fused import FusedCarMonitor
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "passenger-car" / "monitor.toml"
 
@@ -46,8 +46,8 @@ def setup():
     """Both blocks at 20 m/s with densities calibrated on a short simulation (an accelerometer and
     a yaw-rate fault), and a fresh faulty log (accelerometer bias from 1.0 s) on other noise."""
     from fdikit.faults import Bias
-    from fdikit.plants.passenger_car.driving import simulate_drive
-    from fdikit.plants.passenger_car.monitor import sensor_noise
+    from fdikit.systems.car.driving import simulate_drive
+    from fdikit.systems.car.monitor import sensor_noise
 
     des = design_car_monitor(20.0)
     res = simulate_drive("straight", 20.0, duration=1.6, dt=5e-3, runs=3, noise=sensor_noise(), seed=4,
@@ -297,9 +297,9 @@ def test_faulty_drive_through_design_and_monitor(tmp_path):
     sloped curve at 20 m/s, noise seed different from the calibration's) written to CSV through
     `fdikit monitor --json`: the accelerometer fault is announced after the onset and nothing else."""
     from fdikit.faults import Bias
-    from fdikit.plants.passenger_car.driving import simulate_drive
-    from fdikit.plants.passenger_car.monitor import sensor_noise
-    from fdikit.plants.passenger_car.scenarios import SCENARIOS
+    from fdikit.systems.car.driving import simulate_drive
+    from fdikit.systems.car.monitor import sensor_noise
+    from fdikit.systems.car.scenarios import SCENARIOS
 
     shutil.copy(EXAMPLE, tmp_path / "monitor.toml")
     rc, text = _cli("design", tmp_path / "monitor.toml", "--json")
@@ -346,8 +346,8 @@ def test_parallel_chunked_batch_equals_single_run_streaming(setup):
     """19 runs (chunks of 16 and 3, in parallel threads) = each run streamed alone, bitwise: the
     filter's sums run across the runs of a chunk but keep every run's own order."""
     from fdikit.faults import Bias
-    from fdikit.plants.passenger_car.driving import simulate_drive
-    from fdikit.plants.passenger_car.monitor import sensor_noise
+    from fdikit.systems.car.driving import simulate_drive
+    from fdikit.systems.car.monitor import sensor_noise
 
     fused = setup["fused"]
     mags = np.linspace(0.0, 1.2, 19)

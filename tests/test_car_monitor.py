@@ -1,4 +1,4 @@
-"""Passenger-car health monitor (paper 1, Sections IV-V): filters, parity equations, features, the
+"""Passenger-car health monitor (ng-chen-speyer, Sections IV-V): filters, parity equations, features, the
 assembled monitors, the pattern table and the experiments."""
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ import pytest
 
 from fdikit import Signals
 from fdikit.detect.mhsspt import calibrate_densities
-from fdikit.plants.passenger_car.monitor import (
+from fdikit.systems.car.monitor import (
     FILTER_SETS,
     LATERAL_SETS,
     LONGITUDINAL_SETS,
@@ -143,7 +143,7 @@ def test_feature_norms_and_offset_filter_batch_equals_stream(des):
 
 def _synthetic_monitor(des, block):
     """A monitor with densities calibrated on synthetic features (no simulation)."""
-    from fdikit.plants.passenger_car.monitor import _generators
+    from fdikit.systems.car.monitor import _generators
 
     _gens, groups = _generators(des, block)
     C = len(groups)
@@ -158,8 +158,8 @@ def _synthetic_monitor(des, block):
 @pytest.mark.parametrize("block", ["longitudinal", "lateral"])
 def test_monitor_batch_equals_stream(des, block):
     from fdikit.faults import Bias
-    from fdikit.plants.passenger_car.driving import simulate_drive
-    from fdikit.plants.passenger_car.monitor import car_signals, sensor_noise
+    from fdikit.systems.car.driving import simulate_drive
+    from fdikit.systems.car.monitor import car_signals, sensor_noise
 
     mon = _synthetic_monitor(des, block)
     res = simulate_drive("straight", 20.0, duration=0.6, dt=5e-3, runs=2, noise=sensor_noise(),
@@ -177,7 +177,7 @@ def test_monitor_batch_equals_stream(des, block):
 
 def test_monitor_hypothesis_counts():
     """15 longitudinal hypotheses (H0 + 7 faults x small/large), 11 lateral (paper Section IV-E)."""
-    from fdikit.plants.passenger_car.monitor import LATERAL_FAULTS, LONGITUDINAL_FAULTS
+    from fdikit.systems.car.monitor import LATERAL_FAULTS, LONGITUDINAL_FAULTS
 
     assert 1 + 2 * len(LONGITUDINAL_FAULTS) == 15
     assert 1 + 2 * len(LATERAL_FAULTS) == 11
@@ -250,7 +250,7 @@ def test_lateral_residuals_whitened(des):
     """The whitened lateral residuals have unit covariance on their range under the sensor noise:
     sample covariance of the filters driven by simulated white noise (independent of the Lyapunov
     equation used to whiten)."""
-    from fdikit.plants.passenger_car.monitor import SENSOR_NOISE_STD
+    from fdikit.systems.car.monitor import SENSOR_NOISE_STD
     from fdikit.residuals import FaultDetectionFilter
 
     rng = np.random.default_rng(3)
@@ -308,8 +308,8 @@ def _feature_calibrated_monitors(des):
     per block), so that the test sees real detections."""
     from fdikit.faults import Bias
     from fdikit.monitor import Monitor
-    from fdikit.plants.passenger_car.driving import simulate_drive
-    from fdikit.plants.passenger_car.monitor import _generators, car_signals, sensor_noise
+    from fdikit.systems.car.driving import simulate_drive
+    from fdikit.systems.car.monitor import _generators, car_signals, sensor_noise
 
     res = simulate_drive("straight", 20.0, duration=1.6, dt=5e-3, runs=3, noise=sensor_noise(), seed=4,
                          faults=[Bias("sensor:a_x", [0.0, 1.0, 0.0], start=0.7),
@@ -329,7 +329,7 @@ def _feature_calibrated_monitors(des):
 
 
 def test_fused_monitor_equals_stagewise(des):
-    from fdikit.plants.passenger_car.monitor_fused import FusedCarMonitor
+    from fdikit.systems.car.monitor_fused import FusedCarMonitor
 
     mons, sig = _feature_calibrated_monitors(des)
     fused = FusedCarMonitor(mons)
@@ -354,7 +354,7 @@ def test_fused_monitor_equals_stagewise(des):
 @pytest.mark.parametrize("name,delay", [("brake_actuator_short", 0.5), ("brake_actuator", 0.5),
                                         ("steering_actuator", 0.2)])
 def test_actuator_scenarios(name, delay):
-    from fdikit.plants.passenger_car.scenarios import run_scenario
+    from fdikit.systems.car.scenarios import run_scenario
 
     s = run_scenario(name)["summary"]
     assert s["isolated"] == s["fault"], s
@@ -364,7 +364,7 @@ def test_actuator_scenarios(name, delay):
 
 @pytest.mark.slow
 def test_intermittent_front_wheel_sensor():
-    from fdikit.plants.passenger_car.scenarios import run_scenario
+    from fdikit.systems.car.scenarios import run_scenario
 
     s = run_scenario("intermittent_front_wheel")["summary"]
     assert not s["false_announcements"], s
@@ -376,7 +376,7 @@ def test_intermittent_front_wheel_sensor():
 @pytest.mark.slow
 def test_accelerometer_delay_falls_with_the_bias():
     """Paper Fig. 4: the larger the bias, the shorter the delay."""
-    from fdikit.plants.passenger_car.scenarios import run_scenario
+    from fdikit.systems.car.scenarios import run_scenario
 
     d = [run_scenario(f"accel_bias_{b}")["summary"] for b in ("0.4", "0.6", "0.8")]
     assert all(s["isolated"] == "accelerometer" and not s["false_announcements"] for s in d), d
@@ -395,7 +395,7 @@ def test_accelerometer_delay_falls_with_the_bias():
     "filter, which fdf.py does not model"))
 def test_faster_accelerometer_filter_detects_sooner():
     """Paper Fig. 4, second column: the re-tuned filter detects the 0.6 m/s^2 bias sooner."""
-    from fdikit.plants.passenger_car.scenarios import run_scenario
+    from fdikit.systems.car.scenarios import run_scenario
 
     d = [run_scenario(n)["summary"] for n in ("accel_bias_0.6", "accel_bias_0.6_fast")]
     assert all(s["isolated"] == "accelerometer" and not s["false_announcements"] for s in d), d
@@ -404,7 +404,7 @@ def test_faster_accelerometer_filter_detects_sooner():
 
 # ---------------------------------------------------------------------------------- real RAV4 minute
 def _rav4_available():
-    from fdikit.plants.passenger_car.rav4 import default_data_path
+    from fdikit.systems.car.rav4 import default_data_path
 
     return (default_data_path() / "drive.blf").exists()
 
@@ -416,7 +416,7 @@ rav4 = pytest.mark.skipif(not _rav4_available(), reason="RAV4 data not found")
 def test_rav4_filters_block_their_nuisance():
     """The noise-scaled designs, folded back to the measurement units, still block their nuisance
     exactly: internal form against the UNSCALED fitted model, DC to 5 Hz."""
-    from fdikit.plants.passenger_car.monitor_rav4 import rav4_monitor
+    from fdikit.systems.car.monitor_rav4 import rav4_monitor
 
     mon = rav4_monitor()
     model = mon.model
@@ -437,7 +437,7 @@ def test_rav4_filters_block_their_nuisance():
                                         ("yaw_rate:0.03@40", "yaw_rate")])
 def test_rav4_injected_faults_isolated(spec, fault):
     """Faults injected into the held-out half of the real minute are announced and isolated."""
-    from fdikit.plants.passenger_car.monitor_rav4 import run_rav4_log
+    from fdikit.systems.car.monitor_rav4 import run_rav4_log
 
     r = run_rav4_log(None, spec)
     assert r["isolated"] == fault, r
@@ -448,7 +448,7 @@ def test_rav4_injected_faults_isolated(spec, fault):
 
 @rav4
 def test_rav4_no_false_announcements():
-    from fdikit.plants.passenger_car.monitor_rav4 import run_rav4_log
+    from fdikit.systems.car.monitor_rav4 import run_rav4_log
 
     assert run_rav4_log(None, "none")["announcements"] == []
 
@@ -457,7 +457,7 @@ def test_rav4_no_false_announcements():
 def test_ten_minute_nominal_drive_no_false_announcement():
     """Issue 8, item 7: 10 minutes over the scenarios' speed profiles (straight, speed steps, curve;
     20 and 24 m/s), both monitors: no announcement."""
-    from fdikit.plants.passenger_car.scenarios import nominal_drive
+    from fdikit.systems.car.scenarios import nominal_drive
 
     r = nominal_drive(10.0)
     assert abs(r["simulated_s"] - 600.0) < 1.0
@@ -469,7 +469,7 @@ def test_sensor_nuisance_blocked_by_projection_keeps_the_other_wheel(des):
     hides most of the rear wheel-speed difference's fault; projecting the front sensor out does not.
     DC gain of the whitened residual of the filter blind to the front sensor (set 4, target steering)
     to a 0.6 rad/s rear bias, from the internal form: C (I - A)^-1 B + D."""
-    from fdikit.plants.passenger_car.monitor import design_car_monitor
+    from fdikit.systems.car.monitor import design_car_monitor
 
     def dc(d):
         M = internal_form(d, des.models["lateral"])
@@ -491,7 +491,7 @@ def test_extend_ranges_path_clips_the_rise_to_the_way_from_no_fault():
     the no-fault mean; without it the whole rise. Hand-computed boxes, two features."""
     from fdikit.detect import UniformMeanGaussian
     from fdikit.detect.mhsspt import MHSSPTCalibration
-    from fdikit.plants.passenger_car.monitor import extend_ranges
+    from fdikit.systems.car.monitor import extend_ranges
 
     cal = MHSSPTCalibration({"none": UniformMeanGaussian([1.0, 1.0], [1.0, 1.0], [0.1, 0.1]),
                              "f:small": UniformMeanGaussian([2.0, 0.9], [3.0, 1.1], [0.1, 0.1]),
@@ -512,7 +512,7 @@ def test_extend_ranges_path_clips_the_rise_to_the_way_from_no_fault():
 
 @pytest.fixture(scope="module")
 def lon_isolation():
-    from fdikit.plants.passenger_car.monitor import isolation_study
+    from fdikit.systems.car.monitor import isolation_study
 
     return isolation_study("longitudinal")
 
@@ -532,7 +532,7 @@ def test_longitudinal_isolation_at_the_calibration_magnitudes(lon_isolation):
     10 rpm as a front wheel-speed sum and the rear wheel-speed sum at 1.5 as the accelerometer.
     The front wheel-speed sum at 1.5 ends isolated but passes through an accelerometer announcement
     (strict xfail below)."""
-    from fdikit.plants.passenger_car.monitor import LONGITUDINAL_FAULTS, MAGNITUDES
+    from fdikit.systems.car.monitor import LONGITUDINAL_FAULTS, MAGNITUDES
 
     r = lon_isolation
     assert r["nominal_wrong"] == [] and r["nominal_max_probability"] < 0.5, r["nominal_max_probability"]
@@ -560,7 +560,7 @@ def test_warmup_mhsspt_restarts_its_warmup_after_a_gap():
     """resume(n_held) (called by Monitor after held samples) makes the next ``warmup`` samples see
     the no-fault features again; sample numbering (and a checkpoint) keep counting."""
     from fdikit.detect import UniformMeanGaussian
-    from fdikit.plants.passenger_car.monitor import WarmupMHSSPT
+    from fdikit.systems.car.monitor import WarmupMHSSPT
 
     dens = {"none": UniformMeanGaussian([0], [0], [1]), "bias": UniformMeanGaussian([2], [4], [1])}
     t = WarmupMHSSPT(["r"], dens, p=1e-3, warmup=3)

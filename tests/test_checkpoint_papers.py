@@ -30,8 +30,8 @@ def _resume_equals_uninterrupted(build, sig: Signals, cut: int, tmp_path):
 
 
 def test_abs_monitor(tmp_path):
-    from fdikit.plants.abs import Scenario, simulate
-    from fdikit.residuals.abs_residuals import ABSObserver, ParityR1
+    from fdikit.systems.abs.plant import Scenario, simulate
+    from fdikit.systems.abs.residuals import ABSObserver, ParityR1
 
     res = simulate(None, Scenario("F2.2", magnitude=-0.25), runs=1, seed=4)
     sig = res.u.concat_channels(res.y)
@@ -50,8 +50,8 @@ def test_abs_monitor(tmp_path):
 
 
 def test_sliding_mode_reconstructor(tmp_path):
-    from fdikit.commands.reconstruct import X0
-    from fdikit.plants import aircraft
+    from fdikit.systems.aircraft.reconstruction import X0
+    from fdikit.systems import aircraft
     from fdikit.residuals.smo import design_reconstructor, simulate_plant
 
     h = 1e-4

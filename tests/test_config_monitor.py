@@ -13,7 +13,7 @@ import pytest
 from fdikit import DataError
 from fdikit.faults import Bias
 from fdikit.monitor.config import build_monitor, load_config, map_channels, read_log
-from fdikit.plants import two_mass
+from fdikit.systems import two_mass
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "two-mass" / "monitor.toml"
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from fdikit import DataError
-from fdikit.evaluate.detectability import abs_detectability, known_signal_dprime
+from fdikit.systems.abs.detectability import abs_detectability, known_signal_dprime
 
 
 def test_known_signal_dprime_matches_the_exact_mahalanobis_norm():

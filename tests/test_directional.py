@@ -5,7 +5,7 @@ import pytest
 
 from fdikit import DataError, Signals
 from fdikit.detect import DirectionalGLRT, directional_statistic, glrt_statistic
-from fdikit.monitor.artifacts import load_artifact, save_artifact
+from fdikit.base.artifacts import load_artifact, save_artifact
 
 
 def brute_force(r, s, mu0, sigma2, W, min_info=0.0):
@@ -143,7 +143,7 @@ def test_bad_input_is_named():
 # ---------------------------------------------------------------------------------- signatures
 @pytest.fixture(scope="module")
 def abs_records():
-    from fdikit.plants.abs import Scenario, simulate
+    from fdikit.systems.abs.plant import Scenario, simulate
 
     nom = simulate(None, Scenario(snr_db=None, meas_var=0.0, t_end=6.0), runs=1, seed=0)
     f4 = simulate(None, Scenario(fault="F4", magnitude=0.02, snr_db=None, meas_var=0.0, t_end=6.0), runs=1,
@@ -155,7 +155,7 @@ def abs_records():
 def test_signature_predicts_the_fault_response(abs_records):
     """The I_w signature measured on the nominal record predicts what a +2 % I_w plant does to r3
     (to first order) before the two stops' slip cycles drift apart."""
-    from fdikit.residuals.abs_residuals import observer_sensitivity
+    from fdikit.systems.abs.residuals import observer_sensitivity
 
     nom, f4, _ = abs_records
     gen = observer_sensitivity(0.01, ["I_w"])
@@ -170,7 +170,7 @@ def test_signature_predicts_the_fault_response(abs_records):
 
 def test_sensitivity_batch_equals_streaming_and_saves(abs_records, tmp_path):
     from fdikit.residuals import ParameterSensitivity
-    from fdikit.residuals.abs_residuals import observer_sensitivity
+    from fdikit.systems.abs.residuals import observer_sensitivity
 
     sig = abs_records[2]
     gen = observer_sensitivity(0.01, ["I_w", "K_f"])
@@ -190,7 +190,7 @@ def test_sensitivity_batch_equals_streaming_and_saves(abs_records, tmp_path):
 
 def test_sensitivity_bad_input():
     from fdikit.residuals import ParameterSensitivity
-    from fdikit.residuals.abs_residuals import ABSObserver, ParityR1, observer_sensitivity
+    from fdikit.systems.abs.residuals import ABSObserver, ParityR1, observer_sensitivity
 
     with pytest.raises(DataError, match="tau_m and the pedal act through its P_m input"):
         observer_sensitivity(0.01, ["tau_m"])

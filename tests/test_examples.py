@@ -18,8 +18,8 @@ def cli(*args):
 
 
 def test_aircraft_smo_config_reconstructs_the_rudder_fault(tmp_path):
-    from fdikit.commands.reconstruct import X0
-    from fdikit.plants import aircraft
+    from fdikit.systems.aircraft.reconstruction import X0
+    from fdikit.systems import aircraft
     from fdikit.residuals.smo import simulate_plant
 
     shutil.copy(EXAMPLES / "aircraft-smo" / "monitor.toml", tmp_path / "monitor.toml")
@@ -44,7 +44,7 @@ def test_aircraft_smo_config_reconstructs_the_rudder_fault(tmp_path):
 
 
 def _abs_csv(path, fault, magnitude, seed):
-    from fdikit.plants.abs import Scenario, simulate
+    from fdikit.systems.abs.plant import Scenario, simulate
 
     res = simulate(None, Scenario(fault, magnitude=magnitude), runs=1, seed=seed)
     df = pd.DataFrame({"time": res.u.t, "P_m": 10.0 * res.u["P_m"][0], "u_in": res.u["u_in"][0],
@@ -59,7 +59,7 @@ def test_abs_config_detects_rw_fault_and_stays_quiet_on_nominal(tmp_path):
     run over CSV logs: an R_w fault of -25 % (class F2.2) fires G_P1 (paper: Pd 0.979), nominal
     records announce nothing, the alarms equal TestBank.alarms of the same designs, and a
     checkpoint mid-record continues identically in a fresh monitor."""
-    from fdikit.evaluate.campaign import TestBank, abs_residuals, paper_tests
+    from fdikit.systems.abs.campaign import TestBank, abs_residuals, paper_tests
     from fdikit.monitor import load_artifact
     from fdikit.monitor.config import build_monitor, load_config, map_channels, read_log
 
@@ -111,7 +111,7 @@ def test_abs_extended_config_detects_small_iw_fault(tmp_path):
     logs through fdikit monitor: an I_w fault of -3 % (class F4) fires G_D_Iw and no change-in-mean
     test; nominal records announce nothing; the config-built monitor fires what TestBank.alarms fires
     with the same designs."""
-    from fdikit.evaluate.campaign import TestBank, abs_residuals, extended_tests
+    from fdikit.systems.abs.campaign import TestBank, abs_residuals, extended_tests
     from fdikit.monitor import load_artifact
     from fdikit.monitor.config import build_monitor, load_config, map_channels, read_log
 

@@ -7,7 +7,7 @@ from scipy.stats import binom, norm
 from fdikit.errors import DataError, ModelError
 from fdikit.isolate import DMatrix, ao_star, wilson_interval
 
-# Table IV of paper luo-et-al (ABS test design)
+# Table IV of luo-et-al (ABS test design)
 TABLE_IV_TESTS = ["G_P1", "G_O1", "G_O2", "G_O_T1", "G_O_T2", "S_Kf", "S_Iw"]
 TABLE_IV_FAULTS = ["F0", "F1.1", "F1.2", "F2.1", "F2.2", "F3", "F4", "F5"]
 TABLE_IV = [[0, 0, 0, 0, 0, 0, 0],

@@ -55,7 +55,7 @@ def test_hand_example_expensive_t1():
 
 
 def test_table_iv_tree_go_path_and_redundant_svm_test():
-    # Paper luo-et-al Table IV, unit costs, P(F0) = 0.93 and 0.01 for each of the 7 faults.
+    # Luo et al. Table IV, unit costs, P(F0) = 0.93 and 0.01 for each of the 7 faults.
     # By hand: only G_O1 separates F0 from every fault, and any tree not starting with it spends >= 2
     # tests on F0 (>= 1.86), so the root is G_O1 (Go-path [G_O1], as in the paper). Among the 7 faults the
     # first test splits them 2/5 at best (G_P1, G_O_T1, G_O_T2) or 1/6; 2/5 then the best 5-fault
@@ -336,7 +336,7 @@ def _test(t, on_pass, on_fail):
 
 
 def test_paper_fig14_tree_loaded_and_evaluated():
-    # The tree of paper luo-et-al Fig. 14 / the IF-THEN-ELSE listing, with leaves named from Table IV
+    # The tree of luo-et-al Fig. 14 / the IF-THEN-ELSE listing, with leaves named from Table IV
     # (the listing's R_w / sensor labels under G_O_T2 are swapped with respect to Table IV, where
     # G_O_T2 fires for the R_w faults F1.x). By hand its depths are F0 1, F3 3, F4 3, F1.x 4, F5 4,
     # F2.x 5: with P(F0) = 0.93 and 0.01 per fault, J = 0.93 + 0.01 * 28 = 1.21, equal to the AO* optimum.

@@ -274,7 +274,7 @@ def test_markov_parameters_equal_discrete_impulse_response():
 
 
 def test_relative_degree_paper_remark_and_a1():
-    # paper ng-tan-edwards-kuang, remark after (49): CM = 0 but B1 holds
+    # ng-tan-edwards-kuang, remark after (49): CM = 0 but B1 holds
     A = np.array([[0.0, 1.0], [0.0, 0.0]])
     rd = relative_degree(A, [[0.0], [1.0]], [[1.0, 0.0]])
     assert rd.per_input == (2,) and rd.overall == 2 and not rd.is_one

@@ -1,4 +1,4 @@
-"""Output-error parameter estimation (paper luo-et-al, Appendix B, eqs. (43)-(45)) with subset selection."""
+"""Output-error parameter estimation (luo-et-al, Appendix B, eqs. (43)-(45)) with subset selection."""
 
 from __future__ import annotations
 
@@ -15,7 +15,7 @@ from fdikit.estimate import (
 )
 from fdikit.faults import Scenario
 from fdikit.model import NonlinearModel
-from fdikit.plants import abs as A
+from fdikit.systems.abs import plant as A
 
 T = np.linspace(0.0, 3.0, 61)
 

@@ -1,4 +1,4 @@
-"""Passenger car (paper 1, Section III): physics of the nonlinear model, linearisation, decoupling,
+"""Passenger car (ng-chen-speyer, Section III): physics of the nonlinear model, linearisation, decoupling,
 reduction, and the RAV4 fit."""
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ import pytest
 from fdikit.errors import ConditionError, ModelError
 from fdikit.faults import Scenario
 from fdikit.model import linearize, trim
-from fdikit.plants.passenger_car import (
+from fdikit.systems.car import (
     LATERAL_OUTPUTS,
     LATERAL_REDUCED,
     LATERAL_STATES,
@@ -281,7 +281,7 @@ def test_named_modal_reduction_is_the_modal_reduction(lin24):
     transformed states really are the named states on the slow subspace: started on it, the
     full and reduced models agree on those states."""
     from fdikit.model import reduce_fast_modes
-    from fdikit.plants.passenger_car import channel_response_error
+    from fdikit.systems.car import channel_response_error
 
     lon = lin24.longitudinal
     modal = reduce_fast_modes(lon, 10)
@@ -317,7 +317,7 @@ def test_residualizing_the_named_fast_states(speed):
 
 
 def test_wheel_spin_causes_the_longitudinal_error(lin20):
-    from fdikit.plants.passenger_car import channel_response_error
+    from fdikit.systems.car import channel_response_error
 
     lon = lin20.longitudinal
     keep_spin = [s for s in LONGITUDINAL_STATES if s not in ("ds_f", "ds_r")]
@@ -356,7 +356,7 @@ needs_data = pytest.mark.skipif(not (DATA / "drive.blf").exists(),
 
 
 def test_single_track_steady_state_by_closed_form():
-    from fdikit.plants.passenger_car.rav4 import RAV4, simulate_single_track
+    from fdikit.systems.car.rav4 import RAV4, simulate_single_track
 
     Cf, Cr, U, delta = 1.0e5, 1.6e5, 18.0, 0.003
     T, dt = 3000, 0.01
@@ -374,7 +374,7 @@ def test_fit_recovers_known_parameters():
     """Synthetic yaw rate / lateral acceleration from known parameters, with the real speed and steering
     profile (or a synthetic one if the data are absent) and white noise: the fit finds them again."""
     from fdikit.io import LogSignals
-    from fdikit.plants.passenger_car.rav4 import SIGNALS, fit_rav4, load_rav4, simulate_single_track
+    from fdikit.systems.car.rav4 import SIGNALS, fit_rav4, load_rav4, simulate_single_track
 
     rng = np.random.default_rng(7)
     if (DATA / "drive.blf").exists():
@@ -406,7 +406,7 @@ def test_fit_recovers_known_parameters():
 
 @needs_data
 def test_rav4_fit_on_the_real_minute():
-    from fdikit.plants.passenger_car.rav4 import fit_rav4
+    from fdikit.systems.car.rav4 import fit_rav4
 
     fit = fit_rav4(DATA)
     # README: a kinematic bicycle reaches ~0.78; the dynamic single-track model does better, in-sample
@@ -455,7 +455,7 @@ def test_cli_fit_json(capsys):
 
 # ------------------------------------------------------------------ automated driving, faults, nonlinearity
 def test_track_geometry():
-    from fdikit.plants.passenger_car import Track
+    from fdikit.systems.car import Track
 
     tr = Track(straight=100.0, radius=200.0)
     # on the curve, a point 1 m inside the arc (towards the centre) at 30 degrees travelled
@@ -468,7 +468,7 @@ def test_track_geometry():
 
 
 def test_cruise_is_an_equilibrium_of_the_closed_loop():
-    from fdikit.plants.passenger_car import simulate_drive
+    from fdikit.systems.car import simulate_drive
 
     res = simulate_drive("straight", 20.0, duration=2.0, dt=2e-3)
     assert np.allclose(res.x["v_x"][0], 20.0, atol=1e-6)
@@ -477,12 +477,12 @@ def test_cruise_is_an_equilibrium_of_the_closed_loop():
 
 @pytest.mark.slow
 def test_controllers_fight_actuator_faults():
-    """Paper 1, Section V: a driver steps on the brake / turns the wheel while the car is under
+    """Ng, Chen & Speyer, Section V: a driver steps on the brake / turns the wheel while the car is under
     automatic control; the speed controller opens the throttle, the path controller counter-steers.
     Run 0: +0.6 MPa brake at 3 s on the curve at 24 m/s; run 1: +0.01 rad steering at 3 s at 20 m/s
     is simulated separately (different speed)."""
     from fdikit.faults import Bias
-    from fdikit.plants.passenger_car import simulate_drive
+    from fdikit.systems.car import simulate_drive
 
     res = simulate_drive("curve", 24.0, duration=9.0, dt=2e-3,
                          faults=[Bias("actuator:brake", 0.6, start=3.0)])
@@ -505,7 +505,7 @@ def test_controllers_fight_actuator_faults():
 
 def test_curve_on_a_slope_at_20():
     """Curved track (R = 300 m) on a 2 % slope at 20 m/s: steady yaw rate v / R, path held."""
-    from fdikit.plants.passenger_car import simulate_drive
+    from fdikit.systems.car import simulate_drive
 
     res = simulate_drive("curve", 20.0, duration=12.0, dt=2e-3)
     t, y = res.y.t, res.y
@@ -519,7 +519,7 @@ def test_curve_on_a_slope_at_20():
 def test_speed_change():
     """Reference 20 -> 24 -> 20 m/s (steps at 6 and 12 s); in 4th gear the car accelerates at
     under 1 m/s^2, so it needs ~5 s."""
-    from fdikit.plants.passenger_car import simulate_drive
+    from fdikit.systems.car import simulate_drive
 
     res = simulate_drive("speed_change", 20.0, duration=18.0, dt=2e-3)
     t, v = res.x.t, res.x["v_x"][0]
@@ -530,7 +530,7 @@ def test_speed_change():
 
 @pytest.mark.slow
 def test_nonlinearity_direction(lin20):
-    from fdikit.plants.passenger_car import nonlinearity_directions
+    from fdikit.systems.car import nonlinearity_directions
 
     nd = nonlinearity_directions(lin20, "longitudinal", k=2, duration=9.0)
     assert nd.E.shape == (14, 2) and np.allclose(nd.E.T @ nd.E, np.eye(2), atol=1e-10)
@@ -545,7 +545,7 @@ def test_parity_outputs_and_the_papers_fault_list():
     """Every fault of the paper is a named fault of the linear models; with the parity outputs the
     throttle and brake measurements give the two parity equations of Section IV-D exactly:
     throttle_meas - throttle = 0 and brake_meas' = (brake - brake_meas) / tau_b."""
-    from fdikit.plants.passenger_car import FAULTS
+    from fdikit.systems.car import FAULTS
 
     lin = linearize_car(20.0, parity_outputs=True)
     lon, lat = lin.longitudinal_reduced, lin.lateral_reduced

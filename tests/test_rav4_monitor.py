@@ -24,7 +24,7 @@ rav4 = pytest.mark.skipif(not (DATA / "drive.blf").exists(),
 def test_band_limited_filter_is_the_butterworth_low_pass_in_series():
     """A static residual r = y through band_limited: unit DC gain and, at any frequency, the
     magnitude of scipy's Butterworth response (computed independently by freqz)."""
-    from fdikit.plants.passenger_car.monitor_rav4 import band_limited
+    from fdikit.systems.car.monitor_rav4 import band_limited
     from fdikit.residuals import FaultDetectionFilter, FilterDesign
 
     dt, fc = 0.02, 3.0
@@ -46,7 +46,7 @@ def test_band_limited_filter_is_the_butterworth_low_pass_in_series():
 
 
 def test_real_densities_match_a_brute_force_moving_average():
-    from fdikit.plants.passenger_car.monitor_rav4 import real_densities
+    from fdikit.systems.car.monitor_rav4 import real_densities
 
     rng = np.random.default_rng(3)
     nom = np.abs(rng.normal(1.0, 0.3, (300, 2))) + np.sin(np.arange(300) / 40.0)[:, None]
@@ -65,7 +65,7 @@ def test_real_densities_match_a_brute_force_moving_average():
 
 
 def test_preprocessing_round_trip_and_inject_mapping():
-    from fdikit.plants.passenger_car.monitor_rav4 import RAW_CHANNELS, Rav4Preprocessing, inject
+    from fdikit.systems.car.monitor_rav4 import RAW_CHANNELS, Rav4Preprocessing, inject
     from fdikit.signals import Signals
 
     pre = Rav4Preprocessing(16.88, -0.1, -0.008, -0.05, -1.0, 0.0002, 0.0005)
@@ -92,7 +92,7 @@ def test_preprocessing_round_trip_and_inject_mapping():
 def test_rav4_fault_free_minute_no_announcement():
     """Issue 8: zero false announcements on the real minute; every fault's probability stays
     below the 0.95 announcement level."""
-    from fdikit.plants.passenger_car.monitor_rav4 import run_rav4_log
+    from fdikit.systems.car.monitor_rav4 import run_rav4_log
 
     r = run_rav4_log(None, "none")
     assert r["announcements"] == [], r["announcements"]
@@ -106,7 +106,7 @@ def test_rav4_fault_free_minute_no_announcement():
 def test_rav4_injected_faults_detected_and_isolated(spec, fault):
     """Faults injected into the held-out half: detected within 0.5 s, the only announcement is
     the injected fault."""
-    from fdikit.plants.passenger_car.monitor_rav4 import run_rav4_log
+    from fdikit.systems.car.monitor_rav4 import run_rav4_log
 
     r = run_rav4_log(None, spec)
     assert r["isolated"] == fault, r
@@ -119,7 +119,7 @@ def test_rav4_injected_faults_detected_and_isolated(spec, fault):
 def test_rav4_fit_uses_the_calibration_half_only():
     """The model fit of the monitor ignores the held-out half: changing the second half of the
     log does not change the design."""
-    from fdikit.plants.passenger_car.monitor_rav4 import _preprocessing, load_rav4_raw
+    from fdikit.systems.car.monitor_rav4 import _preprocessing, load_rav4_raw
 
     raw = load_rav4_raw(DATA)
     half = float((raw.t[-1] - raw.t[0]) / 2)
@@ -157,7 +157,7 @@ def designed(tmp_path_factory):
 
 @rav4
 def test_config_monitor_announces_what_run_rav4_log_announces(designed, tmp_path):
-    from fdikit.plants.passenger_car.monitor_rav4 import rav4_monitor, run_rav4_log
+    from fdikit.systems.car.monitor_rav4 import rav4_monitor, run_rav4_log
 
     ev = tmp_path / "E.jsonl"
     st = tmp_path / "S.parquet"
@@ -182,7 +182,7 @@ def test_config_monitor_with_an_injected_fault_matches(designed, tmp_path):
     """An injected yaw-rate bias on the raw channels, through the monitor built from the config's
     artifacts, gives the announcements of run_rav4_log."""
     from fdikit.monitor.config import build_monitor, load_config
-    from fdikit.plants.passenger_car.monitor_rav4 import inject, parse_inject, rav4_monitor, run_rav4_log
+    from fdikit.systems.car.monitor_rav4 import inject, parse_inject, rav4_monitor, run_rav4_log
 
     mon = rav4_monitor()
     sig = inject(mon.raw, parse_inject("yaw_rate:0.03@40"), mon.artifacts["filter"].pre)
@@ -201,7 +201,7 @@ def test_checkpoint_mid_log_restore_in_a_fresh_monitor(designed, tmp_path):
     it too: over 7-12 s (the fault and its announcement) every residual and statistic of the
     restored monitor equals the uninterrupted one's to 1e-12, and so do the announcements."""
     from fdikit.monitor.config import build_monitor, load_config
-    from fdikit.plants.passenger_car.monitor_rav4 import inject, parse_inject, rav4_monitor
+    from fdikit.systems.car.monitor_rav4 import inject, parse_inject, rav4_monitor
 
     mon = rav4_monitor()
     sig = inject(mon.raw, parse_inject("wheel_rl:0.6@8"), mon.artifacts["filter"].pre)
@@ -228,7 +228,7 @@ def test_checkpoint_mid_log_restore_in_a_fresh_monitor(designed, tmp_path):
 
 @rav4
 def test_batch_equals_streaming():
-    from fdikit.plants.passenger_car.monitor_rav4 import rav4_monitor
+    from fdikit.systems.car.monitor_rav4 import rav4_monitor
 
     mon = rav4_monitor()
     b = mon.monitor.run(mon.raw)
@@ -241,7 +241,7 @@ def test_batch_equals_streaming():
 @rav4
 def test_example_config_artifacts_refuse_another_model(designed):
     from fdikit.errors import DataError
-    from fdikit.monitor.artifacts import load_artifact
+    from fdikit.base.artifacts import load_artifact
 
     art = designed.parent / "designs" / "filter"
     g = load_artifact(art, expect_inputs=["steer_angle", "steer_fraction", "speed", "yaw_rate_raw",
@@ -257,8 +257,8 @@ def test_band_limited_filters_still_block_their_nuisance():
     with the UNSCALED fitted model by internal_form: the nuisance fault's transmission to the
     residual stays <= 1e-8 of the target's from DC to 5 Hz (evaluated here as C (zI - A)^-1 B + D),
     and at 12.5 Hz the target's transmission is cut below 10 % of its DC value."""
-    from fdikit.plants.passenger_car.monitor import FILTER_SETS
-    from fdikit.plants.passenger_car.monitor_rav4 import band_limited, rav4_monitor
+    from fdikit.systems.car.monitor import FILTER_SETS
+    from fdikit.systems.car.monitor_rav4 import band_limited, rav4_monitor
     from fdikit.residuals import internal_form
 
     mon = rav4_monitor()
@@ -284,9 +284,9 @@ def test_band_limited_filters_still_block_their_nuisance():
 def test_rav4_artifacts_round_trip_exactly(tmp_path):
     """Every artifact of the design saves and loads to an object with the same to_dict, and the
     reloaded chain gives bitwise the same statistics over the minute."""
-    from fdikit.monitor.artifacts import load_artifact, save_artifact
+    from fdikit.base.artifacts import load_artifact, save_artifact
     from fdikit.monitor.core import Monitor
-    from fdikit.plants.passenger_car.monitor_rav4 import rav4_monitor
+    from fdikit.systems.car.monitor_rav4 import rav4_monitor
 
     mon = rav4_monitor()
     loaded = {}

@@ -1,4 +1,4 @@
-"""Tests of the sliding mode observer fault reconstruction (paper 3) and the aircraft plant."""
+"""Tests of the sliding mode observer fault reconstruction (ng-tan-edwards-kuang) and the aircraft plant."""
 
 from __future__ import annotations
 
@@ -15,7 +15,7 @@ from fdikit.design.smo_lmi import primary_smo_lmi
 from fdikit.errors import ConditionError
 from fdikit.model.linear import LinearFaultModel
 from fdikit.model.structure import invariant_zeros
-from fdikit.plants import aircraft
+from fdikit.systems import aircraft
 from fdikit.residuals.smo import (
     check_conditions,
     design_reconstructor,
@@ -50,7 +50,7 @@ def test_condition_A1_pass_and_fail():
     A, M = _companion([1.0, 3.0, 2.0])
     c = check_conditions(A, M, np.array([[1.0, 1.0]]))
     assert c.rank_CM == 1 and c.A1 and c.case == "single"
-    # paper 3's remark: double integrator, position measured: CM = 0 but B1 holds
+    # ng-tan-edwards-kuang's remark: double integrator, position measured: CM = 0 but B1 holds
     c = check_conditions([[0.0, 1.0], [0.0, 0.0]], [[0.0], [1.0]], [[1.0, 0.0]])
     assert c.rank_CM == 0 and not c.A1 and c.B1 and c.rank_H == 1 and c.case == "cascade"
 
@@ -119,7 +119,7 @@ def test_aircraft_conditions_match_paper(rec):
 
 
 def test_aircraft_pbar_from_paper_printed_lemma1_matrices():
-    # paper 3, Section IV-A prints A~ and Q~ in Lemma-1 coordinates; compute pbar from them
+    # ng-tan-edwards-kuang, Section IV-A prints A~ and Q~ in Lemma-1 coordinates; compute pbar from them
     At = np.array([[-25, 0, 0, 0, 0, 0, 0], [1.1, -1, 0, 0.3, 5.2, -0.2, 0], [0, 0, -4, 0, 0, 0.5, 0],
                    [0, 0, 0, -20, 0, 0, 0], [0, 0, 0, 0, -2.1, -1, 0], [0, 0, 0, 0.7, 1.5, -0.2, 0],
                    [0, -1, 0, 0, 0, 0, 0]])
@@ -201,7 +201,7 @@ def test_primary_gains_properties(rec):
 
 def test_secondary_bound_and_independent_hinf(rec):
     gam = rec.info["l2_bound"]
-    assert gam <= 1.3131 + 1e-4  # paper 3: gamma-bar = 1.3131
+    assert gam <= 1.3131 + 1e-4  # ng-tan-edwards-kuang: gamma-bar = 1.3131
     AG, BG, CG, DG = rec.details["G"]
     hn = hinf_norm(AG, BG, CG, DG)
     slycot = control.norm(control.ss(AG, BG, CG, DG), p="inf")
@@ -216,7 +216,7 @@ def test_secondary_bound_and_independent_hinf(rec):
 
 
 def test_G_independent_of_primary_weights(rec):
-    # paper 3's key observation: G(s) does not depend on the primary observer's L
+    # ng-tan-edwards-kuang's key observation: G(s) does not depend on the primary observer's L
     other = design_reconstructor(aircraft.model(), V1=10.0 * np.eye(10), hinf_check=False)
     assert abs(other.info["l2_bound"] - rec.info["l2_bound"]) < 1e-4 * rec.info["l2_bound"]
     assert not np.allclose(other.details["primary_gains"].L, rec.details["primary_gains"].L, atol=1e-3)

@@ -1,4 +1,4 @@
-"""SVM isolation tests S_Kf / S_Iw (paper luo-et-al, Section VI, Appendix A)."""
+"""SVM isolation tests S_Kf / S_Iw (luo-et-al, Section VI, Appendix A)."""
 
 from __future__ import annotations
 

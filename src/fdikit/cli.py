@@ -10,40 +10,16 @@ from __future__ import annotations
 
 import argparse
 import importlib
-import json
 import sys
-from typing import Any
-
-import numpy as np
 
 from . import __version__
+from .commands._output import print_json
 from .errors import FdikitError
+
+__all__ = ["build_parser", "main", "print_json"]
 
 #: Modules under fdikit.commands that register subcommands, in help order.
 COMMAND_MODULES = ("demo", "reconstruct", "abs", "car", "monitor")
-
-
-def _to_jsonable(obj: Any) -> Any:
-    if isinstance(obj, dict):
-        return {str(k): _to_jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [_to_jsonable(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return _to_jsonable(obj.tolist())
-    if isinstance(obj, np.bool_):
-        return bool(obj)
-    if isinstance(obj, np.integer):
-        return int(obj)
-    if isinstance(obj, np.floating | float):
-        f = float(obj)
-        return f if np.isfinite(f) else None
-    return obj
-
-
-def print_json(obj: Any) -> None:
-    """Print exactly one JSON object on stdout (NaN/inf become null)."""
-    sys.stdout.write(json.dumps(_to_jsonable(obj), allow_nan=False) + "\n")
-    sys.stdout.flush()
 
 
 def build_parser() -> argparse.ArgumentParser:

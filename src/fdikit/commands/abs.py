@@ -1,4 +1,4 @@
-"""``fdikit abs``: the antilock braking benchmark of paper 2 (Luo et al.).
+"""``fdikit abs``: the antilock braking benchmark of luo-et-al (Luo et al.).
 
 Actions (sub-subcommands):
 
@@ -15,34 +15,16 @@ from __future__ import annotations
 import argparse
 
 from ..errors import DataError
-
-
-def _snr(text: str) -> float | None:
-    if text.lower() in ("none", "off", "inf"):
-        return None
-    try:
-        return float(text)
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(f"--snr expects a number of dB or 'none', got {text!r}") from exc
-
-
-def add_manoeuvre_args(p: argparse.ArgumentParser) -> None:
-    """``--noise-hold`` and ``--pedal-ramp``: shared by ``abs simulate`` and ``abs campaign``."""
-    p.add_argument("--noise-hold", type=float, default=None,
-                   help="process-noise hold time, s (default: a new sample every 1 ms step; 0.01: one per "
-                   "10 ms sample, the alternative reading of Section III-A)")
-    p.add_argument("--pedal-ramp", type=float, default=None, metavar="SECONDS",
-                   help="opt-in experiment: pedal force rising linearly to K_p over SECONDS after the brake "
-                   "is applied, then held (default: the step of eq. (4))")
+from ._abs_options import add_manoeuvre_args, snr_db
 
 
 def register(subparsers) -> argparse.ArgumentParser:
     """Add the ``abs`` command and its actions; returns the ``abs`` parser's action subparsers.
 
     Nothing heavy is imported here (every ``fdikit`` call registers every command): the fault
-    class is checked (by :class:`fdikit.plants.abs.Scenario`) when the action runs.
+    class is checked (by :class:`fdikit.systems.abs.plant.Scenario`) when the action runs.
     """
-    p = subparsers.add_parser("abs", help="antilock braking system benchmark (paper 2)",
+    p = subparsers.add_parser("abs", help="antilock braking system benchmark (luo-et-al)",
                               description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     actions = p.add_subparsers(dest="abs_action", metavar="ACTION")
     p.set_defaults(func=lambda args: (p.print_help(), 0)[1])
@@ -56,7 +38,7 @@ def register(subparsers) -> argparse.ArgumentParser:
                    "(default: drawn per run inside the class)")
     s.add_argument("--runs", type=int, default=1, help="number of Monte Carlo runs (default 1)")
     s.add_argument("--seed", type=int, default=0, help="master seed (default 0)")
-    s.add_argument("--snr", type=_snr, default=23.0,
+    s.add_argument("--snr", type=snr_db, default=23.0,
                    help="process-noise SNR in dB (23, 20, 17 in the paper) or 'none' (default 23)")
     s.add_argument("--meas-var", type=float, default=0.004,
                    help="measurement noise variance, (rad/s)^2 (default 0.004)")
@@ -76,8 +58,8 @@ def register(subparsers) -> argparse.ArgumentParser:
 
 
 def _simulate(args) -> int:
-    from ..cli import print_json
-    from ..plants.abs import Scenario, simulate, summarize  # Scenario refuses an unknown fault class
+    from ..systems.abs.plant import Scenario, simulate, summarize  # Scenario refuses an unknown fault class
+    from ._output import print_json
 
     if args.runs < 1:
         raise DataError(f"--runs must be >= 1, got {args.runs}")
@@ -104,7 +86,7 @@ def _plot(res, path: str) -> None:
     import matplotlib.pyplot as plt
     import numpy as np
 
-    from ..plants.abs import slip
+    from ..systems.abs.plant import slip
 
     x = res.x.values[0]
     t = res.x.t

@@ -1,11 +1,11 @@
-"""``fdikit abs campaign``: Monte Carlo evaluation of the ABS diagnosis (paper luo-et-al, Section VII).
+"""``fdikit abs campaign``: Monte Carlo evaluation of the ABS diagnosis (luo-et-al, Section VII).
 
 Designs the five GLRT tests (G_P1, G_O1, G_O2, G_O_T1, G_O_T2; with ``--tests extended`` also the
 directional GLRT G_D_Iw) for a target false-alarm probability from nominal runs, runs ``--runs``
 simulations of every fault class (twice as many nominal ones), and reports per-test Pd and Pf,
 the learned D-matrix, the diagnosis sensitivity and specificity and the wall time.
 ``--complete`` adds the complete diagnoser (tree with the SVM tests S_Kf/S_Iw, SVM error,
-severity-estimation errors; :mod:`fdikit.evaluate.abs_diagnoser`).
+severity-estimation errors; :mod:`fdikit.systems.abs.diagnoser`).
 Wire it into ``fdikit abs`` with ``add_campaign_parser(abs_actions)``.
 """
 
@@ -14,7 +14,7 @@ from __future__ import annotations
 import argparse
 
 from ..errors import DataError
-from .abs import _snr, add_manoeuvre_args
+from ._abs_options import add_manoeuvre_args, snr_db
 
 __all__ = ["add_campaign_parser"]
 
@@ -39,7 +39,8 @@ def add_campaign_parser(abs_subparsers) -> argparse.ArgumentParser:
                    help="nominal evaluation runs (default 2 x --runs; paper 10000)")
     p.add_argument("--design-runs", type=int, default=None,
                    help="nominal runs for the threshold design (default: --nominal-runs), separate seeds")
-    p.add_argument("--snr", type=_snr, default=23.0, help="process-noise SNR in dB (17, 20, 23; default 23)")
+    p.add_argument("--snr", type=snr_db, default=23.0,
+                   help="process-noise SNR in dB (17, 20, 23; default 23)")
     p.add_argument("--seed", type=int, default=0, help="master seed (default 0)")
     p.add_argument("--window", type=int, default=None,
                    help="one GLRT window for all tests (Table V uses 40; default Table III's 50/10)")
@@ -73,8 +74,8 @@ def add_campaign_parser(abs_subparsers) -> argparse.ArgumentParser:
 def _campaign(args) -> int:
     import sys
 
-    from ..cli import print_json
-    from ..evaluate import run_campaign
+    from ..systems.abs.campaign import run_campaign
+    from ._output import print_json
 
     if args.runs < 1:
         raise DataError(f"--runs must be >= 1, got {args.runs}")
@@ -91,7 +92,7 @@ def _campaign(args) -> int:
                        progress=sys.stderr.isatty() if args.progress is None else args.progress)
     out = res.to_dict()
     if args.complete:
-        from ..evaluate import complete_campaign
+        from ..systems.abs.diagnoser import complete_campaign
 
         if args.svm_per_size < 1 or args.estimate_runs < 0:
             raise DataError(f"--svm-per-size must be >= 1 and --estimate-runs >= 0, got {args.svm_per_size}, "

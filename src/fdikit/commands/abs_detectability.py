@@ -14,7 +14,7 @@ from __future__ import annotations
 import argparse
 
 from ..errors import DataError
-from .abs import _snr
+from ._abs_options import snr_db
 
 __all__ = ["add_detectability_parser"]
 
@@ -35,7 +35,7 @@ def add_detectability_parser(abs_subparsers) -> argparse.ArgumentParser:
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--fault", required=True, help="fault class: F1.1, F1.2, F2.1, F2.2, F3, F4 or F5")
     p.add_argument("--magnitude", type=float, required=True, help="relative parameter change (e.g. 0.15)")
-    p.add_argument("--snr", type=_snr, default=23.0, help="process-noise SNR in dB, or 'none' (default 23)")
+    p.add_argument("--snr", type=snr_db, default=23.0, help="process-noise SNR in dB, or 'none' (default 23)")
     p.add_argument("--window", type=float, nargs=2, default=[0.5, 2.6], metavar=("START", "END"),
                    help="window of the record, s (default 0.5 2.6: braking before the ABS engages)")
     p.add_argument("--block", type=int, default=5, help="samples averaged per quantity (default 5)")
@@ -48,8 +48,8 @@ def add_detectability_parser(abs_subparsers) -> argparse.ArgumentParser:
 
 
 def _detectability(args) -> int:
-    from ..cli import print_json
-    from ..evaluate.detectability import abs_detectability
+    from ..systems.abs.detectability import abs_detectability
+    from ._output import print_json
 
     if args.runs < 2:
         raise DataError(f"--runs must be >= 2, got {args.runs}")

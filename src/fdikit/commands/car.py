@@ -1,4 +1,4 @@
-"""``fdikit car``: the passenger car of paper 1 (Ng, Chen & Speyer).
+"""``fdikit car``: the passenger car of ng-chen-speyer (Ng, Chen & Speyer).
 
 Actions (sub-subcommands):
 
@@ -22,7 +22,8 @@ import numpy as np
 
 def register(subparsers) -> argparse.ArgumentParser:
     """Add the ``car`` command and its actions; returns the action subparsers."""
-    p = subparsers.add_parser("car", help="passenger-car plant (paper 1): linearisation, real-data fit",
+    p = subparsers.add_parser("car", help="passenger-car plant (ng-chen-speyer): linearisation, "
+                              "real-data fit, scenarios, RAV4 monitor",
                               description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     actions = p.add_subparsers(dest="car_action", metavar="ACTION")
     p.set_defaults(func=lambda args: (p.print_help(), 0)[1])
@@ -55,8 +56,8 @@ def register(subparsers) -> argparse.ArgumentParser:
 
 
 def _linearize(args) -> int:
-    from ..cli import print_json
-    from ..plants.passenger_car import linearize_car
+    from ..systems.car import linearize_car
+    from ._output import print_json
 
     lin = linearize_car(args.speed, method=args.method, f_max=args.f_max, parity_outputs=args.parity)
     out = lin.summary()
@@ -81,8 +82,8 @@ def _linearize(args) -> int:
 
 
 def _fit(args) -> int:
-    from ..cli import print_json
-    from ..plants.passenger_car.rav4 import fit_rav4
+    from ..systems.car.rav4 import fit_rav4
+    from ._output import print_json
 
     fit = fit_rav4(args.path, rate=args.rate, ay_weight=args.ay_weight)
     out = fit.summary()

@@ -1,10 +1,10 @@
-"""``fdikit car scenario`` and ``fdikit car monitor-log``: the passenger-car health monitor (paper 1).
+"""``fdikit car scenario`` and ``fdikit car monitor-log``: the passenger-car health monitor (ng-chen-speyer).
 
 * ``fdikit car scenario --list``: the named experiments of Section V;
 * ``fdikit car scenario NAME [--json] [--plot FILE]``: run one (simulate, monitor, summarise:
   detection time, isolated fault, peak probability of every hypothesis, false announcements);
 * ``fdikit car monitor-log PATH --inject SPEC [--json]``: the lateral monitor designed for the
-  RAV4 (:mod:`fdikit.plants.passenger_car.monitor_rav4`) on the real minute in PATH with faults
+  RAV4 (:mod:`fdikit.systems.car.monitor_rav4`) on the real minute in PATH with faults
   injected into the real signals (SPEC ``yaw_rate:0.03@40`` = a bias of 0.03 rad/s on the
   yaw-rate sensor from 40 s; ``wheel_rl:0.6@40`` = +0.6 m/s on the rear-left wheel-speed sensor;
   comma-separated for several; ``none`` for the unaltered log).
@@ -26,7 +26,8 @@ def add_monitor_parsers(car_actions) -> None:
     >>> p.parse_args(["scenario", "--list"]).list
     True
     """
-    s = car_actions.add_parser("scenario", help="run a health-monitor experiment of paper 1, Section V")
+    s = car_actions.add_parser("scenario",
+                               help="run a health-monitor experiment of ng-chen-speyer, Section V")
     s.add_argument("name", nargs="?", help="scenario name (see --list)")
     s.add_argument("--list", action="store_true", help="list the scenarios")
     s.add_argument("--json", action="store_true", help="print one JSON object")
@@ -42,8 +43,8 @@ def add_monitor_parsers(car_actions) -> None:
 
 
 def _scenario(args: argparse.Namespace) -> int:
-    from ..cli import print_json
-    from ..plants.passenger_car.scenarios import SCENARIOS, plot_scenario, run_scenario
+    from ..systems.car.scenarios import SCENARIOS, plot_scenario, run_scenario
+    from ._output import print_json
 
     if args.list or not args.name:
         rows = {n: s.description for n, s in SCENARIOS.items()}
@@ -69,8 +70,8 @@ def _scenario(args: argparse.Namespace) -> int:
 
 
 def _monitor_log(args: argparse.Namespace) -> int:
-    from ..cli import print_json
-    from ..plants.passenger_car.monitor_rav4 import run_rav4_log
+    from ..systems.car.monitor_rav4 import run_rav4_log
+    from ._output import print_json
 
     res = run_rav4_log(args.path, args.inject)
     if args.json:

@@ -15,15 +15,15 @@ import importlib
 import time
 from collections.abc import Callable
 
-from ..cli import print_json
+from ._output import print_json
 
 
 def section_linear(seed: int = 0) -> dict:
     """Sensor-bias detection on a linear two-mass plant (issue: foundation)."""
     from ..faults import Bias
     from ..monitor import Decision, Monitor
-    from ..plants import two_mass
     from ..residuals import ObserverResidual
+    from ..systems import two_mass
 
     onset, bias = 4.0, 0.012
     # observer residuals, thresholds for a 0.1 % per-run false-alarm probability from 300 nominal
@@ -63,12 +63,12 @@ def _external(module: str, func: str = "demo_summary") -> Callable[[], dict] | N
 
 def sections() -> dict[str, Callable[[], dict]]:
     out: dict[str, Callable[[], dict]] = {"linear": section_linear}
-    for name, module in (("reconstruct", "fdikit.commands.reconstruct"),
-                         ("abs", "fdikit.plants.abs"),
-                         ("abs_diagnosis", "fdikit.evaluate.abs_diagnoser"),
-                         ("abs_directional", "fdikit.evaluate.detectability"),
-                         ("car", "fdikit.plants.passenger_car"),
-                         ("car_monitor", "fdikit.plants.passenger_car.monitor")):
+    for name, module in (("reconstruct", "fdikit.systems.aircraft.reconstruction"),
+                         ("abs", "fdikit.systems.abs.plant"),
+                         ("abs_diagnosis", "fdikit.systems.abs.diagnoser"),
+                         ("abs_directional", "fdikit.systems.abs.detectability"),
+                         ("car", "fdikit.systems.car"),
+                         ("car_monitor", "fdikit.systems.car.scenarios")):
         f = _external(module)
         if f is not None:
             out[name] = f

@@ -28,8 +28,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..cli import print_json
 from ..errors import DataError
+from ._output import print_json
 
 __all__ = ["register"]
 

@@ -1,11 +1,12 @@
-"""LMI designs of the sliding mode observers of paper 3 (Ng, Tan, Edwards & Kuang, CCA 2007).
+"""LMI designs of the sliding mode observers of ng-tan-edwards-kuang (Ng, Tan, Edwards & Kuang, CCA 2007).
 
 Two convex programs, solved with cvxpy and the Clarabel interior-point solver (SCS was measured
 to fail on the primary LMI):
 
-* :func:`primary_smo_lmi` -- the primary observer of Tan & Edwards (2001), paper 3 eqs. (42)-(44):
+* :func:`primary_smo_lmi` -- the primary observer of Tan & Edwards (2001), ng-tan-edwards-kuang
+  eqs. (42)-(44):
   minimise ``trace X`` subject to a Riccati-type LMI in ``P`` and ``X > P^-1``.
-* :func:`secondary_smo_lmi` -- the robust observer of Tan & Edwards (2003), paper 3 eqs.
+* :func:`secondary_smo_lmi` -- the robust observer of Tan & Edwards (2003), ng-tan-edwards-kuang eqs.
   (46)-(47): minimise the L2 gain ``gamma`` from the disturbance to the fault reconstruction.
 
 Both take a system already in the canonical coordinates ``C = [0 T]`` (last ``p`` states are the
@@ -78,7 +79,7 @@ class PrimaryGains:
 
 def primary_smo_lmi(A: np.ndarray, C: np.ndarray, V1: np.ndarray, V2: np.ndarray, *,
                     eps: float = 1e-7) -> PrimaryGains:
-    """Primary observer design, paper 3 eqs. (42)-(44) (Tan & Edwards 2001).
+    """Primary observer design, ng-tan-edwards-kuang eqs. (42)-(44) (Tan & Edwards 2001).
 
     Minimise ``trace X`` subject to
 
@@ -121,8 +122,8 @@ def primary_smo_lmi(A: np.ndarray, C: np.ndarray, V1: np.ndarray, V2: np.ndarray
     P = cp.Variable((n, n), symmetric=True)
     X = cp.Variable((n, n), symmetric=True)
     I = np.eye(n)
-    lmi42 = cp.bmat([[P @ A + A.T @ P - C.T @ V2i @ C, P], [P, -V1i]])  # paper 3, eq. (42)
-    lmi43 = cp.bmat([[-P, I], [I, -X]])  # paper 3, eq. (43)
+    lmi42 = cp.bmat([[P @ A + A.T @ P - C.T @ V2i @ C, P], [P, -V1i]])  # ng-tan-edwards-kuang, eq. (42)
+    lmi43 = cp.bmat([[-P, I], [I, -X]])  # ng-tan-edwards-kuang, eq. (43)
     cons = [0.5 * (lmi42 + lmi42.T) << -eps * np.eye(2 * n),
             0.5 * (lmi43 + lmi43.T) << -eps * np.eye(2 * n)]
     prob = cp.Problem(cp.Minimize(cp.trace(X)), cons)
@@ -131,11 +132,11 @@ def primary_smo_lmi(A: np.ndarray, C: np.ndarray, V1: np.ndarray, V2: np.ndarray
     if np.linalg.eigvalsh(Pv).min() <= 0:
         raise ConditionError("LMI", "primary LMI returned a P that is not positive definite",
                              {"min_eig_P": float(np.linalg.eigvalsh(Pv).min())})
-    Gl = np.linalg.solve(Pv, C.T @ V2i)  # paper 3, eq. (44)
+    Gl = np.linalg.solve(Pv, C.T @ V2i)  # ng-tan-edwards-kuang, eq. (44)
     P11, P12, P22 = Pv[:n - p, :n - p], Pv[:n - p, n - p:], Pv[n - p:, n - p:]
-    L = np.linalg.solve(P11, P12)  # paper 3, eq. (44)
+    L = np.linalg.solve(P11, P12)  # ng-tan-edwards-kuang, eq. (44)
     Po = _sym(T @ (P22 - P12.T @ L) @ T.T)  # eq. (44) (T and T^T in the order that makes P Gn = C^T)
-    Gn = np.vstack([-L @ T.T, T.T]) @ np.linalg.inv(Po)  # paper 3, eq. (17)
+    Gn = np.vstack([-L @ T.T, T.T]) @ np.linalg.inv(Po)  # ng-tan-edwards-kuang, eq. (17)
     A1, A3 = A[:n - p, :n - p], A[n - p:, :n - p]
     ev = np.linalg.eigvals(A1 + L @ A3)
     if ev.size and ev.real.max() >= 0:
@@ -177,7 +178,7 @@ class SecondaryGains:
 
 def secondary_smo_lmi(A: np.ndarray, M: np.ndarray, C: np.ndarray, Q: np.ndarray, *,
                       D1: np.ndarray, gamma_o: float, eps: float = 1e-7) -> SecondaryGains:
-    """Robust observer design, paper 3 eqs. (46)-(47) (Tan & Edwards 2003).
+    """Robust observer design, ng-tan-edwards-kuang eqs. (46)-(47) (Tan & Edwards 2003).
 
     The system ``(A, M, C, Q)`` must be in the coordinates of (33)-(36): ``C = [0 T]`` with ``T``
     invertible, ``M = [0; M2]`` whose bottom ``q`` rows ``Mo`` are invertible. Minimise ``gamma``
@@ -243,7 +244,7 @@ def secondary_smo_lmi(A: np.ndarray, M: np.ndarray, C: np.ndarray, Q: np.ndarray
         P12 = None
         Pl = P22
     cons = []
-    # paper 3, eq. (46): bounded real lemma of G(s) in (40)
+    # ng-tan-edwards-kuang, eq. (46): bounded real lemma of G(s) in (40)
     if k:
         blk11 = P11 @ A1 + A1.T @ P11 + P12 @ A3 + A3.T @ P12.T
         rows = [[blk11, -(P11 @ Q1 + P12 @ Q2), -(W @ A3).T],
@@ -257,7 +258,7 @@ def secondary_smo_lmi(A: np.ndarray, M: np.ndarray, C: np.ndarray, Q: np.ndarray
     else:
         L46 = cp.bmat([[-gam * np.eye(h), (W @ Q2).T], [W @ Q2, -gam * np.eye(q)]])
         cons += [0.5 * (L46 + L46.T) << -eps * np.eye(h + q)]
-    # paper 3, eq. (47)
+    # ng-tan-edwards-kuang, eq. (47)
     Dd = np.hstack([D1, np.zeros((pb, h))])
     Bd = np.hstack([np.zeros((nb, pb)), Q])
     R = np.linalg.inv(Dd @ Dd.T)
@@ -283,7 +284,7 @@ def secondary_smo_lmi(A: np.ndarray, M: np.ndarray, C: np.ndarray, Q: np.ndarray
     # Po = T^-T S T^-1 without forming T^-1 explicitly
     Po = _sym(np.linalg.solve(T.T, np.linalg.solve(T.T, S).T))
     Ti = np.linalg.solve(T, np.eye(pb))
-    Gn = np.vstack([-L @ Ti, Ti]) @ np.linalg.solve(Po, np.eye(pb))  # paper 3, eq. (38)
+    Gn = np.vstack([-L @ Ti, Ti]) @ np.linalg.solve(Po, np.eye(pb))  # ng-tan-edwards-kuang, eq. (38)
     Ao = A - Gl @ C
     ev = np.linalg.eigvals(Ao)
     if ev.real.max() >= 0:

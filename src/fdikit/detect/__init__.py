@@ -1,5 +1,7 @@
-"""Residual processors: threshold rules, GLRT, directional GLRT, MHSSPT."""
+"""Residual processors: threshold rules, GLRT, directional GLRT, MHSSPT, feature norms, and banks
+of tests designed together."""
 
+from .bank import TestBank, TestSpec
 from .directional import DirectionalGLRT, directional_statistic
 from .glrt import GLRT, ThresholdDesign, TimeGated, design_threshold, glrt_statistic
 from .mhsspt import MHSSPT, MHSSPTCalibration, UniformMeanGaussian, calibrate_densities
@@ -11,6 +13,8 @@ __all__ = [
     "DirectionalGLRT",
     "Hold",
     "MHSSPTCalibration",
+    "TestBank",
+    "TestSpec",
     "ThresholdDesign",
     "TimeGated",
     "UniformMeanGaussian",

@@ -44,8 +44,8 @@ from collections.abc import Sequence
 import numpy as np
 from numba import njit
 
+from ..base.stage import ResidualProcessor
 from ..errors import DataError
-from ..monitor.core import ResidualProcessor
 from ..signals import Signals, check_finite
 
 __all__ = ["DirectionalGLRT", "directional_statistic"]
@@ -322,7 +322,7 @@ class DirectionalGLRT(ResidualProcessor):
     _state_attrs = ("_A", "_B", "_pos", "_counts", "_k")
 
     def to_dict(self) -> dict:
-        """Configuration as plain data (a design artifact, :mod:`fdikit.monitor.artifacts`)."""
+        """Configuration as plain data (a design artifact, :mod:`fdikit.base.artifacts`)."""
         return {"inputs": list(self.residual_names), "signatures": list(self.signature_names),
                 "mu0": self.mu0.tolist(), "sigma2": self.sigma2.tolist(), "W": self.W,
                 "min_information": self.min_information, "name": self.name,

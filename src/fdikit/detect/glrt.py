@@ -1,7 +1,7 @@
 """Moving-window generalised likelihood ratio test for a change in mean, time-gated tests and
 threshold design for a target false-alarm probability.
 
-GLRT (paper luo-et-al, eq. (24), with the moving window of Section V-A)::
+GLRT (luo-et-al, eq. (24), with the moving window of Section V-A)::
 
     g_k = 1 / (2 sigma^2) * max_{k-W+1 <= j <= k} (1 / (k-j+1)) * (sum_{i=j..k} (r_i - mu_0))^2
 
@@ -21,8 +21,8 @@ from collections.abc import Sequence
 import numpy as np
 from numba import njit
 
+from ..base.stage import ResidualProcessor
 from ..errors import DataError
-from ..monitor.core import ResidualProcessor
 from ..signals import Signals
 
 __all__ = ["GLRT", "ThresholdDesign", "TimeGated", "design_threshold", "glrt_statistic"]
@@ -172,7 +172,7 @@ class GLRT(ResidualProcessor):
     _state_attrs = ("_state", "_k")
 
     def to_dict(self) -> dict:
-        """Configuration as plain data (see :mod:`fdikit.monitor.artifacts`)."""
+        """Configuration as plain data (see :mod:`fdikit.base.artifacts`)."""
         return {"inputs": list(self.input_names), "mu0": self.mu0.tolist(), "sigma2": self.sigma2.tolist(),
                 "W": self.W}
 

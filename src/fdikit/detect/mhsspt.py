@@ -1,6 +1,6 @@
 """Multiple-hypothesis Shiryayev sequential probability test (MHSSPT), in the log domain.
 
-Paper ng-chen-speyer, Section IV-E, after Malladi & Speyer (IEEE TAC 44(8), 1999); the recursion
+Ng, Chen & Speyer, Section IV-E, after Malladi & Speyer (IEEE TAC 44(8), 1999); the recursion
 and densities are written out in shared/notes/residual-processing.md. Hypothesis 0 is "no
 fault"; hypotheses 1..M are faults. At every sample a change from H0 occurs with probability
 ``p``, to H_j with probability ``pi_j``; an optional return probability ``q`` lets a fault
@@ -23,13 +23,14 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numba import njit, prange
 from scipy.special import log_ndtr
 
+from ..base.stage import ResidualProcessor
 from ..errors import DataError
-from ..monitor.core import ResidualProcessor
 from ..signals import Signals
 
 __all__ = [
@@ -286,7 +287,7 @@ def tabulate_umg(low: np.ndarray, high: np.ndarray, std: np.ndarray, point: np.n
 
 class UniformMeanGaussian:
     """Density of a residual vector whose components are Gaussian with an unknown mean that is
-    uniformly distributed on ``[low_c, high_c]`` (paper ng-chen-speyer, Section IV-E)::
+    uniformly distributed on ``[low_c, high_c]`` (ng-chen-speyer, Section IV-E)::
 
         f(x) = prod_c [Phi((x_c - a_c)/s_c) - Phi((x_c - b_c)/s_c)] / (b_c - a_c)
 
@@ -742,7 +743,7 @@ def calibrate_densities(
 ) -> MHSSPTCalibration:
     """Calibrate uniform-mean Gaussian densities from simulated residual features.
 
-    Paper ng-chen-speyer, Section IV-E: every fault is simulated over a range of magnitudes;
+    Ng, Chen & Speyer, Section IV-E: every fault is simulated over a range of magnitudes;
     two hypotheses per fault (small and large magnitudes) get, per feature component, the range
     ``[a, b]`` spanned by the feature means at those magnitudes and the standard deviation of
     the features about their means (pooled over the magnitudes).
@@ -819,3 +820,130 @@ def calibrate_densities(
             names.append(h)
         groups[fault] = names
     return MHSSPTCalibration(dens, groups, ranges)
+
+
+class WarmupMHSSPT(MHSSPT):
+    """:class:`MHSSPT` that sees the no-fault mean features for the first ``warmup`` samples, while
+    the residual generators' start-up transient (filter state zero, plant not at the design trim)
+    dies out, and again after every gap (:meth:`resume`); afterwards the exact recursion. Batch and
+    streaming alike.
+
+    Examples
+    --------
+    >>> from fdikit.detect import UniformMeanGaussian
+    >>> t = WarmupMHSSPT(["r"], {"none": UniformMeanGaussian([0], [0], [1]),
+    ...                          "bias": UniformMeanGaussian([2], [4], [1])}, p=1e-3, warmup=5)
+    >>> t.reset(1)
+    >>> float(t.step([9.0])[0, 1]) < 0.01          # ignored during the warm-up
+    True
+    """
+
+    _state_attrs = (*MHSSPT._state_attrs, "_warm_from")
+
+    def __init__(self, *args, warmup: int = 0, **kw):
+        super().__init__(*args, **kw)
+        self.warmup = int(warmup)
+        d0 = self.densities[0]
+        self._x0 = np.asarray(getattr(d0, "low", np.zeros(len(self.input_names))), float)
+
+    def reset(self, runs: int = 1) -> None:
+        super().reset(runs)
+        self._warm_from = 0
+
+    def resume(self, n_held: int) -> None:
+        """Data returns after ``n_held`` held samples (:class:`fdikit.monitor.Monitor`,
+        ``on_invalid="hold"``): the filters' states went stale over the gap, so the warm-up
+        starts again from the next sample."""
+        if n_held > 0:
+            self._warm_from = self._k
+
+    def _advance(self, x):
+        n = self.warmup - (self._k - self._warm_from)
+        if n > 0:
+            x = x.copy()
+            x[:, :n] = self._x0
+        return super()._advance(x)
+
+
+def extend_ranges(cal, rise: Mapping[str, Mapping[float, np.ndarray]], *,
+                  split: Mapping[str, float] | None = None, path: Any = None):
+    """Widen every fault hypothesis's uniform-mean range to cover its features' rise.
+
+    ``rise[fault][magnitude]`` (W, C) are the means of the features over short windows after the
+    onset of ``fault`` at ``magnitude``; each hypothesis of the pair (small: magnitudes up to the
+    median, large: from the median, as :func:`~fdikit.detect.calibrate_densities`, or ``split``)
+    gets ``low = min(low, min over its magnitudes' windows)`` and ``high`` likewise, per feature.
+    The standard deviations are kept (they describe the noise about the settled mean, not the
+    trend of the rise). Returns a new :class:`~fdikit.detect.mhsspt.MHSSPTCalibration`.
+
+    With ``path`` (C,) (the no-fault mean), each window is first clipped per feature to the hull
+    of ``path`` and the hypothesis's settled range ``[low, high]``: the range then covers the way
+    the features travel from the no-fault mean to their settled values and nothing beyond it, not
+    a one-sample overshoot at the onset (a wheel-speed-sum step passes straight to two residuals
+    for a sample) nor the noise of a short window in a feature the fault does not move. The
+    uniform-mean density is ``1 / width`` across its range, so every unit of width a hypothesis
+    takes to cover a brief spike it pays for at every later sample, and a noise-widened range of a
+    feature the fault leaves alone lets that hypothesis take another fault's settled features.
+
+    Examples
+    --------
+    >>> from fdikit.detect.mhsspt import MHSSPTCalibration
+    >>> from fdikit.detect import UniformMeanGaussian
+    >>> c = MHSSPTCalibration({"none": UniformMeanGaussian([0.0], [0.0], [1.0]),
+    ...                        "f:small": UniformMeanGaussian([2.0], [3.0], [1.0]),
+    ...                        "f:large": UniformMeanGaussian([4.0], [5.0], [1.0])},
+    ...                       {"f": ["f:small", "f:large"]}, {})
+    >>> e = extend_ranges(c, {"f": {1.0: np.array([[0.5], [2.5]]), 2.0: np.array([[3.5]]),
+    ...                             3.0: np.array([[6.0]])}})
+    >>> [(e.densities[h].low.tolist(), e.densities[h].high.tolist()) for h in ("f:small", "f:large")]
+    [([0.5], [3.5]), ([3.5], [6.0])]
+    >>> e = extend_ranges(c, {"f": {1.0: np.array([[-0.5], [2.5]]), 2.0: np.array([[3.5]]),
+    ...                             3.0: np.array([[6.0]])}}, path=np.array([0.0]))
+    >>> [(e.densities[h].low.tolist(), e.densities[h].high.tolist()) for h in ("f:small", "f:large")]
+    [([0.0], [3.0]), ([3.5], [5.0])]
+    """
+    dens = dict(cal.densities)
+    for fault, by_mag in rise.items():
+        if fault not in cal.groups:
+            raise DataError(f"no hypotheses for fault {fault!r}; faults: {list(cal.groups)}")
+        mags = sorted(by_mag, key=abs)
+        cut = abs((split or {}).get(fault, float(np.median(np.abs(mags)))))
+        small = [m for m in mags if abs(m) <= cut] or mags[:1]
+        large = [m for m in mags if abs(m) >= cut] or mags[-1:]
+        hyps = cal.groups[fault]
+        for h, ms in zip(hyps, (small, large) if len(hyps) == 2 else (mags,)):
+            x = np.concatenate([np.asarray(by_mag[m], float) for m in ms])
+            if not np.all(np.isfinite(x)):
+                raise DataError(f"fault {fault!r}: rise features contain NaN or inf")
+            d = dens[h]
+            if path is not None:
+                x = np.clip(x, np.minimum(d.low, path), np.maximum(d.high, path))
+            dens[h] = UniformMeanGaussian(np.minimum(d.low, x.min(0)), np.maximum(d.high, x.max(0)), d.std)
+    return MHSSPTCalibration(dens, dict(cal.groups), dict(cal.ranges))
+
+
+def floor_std(cal, frac: float, *, h0_floor: bool = False):
+    """Floor every density's per-feature std at ``frac`` times its own upper mean ``high`` (a
+    relative model error: a few per cent of a residual's level) and, with ``h0_floor``, at the
+    no-fault (first) hypothesis's std (a fault adds to the noise, it does not remove it), as a new
+    :class:`~fdikit.detect.mhsspt.MHSSPTCalibration`.
+
+    Examples
+    --------
+    >>> from fdikit.detect.mhsspt import MHSSPTCalibration
+    >>> from fdikit.detect import UniformMeanGaussian
+    >>> c = MHSSPTCalibration({"none": UniformMeanGaussian([0.1], [0.1], [0.001]),
+    ...                        "f": UniformMeanGaussian([1.0], [2.0], [0.01])}, {}, {})
+    >>> [floor_std(c, 0.05).densities[h].std.round(6).tolist() for h in ("none", "f")]
+    [[0.005], [0.1]]
+    >>> floor_std(c, 0.0, h0_floor=True).densities["f"].std.tolist()
+    [0.01]
+    """
+    h0 = next(iter(cal.densities.values())).std if h0_floor else 0.0
+    # a fault does not remove the noise: no hypothesis narrower than the no-fault one (h0_floor)
+    dens = {h: UniformMeanGaussian(d.low, d.high, np.maximum(np.maximum(d.std, frac * np.abs(d.high)), h0))
+            for h, d in cal.densities.items()}
+    return MHSSPTCalibration(dens, dict(cal.groups), dict(cal.ranges))
+
+
+# ---------------------------------------------------------------------------------- pattern table

@@ -1,6 +1,6 @@
 """Threshold rules: a statistic above a threshold for Z consecutive samples raises an alarm.
 
-This is the alarm rule of paper luo-et-al, eq. (34): a test declares a fault at sample k when its
+This is the alarm rule of luo-et-al, eq. (34): a test declares a fault at sample k when its
 statistic exceeds the threshold at samples k-Z+1, ..., k. ``Z = 1`` is a plain threshold.
 """
 
@@ -10,8 +10,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from ..base.stage import ResidualProcessor
 from ..errors import DataError
-from ..monitor.core import ResidualProcessor
 from ..signals import Signals
 
 __all__ = ["Hold", "consecutive_count"]
@@ -81,7 +81,7 @@ class Hold(ResidualProcessor):
     _state_attrs = ("_count",)
 
     def to_dict(self) -> dict:
-        """Configuration as plain data (see :mod:`fdikit.monitor.artifacts`)."""
+        """Configuration as plain data (see :mod:`fdikit.base.artifacts`)."""
         return {"inputs": list(self.input_names), "threshold": self.threshold.tolist(), "Z": self.Z,
                 "absolute": self.absolute}
 

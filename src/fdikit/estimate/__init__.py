@@ -1,18 +1,7 @@
-"""Parameter estimation: output-error estimation of any subset of named parameters (paper luo-et-al,
-Section VIII and Appendix B), with ready re-simulators for any NonlinearModel and for the ABS.
+"""Parameter estimation: output-error estimation of any subset of named parameters (luo-et-al,
+Section VIII and Appendix B), with a ready re-simulator for any NonlinearModel.
 """
 
-from .output_error import (
-    ABS_ESTIMATED,
-    ABS_TABLE_VI_PAPER,
-    ABS_TABLE_VI_TRUE,
-    ABSSimulator,
-    ModelSimulator,
-    OutputErrorResult,
-    abs_table_vi,
-    output_error,
-    output_error_covariance,
-)
+from .output_error import ModelSimulator, OutputErrorResult, output_error, output_error_covariance
 
-__all__ = ["ABS_ESTIMATED", "ABS_TABLE_VI_PAPER", "ABS_TABLE_VI_TRUE", "ABSSimulator", "ModelSimulator",
-           "OutputErrorResult", "abs_table_vi", "output_error", "output_error_covariance"]
+__all__ = ["ModelSimulator", "OutputErrorResult", "output_error", "output_error_covariance"]

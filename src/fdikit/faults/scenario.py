@@ -64,7 +64,7 @@ class Noise:
     process_snr_db, measurement_snr_db : float or array_like, optional
         Instead of a covariance: signal-to-noise ratio in dB per state (per output), relative to
         that signal's mean-square value in a nominal (fault-free, noise-free) pass of the same
-        run: ``variance = ms * 10**(-snr/10)`` (paper luo-et-al: 0.5 % of the mean square,
+        run: ``variance = ms * 10**(-snr/10)`` (luo-et-al: 0.5 % of the mean square,
         23 dB). ``+inf`` means no noise on that channel. Noise is independent across channels.
     process_mode : {"derivative", "psd", "increment"}, optional
         How process noise ``w`` enters (default ``"derivative"`` for continuous-time and
@@ -73,7 +73,7 @@ class Noise:
 
         * ``"derivative"``: ``x' = f(t, x, u, p) + w(t)`` where ``w`` is a random signal held
           constant over each integration step (zero-order hold), each value with the given
-          covariance ``Q`` -- the ``w_i`` of paper luo-et-al eq. (19), as a Simulink random
+          covariance ``Q`` -- the ``w_i`` of luo-et-al eq. (19), as a Simulink random
           source with sample time ``dt`` makes it. It is integrated by the same scheme as the
           input (RK4 sees it as a constant input; linear models use the exact ZOH integral
           ``int_0^dt exp(A s) ds``). Its equivalent white-noise intensity is ``Q * dt``.
@@ -86,7 +86,7 @@ class Noise:
     Examples
     --------
     >>> from fdikit.faults import Noise
-    >>> Noise(measurement=[0.004, 0.004], process_snr_db=23.0)   # paper luo-et-al, Sec. III-A
+    >>> Noise(measurement=[0.004, 0.004], process_snr_db=23.0)   # luo-et-al, Sec. III-A
     Noise(process=None, measurement=[0.004, 0.004], process_snr_db=23.0, measurement_snr_db=None, \
 process_mode=None)
     """
@@ -156,7 +156,7 @@ class Scenario:
         linear model steps at its own ``dt`` (give ``None`` or the same value).
     sample_time : float, optional
         Measurement sample time (s), a whole multiple of ``dt`` (default ``dt``). Measurements are
-        sampled every ``sample_time`` and held in between (paper luo-et-al, eq. (31)); a
+        sampled every ``sample_time`` and held in between (luo-et-al, eq. (31)); a
         controller runs at this rate. ``duration`` must be a multiple of it.
     faults : sequence of Fault
     x0 : array_like, optional

@@ -15,7 +15,7 @@ data and ``info`` reports per-signal quality (rates, gaps, duplicates, stuck str
 are never interpolated across (see :mod:`fdikit.io.can`).
 """
 
-from .can import LogSignals, SignalInfo, convert_units, read_can_log, resample_to_grid
+from .can import LogSignals, SignalInfo, convert_units, resample_to_grid
 from .csv import read_csv
 from .formats import (
     FORMATS,
@@ -26,6 +26,7 @@ from .formats import (
     frames_to_signals,
     read_asc,
     read_blf,
+    read_can_log,
     read_candump,
     read_log,
     read_mdf,

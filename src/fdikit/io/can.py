@@ -26,7 +26,7 @@ from __future__ import annotations
 import difflib
 import os
 import struct
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -36,7 +36,7 @@ import numpy as np
 from ..errors import DataError
 from ..signals import Signals
 
-__all__ = ["LogSignals", "SignalInfo", "convert_units", "read_can_log", "resample_to_grid"]
+__all__ = ["LogSignals", "SignalInfo", "convert_units", "resample_to_grid"]
 
 
 # ---------------------------------------------------------------------------------- units
@@ -360,72 +360,3 @@ def _resolve(db, signals: Sequence[str]):
                             f"its signals are {snames}" + (f"; did you mean {close}?" if close else ""))
         out.append((full, msg, msg.get_signal_by_name(sname)))
     return out
-
-
-def read_can_log(
-    path: str | os.PathLike,
-    dbc: Any,
-    signals: Sequence[str],
-    rate: float | None = None,
-    *,
-    units: str | Mapping[str, str] | None = None,
-    max_gap: float = 3.0,
-    method: str = "linear",
-    span: str = "common",
-) -> LogSignals:
-    """Read a CAN log, decode the chosen signals with a DBC and put them on one time grid.
-
-    Parameters
-    ----------
-    path : path-like
-        The log (``.blf``, ``.asc``, ``.csv``, ``.trc``, ... as :class:`can.LogReader` knows).
-    dbc : path-like or cantools Database
-        The DBC (loaded with ``strict=False``: overlapping signals are allowed).
-    signals : sequence of str
-        ``"MESSAGE.SIGNAL"`` names, e.g. ``["KINEMATICS.YAW_RATE", "SPEED.SPEED"]``.
-    rate : float, optional
-        Grid rate in Hz; default the highest median source rate among the chosen signals.
-    units : "si" or mapping, optional
-        Unit conversion: ``"si"`` converts every signal with a known SI target (km/h -> m/s,
-        deg -> rad, deg/s -> rad/s, rpm -> rad/s, % -> 1); a mapping gives a target unit per
-        signal name. Default: the DBC's units.
-    max_gap : float
-        Longest frame interval, in that signal's median source periods, that is interpolated
-        across; longer gaps become NaN with ``valid == False`` (see the module docstring).
-    method : {"linear", "previous"}
-        Interpolation between neighbouring frames, or zero-order hold.
-    span : {"common", "log"}
-        Grid from the latest first frame to the earliest last frame of the chosen signals
-        (default; no leading/trailing NaN), or over the whole log (channels are invalid outside
-        their recorded span). Time 0 is the first frame of the log either way.
-
-    Returns
-    -------
-    LogSignals
-        One run, ``T`` samples at ``rate`` Hz, one channel per requested signal (named as
-        requested), units from the DBC (or converted), ``valid`` mask and per-signal
-        :class:`SignalInfo` in ``info``.
-
-    Raises
-    ------
-    DataError
-        Missing / not-a-log / truncated / corrupt file; a DBC without the requested message or
-        signal (with close matches); a requested message with no frames in the log; an
-        impossible unit conversion.
-
-    Examples
-    --------
-    >>> from fdikit.io import read_can_log
-    >>> s = read_can_log("drive.blf", "toyota_rav4.dbc",
-    ...                  ["KINEMATICS.YAW_RATE", "SPEED.SPEED"], rate=50, units="si")  # doctest: +SKIP
-    >>> s.units  # doctest: +SKIP
-    ['rad/s', 'm/s']
-    """
-    # one frame-to-grid path for every log format: fdikit.io.formats (stricter bad-input policy:
-    # short payloads are flagged, never zero-padded; conflicting duplicates are flagged; a
-    # corrupt container is a DataError)
-    from .formats import read_log
-
-    return read_log(path, dbc, signals, rate, units=units, max_gap=max_gap, method=method, span=span)
-
-

@@ -1,6 +1,6 @@
 """Code generation: a diagnostic tree as IF-THEN-ELSE logic in Python, C, or the paper's listing style.
 
-Paper luo-et-al, Section VII translates the optimal diagnostic tree into "IF-THEN-ELSE" logic
+Luo et al., Section VII translates the optimal diagnostic tree into "IF-THEN-ELSE" logic
 embedded in the ABS ECU; only the Go-path tests run all the time, the others are *requested* when
 the tree reaches them. The generated code does the same: it reads a test outcome only when the tree
 asks for it.

@@ -2,7 +2,7 @@
 
 A D-matrix ``D = {d_ij}`` has one row per fault state (including, if the user wants it, the
 no-fault state ``"F0"``) and one column per test; ``d_ij = 1`` when test ``j`` detects fault
-state ``i`` (paper luo-et-al, Section VII and Table IV). Rows that are identical cannot be told
+state ``i`` (luo-et-al, Section VII and Table IV). Rows that are identical cannot be told
 apart by any test: they form an *ambiguity group*. This module reports such groups; it never
 merges them silently.
 

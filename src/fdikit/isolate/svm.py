@@ -1,31 +1,17 @@
-"""SVM isolation tests S_Kf / S_Iw (paper luo-et-al, Section VI and Appendix A).
+"""SVM isolation for any labelled pattern set (after luo-et-al, Section VI and Appendix A).
 
-The K_f (brake torque gain) and I_w (wheel inertia) faults move the ABS residuals alike, so the
-paper isolates them with a support vector machine trained on simulated records: each pattern is
-the two measurements (wheel speed, vehicle speed; 1250 samples each) concatenated into one
-vector of 2500 values (eq. (36)), the kernel is the RBF ``exp(-||y_i - y_j||^2 / (2 sigma^2))``
-with ``sigma = 20`` and ``C = 1`` (eqs. (38)-(42)). With scikit-learn's ``SVC`` this is
-``gamma = 1 / (2 sigma^2) = 1/800``.
+Faults that move the residuals alike can be told apart by a classifier trained on labelled records
+(simulated or real). :class:`SVMIsolator` wraps a scikit-learn pipeline: ``fit``/``predict``, the
+binary test outcomes ``S_<label>`` of a D-matrix, and :meth:`SVMIsolator.export`, a plain-data
+(JSON-able) form of the trained RBF decision function (eq. (42)) that :class:`SVMDecision`
+evaluates with numpy alone -- no pickle.
 
-Improvement (:func:`improved_pipeline`). The raw pattern is dominated by the vehicle speed
-trajectory, whose random walk under process noise is common to both measurements and carries no
-information on which parameter changed. The fault shows in the *slip speed* ``omega_v -
-omega_w``, which the sliding-mode controller modulates; its mean over 500 ms windows (25
-features) removes the common mode and averages out the measurement noise and the valve
-chattering. ``C`` and ``gamma`` of the RBF SVC are chosen by stratified 5-fold cross-validation on
-the training set only. A ``StandardScaler`` step is available (``scale=True``) but off by default:
-all features share one unit (rad/s) and standardising inflates the windows after standstill,
-where only measurement noise varies. Measured on two independent 720-pattern sets at 23 dB
-(train on one, test on the other, both ways): window means of the slip speed 1 + 0 errors
-unscaled, 3 + 0 standardised; 250 ms windows 2 + 1 / 8 + 2; both channels separately (no
-difference) standardised 21 + 10. Against the paper's raw patterns (3 + 0) the gain shows when
-the process noise grows: 20 dB, 180 + 180 patterns: 1 vs 6 errors; 17 dB, 720 + 720: 3 vs 15.
-See :class:`WindowFeatures` (any linear channel combination, any window) for other plants.
-
-:class:`SVMIsolator` wraps either pipeline for any labelled pattern set: ``fit``/``predict``,
-the binary test outcomes ``S_<label>`` of the D-matrix, and :meth:`SVMIsolator.export`, a plain
-data (JSON-able) form of the trained decision function (eq. (42)) that :class:`SVMDecision`
-evaluates with numpy alone — no pickle.
+The default pipeline (:func:`cv_pipeline`) standardises the features and chooses the RBF width and
+box constraint by stratified cross-validation on the training data, so it needs no tuning for a
+new system. :class:`WindowFeatures` (window means of any linear combination of channels) turns
+records laid end to end (:func:`concat_measurements`) into compact features. The ABS paper's
+pipelines (raw patterns with sigma = 20, C = 1, and the slip-speed window means) are in
+:mod:`fdikit.systems.abs.svm`.
 """
 
 from __future__ import annotations
@@ -44,27 +30,18 @@ from sklearn.svm import SVC
 from ..errors import DataError
 
 __all__ = [
-    "C_PAPER",
-    "SIGMA_PAPER",
     "SVMDecision",
     "SVMIsolator",
     "WindowFeatures",
-    "abs_patterns",
-    "abs_svm_experiment",
     "concat_measurements",
-    "improved_pipeline",
-    "paper_pipeline",
+    "cv_pipeline",
     "rbf_gamma",
 ]
 
-SIGMA_PAPER = 20.0  # RBF width sigma of Section VI
-C_PAPER = 1.0  # box constraint C of eq. (38), Section VI
-#: Magnitudes of the training/test grid of Section VI: ±2 %, ±3 %, ..., ±10 % (18 sizes).
-SIZES = tuple(s * k / 100.0 for s in (-1, 1) for k in range(2, 11))
 
 
 def rbf_gamma(sigma: float) -> float:
-    """scikit-learn's ``gamma`` for the paper's RBF width: ``1 / (2 sigma^2)`` (Appendix A).
+    """scikit-learn's ``gamma`` for an RBF width ``sigma``: ``1 / (2 sigma^2)`` (Appendix A).
 
     Examples
     --------
@@ -128,8 +105,7 @@ class WindowFeatures(TransformerMixin, BaseEstimator):
     [[8.5, 6.5]]
     """
 
-    def __init__(self, n_channels: int = 2, window: int = 50,
-                 combination: Sequence[float] | None = (-1.0, 1.0)):
+    def __init__(self, n_channels: int, window: int, combination: Sequence[float] | None = None):
         self.n_channels = n_channels
         self.window = window
         self.combination = combination
@@ -163,40 +139,29 @@ class WindowFeatures(TransformerMixin, BaseEstimator):
         return Z[:, :, : k * w].reshape(n, Z.shape[1], k, w).mean(axis=3).reshape(n, -1)
 
 
-def paper_pipeline(sigma: float = SIGMA_PAPER, C: float = C_PAPER) -> Pipeline:
-    """The paper's classifier: RBF SVC on the raw concatenated measurements (Section VI).
-
-    Examples
-    --------
-    >>> from fdikit.isolate.svm import paper_pipeline
-    >>> paper_pipeline().named_steps["svc"].gamma
-    0.00125
-    """
-    return Pipeline([("svc", SVC(kernel="rbf", gamma=rbf_gamma(sigma), C=float(C)))])
-
-
-def improved_pipeline(
-    n_channels: int = 2,
-    window: int = 50,
-    combination: Sequence[float] | None = (-1.0, 1.0),
+def cv_pipeline(
+    features: Any = None,
     *,
-    scale: bool = False,
-    Cs: Sequence[float] = (1.0, 10.0, 100.0, 1000.0),
-    gammas: Sequence[Any] = ("scale", 3e-3, 1e-2, 3e-2, 0.1),
+    scale: bool = True,
+    Cs: Sequence[float] = (0.1, 1.0, 10.0, 100.0, 1000.0),
+    gammas: Sequence[Any] = ("scale", 1e-3, 1e-2, 0.1, 1.0),
     cv: int = 5,
     random_state: int = 0,
 ) -> GridSearchCV:
-    """Window features (-> StandardScaler) -> RBF SVC, with ``C`` and ``gamma`` cross-validated.
+    """[features ->] [StandardScaler ->] RBF SVC, with ``C`` and ``gamma`` cross-validated.
+
+    The default of :class:`SVMIsolator`: it works for any number of channels and classes, because
+    the features are standardised (so no channel's unit dominates the kernel) and the kernel width
+    and box constraint are chosen on the training data by stratified ``cv``-fold cross-validation.
 
     Parameters
     ----------
-    n_channels, window, combination
-        See :class:`WindowFeatures` (default: 500 ms means of ``omega_v - omega_w``, in rad/s).
+    features : sklearn transformer, optional
+        A first step, e.g. :class:`WindowFeatures` (window means of channel combinations).
     scale : bool
-        Insert a ``StandardScaler`` after the features (see the module docstring for why the
-        default is off for the ABS).
+        Standardise the features (default True).
     Cs, gammas : sequences
-        Grid of the box constraint and of the RBF ``gamma`` (1/feature-unit^2; "scale" is
+        Grid of the box constraint and of the RBF ``gamma`` (1/feature-unit^2; ``"scale"`` is
         scikit-learn's ``1 / (n_features · var(X))``).
     cv : int
         Folds of the stratified cross-validation (on the training data only).
@@ -205,11 +170,15 @@ def improved_pipeline(
 
     Examples
     --------
-    >>> from fdikit.isolate.svm import improved_pipeline
-    >>> sorted(improved_pipeline().param_grid)
-    ['svc__C', 'svc__gamma']
+    >>> from fdikit.isolate.svm import cv_pipeline
+    >>> sorted(cv_pipeline().param_grid), [n for n, _ in cv_pipeline().estimator.steps]
+    (['svc__C', 'svc__gamma'], ['scale', 'svc'])
     """
-    steps: list[tuple[str, Any]] = [("features", WindowFeatures(n_channels, window, combination))]
+    if int(cv) != cv or cv < 2:
+        raise DataError(f"cv must be an integer >= 2 folds, got {cv}")
+    steps: list[tuple[str, Any]] = []
+    if features is not None:
+        steps.append(("features", features))
     if scale:
         steps.append(("scale", StandardScaler()))
     steps.append(("svc", SVC(kernel="rbf")))
@@ -218,13 +187,13 @@ def improved_pipeline(
 
 
 class SVMIsolator:
-    """An SVM isolation test for any labelled pattern set (paper 2, Section VI).
+    """An SVM isolation test for any labelled pattern set (luo-et-al, Section VI).
 
     Parameters
     ----------
-    pipeline : {"paper", "improved"} or sklearn estimator
-        ``"paper"``: :func:`paper_pipeline`; ``"improved"``: :func:`improved_pipeline`; or any
-        classifier with fit/predict (a Pipeline ending in an RBF ``SVC`` can be exported).
+    pipeline : "default" or sklearn estimator
+        ``"default"``: :func:`cv_pipeline` (standardised features, cross-validated RBF SVC); or
+        any classifier with fit/predict (a Pipeline ending in an RBF ``SVC`` can be exported).
     test_names : mapping label -> str, optional
         Names of the binary tests; default ``"S_" + label`` without underscores
         (``"K_f" -> "S_Kf"``).
@@ -244,12 +213,12 @@ class SVMIsolator:
     >>> rng = np.random.default_rng(0)
     >>> X = np.vstack([rng.normal(0, 1, (20, 4)), rng.normal(3, 1, (20, 4))])
     >>> lab = np.array(["K_f"] * 20 + ["I_w"] * 20)
-    >>> iso = SVMIsolator("paper").fit(X, lab)
+    >>> iso = SVMIsolator().fit(X, lab)
     >>> iso.error(X, lab) < 0.1, sorted(iso.outcomes(X[:1]))
     (True, ['S_Iw', 'S_Kf'])
     """
 
-    def __init__(self, pipeline: Any = "paper", test_names: Mapping[Any, str] | None = None):
+    def __init__(self, pipeline: Any = "default", test_names: Mapping[Any, str] | None = None):
         self.pipeline = pipeline
         self.test_names = dict(test_names or {})
 
@@ -257,11 +226,10 @@ class SVMIsolator:
         from sklearn.base import clone
 
         if isinstance(self.pipeline, str):
-            if self.pipeline == "paper":
-                return paper_pipeline()
-            if self.pipeline == "improved":
-                return improved_pipeline()
-            raise DataError(f"unknown pipeline {self.pipeline!r}; use 'paper', 'improved' or an estimator")
+            if self.pipeline == "default":
+                return cv_pipeline()
+            raise DataError(f"unknown pipeline {self.pipeline!r}; use 'default' (cv_pipeline()) or a "
+                            "scikit-learn estimator")
         return clone(self.pipeline)
 
     @staticmethod
@@ -359,9 +327,10 @@ class SVMDecision:
     Examples
     --------
     >>> import numpy as np
+    >>> from sklearn.svm import SVC
     >>> from fdikit.isolate.svm import SVMDecision, SVMIsolator
     >>> X = np.array([[0.0, 0.0], [0.1, 0.0], [3.0, 3.0], [3.1, 3.0]])
-    >>> iso = SVMIsolator("paper").fit(X, ["a", "a", "b", "b"])
+    >>> iso = SVMIsolator(SVC(kernel="rbf", gamma=0.5)).fit(X, ["a", "a", "b", "b"])
     >>> SVMDecision(iso.export()).predict(X).tolist()
     ['a', 'a', 'b', 'b']
     """
@@ -404,115 +373,9 @@ class SVMDecision:
         """``f(y)`` of eq. (42) before the sign, (n,)."""
         Z = self.features(X)
         d2 = (np.sum(Z**2, 1)[:, None] + np.sum(self.sv**2, 1)[None, :] - 2.0 * Z @ self.sv.T)
-        return np.exp(-self.gamma * np.maximum(d2, 0.0)) @ self.coef + self.b  # paper 2, eq. (42)
+        return np.exp(-self.gamma * np.maximum(d2, 0.0)) @ self.coef + self.b  # luo-et-al eq. (42)
 
     def predict(self, X: Any) -> np.ndarray:
         d = self.decision_function(X)
         c0, c1 = np.array(self.classes[0], dtype=object), np.array(self.classes[1], dtype=object)
         return np.where(d > 0, c1, c0)
-
-
-# --------------------------------------------------------------------------------------------
-# The ABS data set of Section VI
-# --------------------------------------------------------------------------------------------
-def abs_patterns(
-    per_size: int = 20,
-    seed: int = 0,
-    *,
-    sizes: Sequence[float] = SIZES,
-    faults: Mapping[str, str] | None = None,
-    snr_db: float | None = 23.0,
-    scenario: Any = None,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Simulated K_f / I_w patterns of Section VI: ``per_size`` records per fault size and fault.
-
-    Parameters
-    ----------
-    per_size : int
-        Records per (fault, size) (paper: 20, giving 20 x 18 x 2 = 720 patterns).
-    seed : int
-        Master seed; (fault, size) cell ``(a, b)`` uses ``SeedSequence(seed, spawn_key=(a, b))``,
-        so two seeds give independent sets.
-    sizes : sequence of float
-        Relative fault sizes (paper: ±2 %, ..., ±10 %).
-    faults : mapping label -> fault class
-        Default ``{"K_f": "F3", "I_w": "F4"}``.
-    snr_db : float or None
-        Process noise (paper: 23 dB); measurement noise is the plant's 0.004.
-    scenario : fdikit.plants.abs.Scenario, optional
-        Manoeuvre (default 28 m/s, 12.5 s).
-
-    Returns
-    -------
-    X : ndarray (n, 2·1250)
-        Concatenated measurements (rad/s).
-    labels : ndarray (n,) of str
-    magnitudes : ndarray (n,)
-
-    Examples
-    --------
-    >>> from fdikit.isolate.svm import abs_patterns
-    >>> X, lab, mag = abs_patterns(per_size=1, sizes=(0.05,))
-    >>> X.shape, lab.tolist(), mag.tolist()
-    ((2, 2500), ['K_f', 'I_w'], [0.05, 0.05])
-    """
-    from dataclasses import replace
-
-    from ..plants import abs as A
-
-    faults = dict(faults or {"K_f": "F3", "I_w": "F4"})
-    base = scenario if scenario is not None else A.Scenario()
-    X, lab, mag = [], [], []
-    for a, (label, fc) in enumerate(faults.items()):
-        for b, m in enumerate(sizes):
-            sc = replace(base, fault=fc, magnitude=float(m), snr_db=snr_db)
-            s = int(np.random.SeedSequence(seed, spawn_key=(a, b)).generate_state(1)[0] & 0x7FFFFFFF)
-            res = A.simulate(None, sc, runs=per_size, seed=s)
-            X.append(concat_measurements(res.y.values))
-            lab += [label] * per_size
-            mag += [float(m)] * per_size
-    return np.vstack(X), np.array(lab), np.array(mag)
-
-
-def abs_svm_experiment(per_size: int = 20, train_seed: int = 1, test_seed: int = 2,
-                       snr_db: float | None = 23.0) -> dict[str, Any]:
-    """Section VI: train on ``per_size``·36 patterns, test on as many independent ones.
-
-    Returns
-    -------
-    dict
-        For ``"paper"`` and ``"improved"``: ``error`` (fraction), ``errors`` (count), ``n_test``,
-        ``fit_time``, ``predict_time`` (s), ``n_support``; the improved one also ``best_params``
-        and ``cv_error``, and ``fit_time_final`` (refit at the chosen hyper-parameters).
-
-    Examples
-    --------
-    >>> from fdikit.isolate.svm import abs_svm_experiment
-    >>> r = abs_svm_experiment(per_size=2)
-    >>> r["paper"]["n_test"]
-    72
-    """
-    Xtr, ztr, _ = abs_patterns(per_size, train_seed, snr_db=snr_db)
-    Xte, zte, mte = abs_patterns(per_size, test_seed, snr_db=snr_db)
-    out: dict[str, Any] = {"n_train": len(ztr)}
-    for kind in ("paper", "improved"):
-        iso = SVMIsolator(kind).fit(Xtr, ztr)
-        t0 = time.perf_counter()
-        pred = iso.predict(Xte)
-        tp = time.perf_counter() - t0
-        wrong = pred != zte
-        svc = iso.estimator_[-1] if isinstance(iso.estimator_, Pipeline) else iso.estimator_
-        r = {"error": float(np.mean(wrong)), "errors": int(wrong.sum()), "n_test": len(zte),
-             "fit_time": iso.fit_time_, "predict_time": tp, "n_support": int(svc.n_support_.sum()),
-             "wrong_magnitudes": sorted(mte[wrong].tolist())}
-        if iso.search_ is not None:
-            r["best_params"] = {k: (v if isinstance(v, str) else float(v))
-                                for k, v in iso.search_.best_params_.items()}
-            r["cv_error"] = float(1.0 - iso.search_.best_score_)
-            from sklearn.base import clone
-
-            t0 = time.perf_counter()
-            clone(iso.estimator_).fit(Xtr, ztr)
-            r["fit_time_final"] = time.perf_counter() - t0
-        out[kind] = r
-    return out

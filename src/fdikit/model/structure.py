@@ -412,7 +412,7 @@ def invariant_zeros(A: Any, B: Any = None, C: Any = None, D: Any = None, *,
     ----------
     A : array_like (n, n) or LinearFaultModel
         With a model, ``B`` may name an input group (``"u"`` default, ``"f"`` for the fault
-        directions ``(A, M, C)`` of paper ng-tan-edwards-kuang, ...).
+        directions ``(A, M, C)`` of ng-tan-edwards-kuang, ...).
     B : array_like (n, m)
     C : array_like (p, n)
     D : array_like (p, m), optional
@@ -529,7 +529,7 @@ class RelativeDegree:
         The smallest ``r`` with ``rank T_(r+1) - rank T_r = rank M`` where ``T_k`` is the block
         lower-triangular Toeplitz matrix of ``H_0 .. H_(k-1)``: the input can be recovered from
         the output and its first ``r`` derivatives (the inherent inversion delay). With ``D = 0``,
-        ``r = 1`` is condition A1 of paper ng-tan-edwards-kuang (``rank CM = rank M``) and
+        ``r = 1`` is condition A1 of ng-tan-edwards-kuang (``rank CM = rank M``) and
         ``r = 2`` is condition B1 (``rank [[CAM, CM], [CM, 0]] = rank CM + rank M``).
         ``None``: the system is not left invertible (no r <= n + 1 works).
     rank_M, rank_CM : int
@@ -546,7 +546,7 @@ class RelativeDegree:
 
     @property
     def is_one(self) -> bool:
-        """``rank(C M) == rank(M)`` (paper ng-tan-edwards-kuang, condition A1)."""
+        """``rank(C M) == rank(M)`` (ng-tan-edwards-kuang, condition A1)."""
         return self.rank_CM == self.rank_M
 
 
@@ -589,7 +589,7 @@ def relative_degree(A: Any, B: Any = None, C: Any = None, D: Any = None, *,
 
     Examples
     --------
-    The remark of paper ng-tan-edwards-kuang (double integrator, force input, position output):
+    The remark of ng-tan-edwards-kuang (double integrator, force input, position output):
     ``CM = 0`` but condition B1 holds, relative degree two:
 
     >>> from fdikit.model import relative_degree

@@ -1,9 +1,10 @@
 """The runtime: residual generator and processor interfaces, the Monitor that chains them, and
 checkpoint / restore of streaming state."""
 
-from .artifacts import load_artifact, save_artifact
-from .core import Decision, Event, Monitor, MonitorResult, ResidualGenerator, ResidualProcessor
-from .state import Stateful, load_state, save_state
+from ..base.artifacts import load_artifact, save_artifact
+from ..base.stage import ResidualGenerator, ResidualProcessor
+from ..base.state import Stateful, load_state, save_state
+from .core import Decision, Event, Monitor, MonitorResult
 
 __all__ = [
     "Decision",

@@ -18,7 +18,7 @@ Schema (every key is checked: an unknown key or a wrong type is an error naming 
     [channels.pos1]               # a monitor channel (the name the designs use)
     source = "POS.P1"             # the column / "MESSAGE.SIGNAL" in the log (default: the name)
     scale = 1.0                   # value = scale * source - offset
-    offset = 0.0                  # nominal operating point to subtract (paper 1, Section V)
+    offset = 0.0                  # nominal operating point to subtract (ng-chen-speyer, Section V)
     unit = "m"                    # unit after scaling (documentation, stored in artifacts)
 
     [design]                      # how `fdikit design CONFIG` makes the artifacts
@@ -48,9 +48,9 @@ from typing import Any
 
 import numpy as np
 
+from ..base.artifacts import load_artifact, save_artifact
 from ..errors import DataError
 from ..signals import Signals
-from .artifacts import load_artifact, save_artifact
 from .core import Decision, Monitor
 
 __all__ = ["ChannelMap", "MonitorConfig", "build_monitor", "load_config", "map_channels", "read_log",

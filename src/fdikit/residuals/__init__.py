@@ -1,4 +1,5 @@
-"""Residual generators: observers, parity equations, fault detection filters, sliding mode observers.
+"""Residual generators: observers, parity equations, fault detection filters, sliding mode observers
+(fault reconstruction), and parameter-signature generators.
 
 Every linear design returns plain matrices (its implementation form), an info record, and can be
 checked exactly: :func:`internal_form` composes any design with a model and returns the transfer
@@ -20,23 +21,57 @@ from .fdf import (
     stack_designs,
 )
 from .observer import ObserverDesign, ObserverResidual, design_observer_residual
+from .parity import (
+    CausalDerivative,
+    CausalLowPass,
+    butter_sos,
+    causal_spline_derivative,
+    lowpass,
+    spline_derivative,
+    spline_derivative_weights,
+    spline_lam,
+)
 from .sensitivity import ParameterSensitivity
+from .smo import (
+    SlidingModeReconstructor,
+    SMOConditions,
+    check_conditions,
+    design_reconstructor,
+    hinf_norm,
+    integrate_observers,
+    simulate_plant,
+)
 
 __all__ = [
+    "CausalDerivative",
+    "CausalLowPass",
     "FaultDetectionFilter",
     "FilterDesign",
     "ObserverDesign",
     "ObserverResidual",
     "ParameterSensitivity",
+    "SMOConditions",
+    "SlidingModeReconstructor",
+    "butter_sos",
+    "causal_spline_derivative",
+    "check_conditions",
     "design_filter_set",
     "design_observer_residual",
     "design_optimal_fdf",
+    "design_reconstructor",
     "design_uio",
     "fault_detection_filter",
     "fault_direction_split",
     "fault_directions",
+    "hinf_norm",
+    "integrate_observers",
     "internal_form",
+    "lowpass",
     "reduce_filter",
     "residual_covariance",
+    "simulate_plant",
+    "spline_derivative",
+    "spline_derivative_weights",
+    "spline_lam",
     "stack_designs",
 ]

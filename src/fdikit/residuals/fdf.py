@@ -1,7 +1,7 @@
 """Fault detection filters: exact unknown input observer and optimal stochastic fault detection filter.
 
 A fault detection filter watches one *target* fault and blocks *nuisance* faults (other faults,
-and the linearisation error of a nonlinear plant modelled as a fault; paper 1, Sections II and
+and the linearisation error of a nonlinear plant modelled as a fault; ng-chen-speyer, Sections II and
 IV-A). Two designs are offered, both in discrete time at the sample rate of the monitor:
 
 * :func:`design_uio` - the exact unknown input observer of Chen, Patton & Zhang (1996), for a
@@ -14,7 +14,7 @@ IV-A). Two designs are offered, both in discrete time at the sample rate of the 
   ``H`` annihilating the output directions of the nuisance. As ``gamma -> 0`` the nuisance
   subspace becomes unobservable from ``r`` (the UIO's geometric structure) and its eigenvalues go
   to ``z = 0`` (the discrete image of ``-infinity``); short of the limit these fast, weakly
-  observable modes are removed by model reduction (paper 1, Section IV-C,
+  observable modes are removed by model reduction (ng-chen-speyer, Section IV-C,
   :func:`reduce_filter`).
 
 Fault directions (:func:`fault_directions`): every declared fault ``(b, d)`` of the *discrete*
@@ -66,10 +66,10 @@ import numpy as np
 import scipy.linalg as sla
 from numba import njit
 
+from ..base.stage import ResidualGenerator
 from ..errors import ConditionError, ModelError
 from ..model.linear import GROUPS, LinearFaultModel
 from ..model.structure import default_tol, invariant_zeros, rank, unobservable_modes
-from ..monitor.core import ResidualGenerator
 from ..signals import Signals
 
 __all__ = [
@@ -601,7 +601,7 @@ def design_optimal_fdf(
        falls in proportion to ``gamma``. Discrete time is used because the monitor runs at a fixed sample
        rate; a continuous model is discretised by ZOH first. (See the module's source note:
        the paper's target-fault weighting is not modelled.)
-    4. Model reduction (paper 1, Section IV-C): the fast (``|z| <= fast_modulus``) and the weakly
+    4. Model reduction (ng-chen-speyer, Section IV-C): the fast (``|z| <= fast_modulus``) and the weakly
        observable (relative modal observability from ``r`` below ``weak_observability``)
        filter modes, which approximate the nuisance subspace, are removed by
        :func:`reduce_filter` (``reduce="residualize"``: steady-state correction, exact DC gain;
@@ -703,7 +703,7 @@ def design_optimal_fdf(
         raise ModelError(f"Q2 must be {(k2, k2)}, Qw {(n, n)} and V {(po, po)}; got {Q2m.shape}, "
                          f"{Qwm.shape}, {Vm.shape}")
     Vp = Pd @ Vm @ Pd.T
-    Qtot = Qwm + F2 @ Q2m @ F2.T / gamma  # nuisance weighted by 1/gamma (paper 4, Riccati eq.)
+    Qtot = Qwm + F2 @ Q2m @ F2.T / gamma  # nuisance weighted by 1/gamma (ng-chen-speyer, Riccati eq.)
     Qtot = 0.5 * (Qtot + Qtot.T)
     try:
         P = sla.solve_discrete_are(A.T, C.T, Qtot, Vp)
@@ -783,7 +783,7 @@ def modal_observability(design: FilterDesign) -> tuple[np.ndarray, np.ndarray]:
 
 def reduce_filter(design: FilterDesign, order: int | None = None, *, fast_modulus: float = 0.05,
                   weak_observability: float = 1e-4, method: str = "residualize") -> FilterDesign:
-    """Remove the fast and weakly observable modes of a discrete filter (paper 1, Section IV-C).
+    """Remove the fast and weakly observable modes of a discrete filter (ng-chen-speyer, Section IV-C).
 
     Near the limit ``gamma -> 0`` the optimal filter has fast modes (``|z|`` near 0) and weakly
     observable modes approximating the nuisance's detection space. The modes to drop are
@@ -937,7 +937,7 @@ def design_filter_set(model: LinearFaultModel, targets: Sequence[str], nuisance:
     ----------
     model : LinearFaultModel
     targets : sequence of str
-        Faults of the set (e.g. paper 1, Section IV-B: two faults per set).
+        Faults of the set (e.g. ng-chen-speyer, Section IV-B: two faults per set).
     nuisance : sequence
         Nuisances common to every filter (e.g. the nonlinearity direction).
     method, kwargs

@@ -1,6 +1,6 @@
 """Signal conditioning for parity-equation residuals: low-pass filtering and derivatives.
 
-Parity equations (paper luo-et-al, Section V-A) need time derivatives of sampled, noisy
+Parity equations (luo-et-al, Section V-A) need time derivatives of sampled, noisy
 measurements. The paper low-passes the measurements with a tenth-order Butterworth filter at
 10 Hz and takes derivatives from a cubic smoothing-spline regression. Each operation here comes
 in two variants, and which one is **online-capable** is stated on each function:
@@ -39,8 +39,8 @@ import numpy as np
 from scipy.interpolate import make_smoothing_spline
 from scipy.signal import butter, sosfilt, sosfilt_zi, sosfiltfilt
 
+from ..base.state import Stateful
 from ..errors import DataError
-from ..monitor.state import Stateful
 
 __all__ = [
     "CausalDerivative",
@@ -62,7 +62,7 @@ def _check_finite(x: np.ndarray, what: str) -> None:
 
 
 def butter_sos(order: int = 10, cutoff_hz: float = 10.0, fs_hz: float = 100.0) -> np.ndarray:
-    """Butterworth low-pass in second-order sections (paper luo-et-al, Section V-A: 10th order, 10 Hz).
+    """Butterworth low-pass in second-order sections (luo-et-al, Section V-A: 10th order, 10 Hz).
 
     Parameters
     ----------

@@ -21,8 +21,8 @@ from typing import Any
 
 import numpy as np
 
+from ..base.stage import ResidualGenerator
 from ..errors import DataError
-from ..monitor.core import ResidualGenerator
 from ..signals import Signals
 
 __all__ = ["ParameterSensitivity"]
@@ -49,8 +49,8 @@ class ParameterSensitivity(ResidualGenerator):
 
     Examples
     --------
-    >>> from fdikit.residuals.abs_residuals import observer_sensitivity
-    >>> from fdikit.plants.abs import Scenario, simulate
+    >>> from fdikit.systems.abs.residuals import observer_sensitivity
+    >>> from fdikit.systems.abs.plant import Scenario, simulate
     >>> gen = observer_sensitivity(0.01, ["I_w"])
     >>> gen.output_names
     ['r3', 'r4', 'sig:r3:I_w', 'sig:r4:I_w']
@@ -117,7 +117,7 @@ class ParameterSensitivity(ResidualGenerator):
 
     def to_dict(self) -> dict:
         """The design as plain data: each generator's class path and design, the steps and outputs."""
-        from ..monitor.artifacts import _class_path
+        from ..base.artifacts import _class_path
 
         def one(g):
             where = _class_path(g)
@@ -131,7 +131,7 @@ class ParameterSensitivity(ResidualGenerator):
     @classmethod
     def from_dict(cls, d: Mapping) -> ParameterSensitivity:
         """Rebuild from :meth:`to_dict` (only fdikit classes are imported)."""
-        from ..monitor.artifacts import _resolve
+        from ..base.artifacts import _resolve
 
         def one(e):
             where = str(e["class"])

@@ -1,6 +1,6 @@
-"""Robust actuator fault reconstruction with sliding mode observers (paper 3).
+"""Robust actuator fault reconstruction with sliding mode observers (ng-tan-edwards-kuang).
 
-Paper 3: K. Y. Ng, C. P. Tan, C. Edwards, Y. C. Kuang, "New result in robust actuator fault
+Ng, Tan, Edwards & Kuang: K. Y. Ng, C. P. Tan, C. Edwards, Y. C. Kuang, "New result in robust actuator fault
 reconstruction with application to an aircraft", IEEE CCA 2007 -- and, for the relative-degree-one
 case, C. P. Tan & C. Edwards, IJRNC 13:443-463, 2003.
 
@@ -37,11 +37,11 @@ from typing import Any
 import numpy as np
 from numba import njit
 
+from ..base.stage import ResidualGenerator
 from ..design.smo_lmi import primary_smo_lmi, secondary_smo_lmi
 from ..errors import ConditionError, DataError, ModelError
 from ..model.linear import LinearFaultModel
 from ..model.structure import invariant_zeros, is_detectable, is_observable, rank
-from ..monitor.core import ResidualGenerator
 from ..signals import Signals
 
 __all__ = [
@@ -146,7 +146,7 @@ class SMOConditions:
 
 def check_conditions(A: Any, M: Any, C: Any, Q: Any = None, *, tol: float | None = None,
                      zero_margin: float = 1e-9) -> SMOConditions:
-    """Check the conditions A1, A2 (Tan & Edwards 2003) and B1, B2 (paper 3, Theorem 1).
+    """Check the conditions A1, A2 (Tan & Edwards 2003) and B1, B2 (ng-tan-edwards-kuang, Theorem 1).
 
     Parameters
     ----------
@@ -180,7 +180,7 @@ def check_conditions(A: Any, M: Any, C: Any, Q: Any = None, *, tol: float | None
     n, p, q = A.shape[0], C.shape[0], M.shape[1]
     h = 0 if Q is None else np.asarray(Q, float).reshape(n, -1).shape[1]
     rM, rC, rCM = rank(M, tol), rank(C, tol), rank(C @ M, tol)
-    H = np.block([[C @ A @ M, C @ M], [C @ M, np.zeros((p, q))]])  # paper 3, eq. (49)
+    H = np.block([[C @ A @ M, C @ M], [C @ M, np.zeros((p, q))]])  # ng-tan-edwards-kuang, eq. (49)
     rH = rank(H, tol)
     z = np.asarray(invariant_zeros(A, M, C, np.zeros((p, q))), complex)
     stable = bool(np.all(z.real < -zero_margin)) if z.size else True
@@ -195,7 +195,7 @@ def check_conditions(A: Any, M: Any, C: Any, Q: Any = None, *, tol: float | None
 # ================================================================================ Lemma 1
 @dataclass
 class Lemma1Form:
-    """The coordinates of Lemma 1 (paper 3, eqs. (4)-(5)).
+    """The coordinates of Lemma 1 (ng-tan-edwards-kuang, eqs. (4)-(5)).
 
     ``x_new = T1 x``, ``f_new = T2 f = col(f1, f2)`` with ``f2`` of size ``r``. In the new
     coordinates ``C = [0 Ttil]`` (``Ttil`` orthogonal), ``M = [[0, 0], [M11, 0], [0, 0], [0, M22]]``
@@ -234,7 +234,7 @@ def _complete_svd(X: np.ndarray, tol: float | None):
 
 
 def lemma1_form(A: Any, B: Any, M: Any, C: Any, Q: Any, *, tol: float | None = None) -> Lemma1Form:
-    """Lemma 1 of paper 3 by SVD / QR steps (no inverse of an ill-conditioned matrix).
+    """Lemma 1 of ng-tan-edwards-kuang by SVD / QR steps (no inverse of an ill-conditioned matrix).
 
     Steps: (i) SVD of ``C`` gives an orthonormal basis ``Vn`` of its kernel; (ii) SVD of ``C M``
     gives the orthogonal output rotation ``Ttil`` and fault rotation ``T2`` that put the rank-``r``
@@ -338,21 +338,21 @@ class AugmentedSystem:
 
 
 def augment(l1: Lemma1Form, A_Omega: np.ndarray, B_Omega: np.ndarray) -> AugmentedSystem:
-    """Augment the Lemma-1 form with the disturbance filter (3): paper 3, eqs. (7)-(10)."""
+    """Augment the Lemma-1 form with the disturbance filter (3): ng-tan-edwards-kuang, eqs. (7)-(10)."""
     nt = l1.A.shape[0]
     h = l1.Q.shape[1]
-    A = np.block([[A_Omega, np.zeros((h, nt))], [l1.Q, l1.A]])  # paper 3, eq. (7)
+    A = np.block([[A_Omega, np.zeros((h, nt))], [l1.Q, l1.A]])  # ng-tan-edwards-kuang, eq. (7)
     B = np.vstack([np.zeros((h, l1.B.shape[1])), l1.B])
     M = np.vstack([np.zeros((h, l1.M.shape[1])), l1.M])
     Qa = np.vstack([B_Omega, np.zeros((nt, h))])
-    C = np.hstack([np.zeros((l1.C.shape[0], h)), l1.C])  # paper 3, eq. (8)
+    C = np.hstack([np.zeros((l1.C.shape[0], h)), l1.C])  # ng-tan-edwards-kuang, eq. (8)
     return AugmentedSystem(A, B, M, Qa, C, A_Omega, B_Omega, l1)
 
 
 # ================================================================================ Lemma 4
 @dataclass
 class CanonicalForm:
-    """The canonical form of Lemma 4 (paper 3, eqs. (11)-(13)).
+    """The canonical form of Lemma 4 (ng-tan-edwards-kuang, eqs. (11)-(13)).
 
     ``x_can = T5 x_aug``. State blocks ``(n1, n2, n3, n4, n5) = (n-p-(pbar-r), pbar-q, q-r, p-r, r)``.
 
@@ -408,7 +408,7 @@ class CanonicalForm:
 
 
 def lemma4_form(aug: AugmentedSystem, *, tol: float | None = None) -> CanonicalForm:
-    """Lemma 4 of paper 3 (proof in its appendix VI-C), with orthogonal X3, X4, X6.
+    """Lemma 4 of ng-tan-edwards-kuang (proof in its appendix VI-C), with orthogonal X3, X4, X6.
 
     ``R1 = [Q~21 A~31 A~32]`` (the first ``p-r`` rows of ``A3``) is rotated by its SVD,
     ``X4 R1 X3^T = [[0, 0], [0, U]]`` (51); then a QR of ``[M_a12; M_a13]`` gives the orthogonal
@@ -428,7 +428,7 @@ def lemma4_form(aug: AugmentedSystem, *, tol: float | None = None) -> CanonicalF
     r = aug.l1.r
     nm = n - p
     qr = q - r
-    R1 = A[nm:nm + p - r, :nm]  # paper 3, eq. (50)
+    R1 = A[nm:nm + p - r, :nm]  # ng-tan-edwards-kuang, eq. (50)
     Ur, _sr, Vtr, k = _complete_svd(R1, tol) if R1.size else (np.eye(p - r), np.zeros(0), np.eye(nm), 0)
     X4 = np.vstack([Ur[:, k:].T, Ur[:, :k].T])
     X3 = np.vstack([Vtr[k:], Vtr[:k]])
@@ -503,7 +503,7 @@ class FictitiousSystem:
 
 
 def fictitious_system(cf: CanonicalForm, L: np.ndarray, Af: np.ndarray) -> FictitiousSystem:
-    """Form the fictitious system of paper 3, eqs. (25)-(36).
+    """Form the fictitious system of ng-tan-edwards-kuang, eqs. (25)-(36).
 
     Note: eq. (32) prints ``Mcal = [-(M1 + L M2); 0]``; the filter equation (28) carries
     ``A_f M22 f2``, so the second block row is ``[0, A_f M22]`` (then (34) follows).
@@ -527,12 +527,12 @@ def fictitious_system(cf: CanonicalForm, L: np.ndarray, Af: np.ndarray) -> Ficti
     M1, M2 = cf.M[:nm], cf.M[nm:]
     Q1 = cf.Q[:nm]
     A311, A312 = A3[:n4], A3[n4:]
-    Z = np.hstack([np.zeros((k, n4 - k)), np.eye(k)])  # paper 3, eq. (27)
+    Z = np.hstack([np.zeros((k, n4 - k)), np.eye(k)])  # ng-tan-edwards-kuang, eq. (27)
     nb = nm + r
-    Acal = np.block([[A1 + L @ A3, np.zeros((nm, r))], [-Af @ A312, -Af]])  # paper 3, eq. (31)
+    Acal = np.block([[A1 + L @ A3, np.zeros((nm, r))], [-Af @ A312, -Af]])  # ng-tan-edwards-kuang, eq. (31)
     Mcal = np.vstack([-(M1 + L @ M2), np.hstack([np.zeros((r, q - r)), Af @ cf.M22])])  # (32)+(28)
     Ccal = np.block([[-Z @ A311, np.zeros((k, r))], [np.zeros((r, nm)), np.eye(r)]])  # eq. (32)
-    Qcal = np.vstack([-Q1, np.zeros((r, Q1.shape[1]))])  # paper 3, eq. (31)
+    Qcal = np.vstack([-Q1, np.zeros((r, Q1.shape[1]))])  # ng-tan-edwards-kuang, eq. (31)
     Tcal = np.eye(nb)
     Tcal[:nm, nm:] = np.linalg.solve(Af.T, L[:, p - r:].T).T if r else np.zeros((nm, 0))
     Tcali = np.eye(nb)
@@ -645,7 +645,7 @@ def _smo_step_py(h, A, B, C, Gl, Gn, rho, delta, SV, Smu, u, y, x, e, started, n
             ne += e[i] * e[i]
         ne = np.sqrt(ne)
         for i in range(p):
-            nu[i] = -rho * e[i] / (ne + delta)  # paper 3, eq. (24)
+            nu[i] = -rho * e[i] / (ne + delta)  # ng-tan-edwards-kuang, eq. (24)
         _mv(A, x, dx, False)
         _mv(Gn, nu, dx, True)
         for i in range(n):
@@ -726,7 +726,7 @@ def _smo_step_py(h, A, B, C, Gl, Gn, rho, delta, SV, Smu, u, y, x, e, started, n
         ne += e[i] * e[i]
     ne = np.sqrt(ne)
     for i in range(p):
-        nu[i] = -rho * e[i] / (ne + delta)  # paper 3, eq. (24)
+        nu[i] = -rho * e[i] / (ne + delta)  # ng-tan-edwards-kuang, eq. (24)
     if started:
         _mv(Gn, nu, dx, True)
         for i in range(n):
@@ -764,9 +764,9 @@ def _kernel_py(h, cascade, A1, B1, C1, Gl1, Gn1, rho1, del1, S1V, S1mu, Tv, r, Z
                 _smo_step(h, A1, B1, C1, Gl1, Gn1, rho1, del1, S1V, S1mu, u, Y[run, k],
                           x1[run], e1[run], started[run], nu1, dx1, xt1, w1, wt1,
                           implicit)
-                _mv(Tv, nu1, v, False)  # paper 3, eq. (23)
+                _mv(Tv, nu1, v, False)  # ng-tan-edwards-kuang, eq. (23)
                 for i in range(Zsel.shape[0]):
-                    ybar[i] = v[Zsel[i]]  # paper 3, eq. (27)
+                    ybar[i] = v[Zsel[i]]  # ng-tan-edwards-kuang, eq. (27)
                 if r > 0:
                     if started[run]:
                         for i in range(r):
@@ -775,7 +775,7 @@ def _kernel_py(h, cascade, A1, B1, C1, Gl1, Gn1, rho1, del1, S1V, S1mu, Tv, r, Z
                                 acc += Af[i, j] * (v[pr + j] - vf[run, j])
                             dvf[i] = acc
                         for i in range(r):
-                            vf[run, i] += h * dvf[i]  # paper 3, eq. (28)
+                            vf[run, i] += h * dvf[i]  # ng-tan-edwards-kuang, eq. (28)
                     for i in range(r):
                         ybar[p2 - r + i] = vf[run, i]
                 _smo_step(h, A2, B2, C2, Gl2, Gn2, rho2, del2, S2V, S2mu, u, ybar,
@@ -908,7 +908,7 @@ class SlidingModeReconstructor(ResidualGenerator):
         Examples
         --------
         >>> import json
-        >>> from fdikit.plants import aircraft
+        >>> from fdikit.systems import aircraft
         >>> from fdikit.residuals.smo import SlidingModeReconstructor, design_reconstructor
         >>> rec = design_reconstructor(aircraft.model(), hinf_check=False)
         >>> back = SlidingModeReconstructor.from_dict(json.loads(json.dumps(rec.to_dict())))
@@ -933,7 +933,7 @@ class SlidingModeReconstructor(ResidualGenerator):
             output_names=list(d["output_names"]), info=dict(d.get("info", {})), scheme=d["scheme"])
 
     def error_transfer(self):
-        """``G(s)`` of paper 3 eq. (40): disturbance ``xi`` -> reconstruction error ``f^ - f``.
+        """``G(s)`` of ng-tan-edwards-kuang eq. (40): disturbance ``xi`` -> reconstruction error ``f^ - f``.
 
         Returns
         -------
@@ -1079,7 +1079,7 @@ def design_reconstructor(
 
     Examples
     --------
-    >>> from fdikit.plants import aircraft
+    >>> from fdikit.systems import aircraft
     >>> from fdikit.residuals.smo import design_reconstructor
     >>> rec = design_reconstructor(aircraft.model())
     >>> rec.info["case"], rec.info["pbar"], rec.info["rank_CM"]

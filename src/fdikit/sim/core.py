@@ -122,7 +122,7 @@ class SimResult:
 
 
 def sample_and_hold(signals: Signals, t: Any) -> Signals:
-    """Zero-order hold of sampled signals onto another time grid (paper luo-et-al, eq. (31)).
+    """Zero-order hold of sampled signals onto another time grid (luo-et-al, eq. (31)).
 
     ``y_h(t) = y(t_k)`` for ``t_k <= t < t_(k+1)``.
 
@@ -318,7 +318,7 @@ def _snr_std(ms: np.ndarray, snr: Any, k: int, what: str, names: Sequence[str]) 
         s = np.full(k, s[0])
     if s.shape != (k,):
         raise DataError(f"{what} has {s.size} values; expected 1 or {k} (channels {list(names)})")
-    var = ms * 10.0 ** (-s / 10.0)  # paper luo-et-al: variance = 0.5 % of the mean square at 23 dB
+    var = ms * 10.0 ** (-s / 10.0)  # luo-et-al: variance = 0.5 % of the mean square at 23 dB
     return np.sqrt(var)
 
 

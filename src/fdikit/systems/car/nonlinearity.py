@@ -1,4 +1,4 @@
-"""The nonlinearity direction of paper 1, Section IV-A.
+"""The nonlinearity direction of ng-chen-speyer, Section IV-A.
 
 The fault detection filters are designed on a linear model linearised at one operating point;
 the error of that linear model along real manoeuvres is modelled as a slowly varying one- or
@@ -73,7 +73,7 @@ def nonlinearity_directions(lin: CarLinearization, block: str = "longitudinal", 
     k : int
         Number of directions (the paper uses one or two).
     kinds : sequence of str
-        Nominal driving scenarios (:func:`~fdikit.plants.passenger_car.driving.driving_scenario`)
+        Nominal driving scenarios (:func:`~fdikit.systems.car.driving.driving_scenario`)
         simulated at ``lin.speed`` when ``results`` is not given.
     duration, dt : float
         Their length and integration step (s).

@@ -1,13 +1,13 @@
 """The lateral health monitor designed for the real Toyota RAV4 (issue 8, item 7; issue 9).
 
-The model is the one fitted to the real minute (:func:`~fdikit.plants.passenger_car.rav4.fit_rav4`:
+The model is the one fitted to the real minute (:func:`~fdikit.systems.car.rav4.fit_rav4`:
 single track with steering lag, tyre relaxation and roll), fitted on the CALIBRATION half of the
 minute only, linearised at several speeds over the minute's range, and given the four
-measurements of the lateral block of paper 1: lateral acceleration, yaw rate, and the front and
+measurements of the lateral block of ng-chen-speyer: lateral acceleration, yaw rate, and the front and
 rear wheel-speed differences (left minus right, m/s; on CAN, WHEEL_SPEEDS.WHEEL_SPEED_FL/FR/RL/RR).
 The wheel-speed differences are modelled as ``k_f r`` and ``k_r r`` plus a term proportional to
 the speed (unequal rolling radii), fitted by least squares on the calibration half. The filter
-sets 4-6 of paper 1 (Section IV-B) are designed on this model as for the simulated car, with the
+sets 4-6 of ng-chen-speyer (Section IV-B) are designed on this model as for the simulated car, with the
 measurement noise of each channel estimated from the data.
 
 Real data, honest split: the minute is cut in two halves. The model fit, the preprocessing
@@ -51,7 +51,7 @@ Three design changes, none a threshold (announcement level 0.95, hold 10 samples
    spans a narrower range or a smaller spread than H0 (a fault adds to the road's variation).
    The first ``settle`` = 0.04 s after an injected onset are left out of the fault samples
    (there the band-limited features have not moved yet and would be mislabelled).
-3. **The model is fitted on the calibration half only** (:func:`~fdikit.plants.passenger_car.rav4.
+3. **The model is fitted on the calibration half only** (:func:`~fdikit.systems.car.rav4.
    fit_rav4` ``fit_until``; before, the fit used the whole minute): the held-out half is held out.
 
 Measured (50 Hz, tests/test_rav4_monitor.py): no announcement on the real minute (before: 3);
@@ -91,31 +91,29 @@ from typing import Any
 import numpy as np
 from numba import njit
 
+from ...base import ResidualGenerator
 from ...detect import Hold
+from ...detect.features import FeatureNorms
 from ...detect.mhsspt import (
     MHSSPTCalibration,
     UniformMeanGaussian,
+    WarmupMHSSPT,
     calibrate_densities,
+    floor_std,
     mhsspt_update,
     umg_component_logpdf,
 )
 from ...errors import DataError
 from ...model.linear import GROUPS, LinearFaultModel
-from ...monitor.core import Decision, Monitor, ResidualGenerator
+from ...monitor import Decision, Monitor
 from ...residuals import FaultDetectionFilter, FilterDesign, fault_detection_filter, stack_designs
+from ...residuals.transforms import band_limited, delayed_feedthrough
 from ...signals import Signals
-from .monitor import (
-    FILTER_SETS,
-    LATERAL_SETS,
-    FeatureNorms,
-    WarmupMHSSPT,
-    delayed_feedthrough,
-    floor_std,
-)
+from .monitor import FILTER_SETS, LATERAL_SETS
 from .rav4 import RAV4, default_data_path
 
 __all__ = ["CHANNELS", "RAV4_FAULTS", "RAW_CHANNELS", "RAW_SOURCES", "Rav4FeatureNorms", "Rav4LateralFilter",
-           "Rav4MHSSPT", "Rav4Monitor", "Rav4Preprocessing", "ScheduledFilter", "band_limited", "design",
+           "Rav4MHSSPT", "Rav4Monitor", "Rav4Preprocessing", "ScheduledFilter", "design",
            "inject", "load_rav4_raw", "parse_inject", "rav4_monitor", "run_rav4_log"]
 
 #: Monitored faults of the RAV4 lateral monitor -> (monitor channel the fault is injected on, magnitudes).
@@ -313,50 +311,6 @@ def _preprocessing(raw: Signals, half_s: float, rate: float) -> tuple[Rav4Prepro
 
 
 # ---------------------------------------------------------------------------------- filters
-def band_limited(design: FilterDesign, band_hz: float, order: int = 2) -> FilterDesign:
-    """The filter followed by a Butterworth low-pass of ``order`` at ``band_hz`` on every residual.
-
-    The low-pass (discretised by the bilinear transform at the filter's ``dt``) is connected in
-    series: state ``[xi; w]``, ``w[k+1] = Al w + Bl r[k]``, ``r'[k] = Cl w + Dl r[k]`` with
-    ``r = C xi + Du u + Dy y``. Its DC gain is 1, so a bias fault's residual is unchanged in
-    steady state, and the residual's transmission from any nuisance input is the filter's times
-    the low-pass's (exactly zero stays exactly zero). ``band_hz <= 0`` returns the design.
-
-    Examples
-    --------
-    >>> d = FilterDesign(np.zeros((0, 0)), np.zeros((0, 0)), np.zeros((0, 1)), np.zeros((1, 0)),
-    ...                  np.zeros((1, 0)), np.ones((1, 1)), 0.02, [], ["y"], ["r"])
-    >>> f = FaultDetectionFilter(band_limited(d, 1.0))
-    >>> f.reset(1)
-    >>> r = [float(f.step(np.zeros(0), [1.0])[0, 0]) for _ in range(500)]
-    >>> round(r[-1], 9)                                   # unit DC gain
-    1.0
-    """
-    from scipy.signal import butter, tf2ss  # design time only: keeps the runtime import light
-
-    if band_hz <= 0:
-        return design
-    dt, q = design.dt, len(design.residual_names)
-    if not band_hz < 0.5 / dt:
-        raise DataError(f"band_hz = {band_hz} Hz must be below the Nyquist frequency {0.5 / dt} Hz")
-    b, a = butter(order, band_hz, fs=1.0 / dt)
-    al, bl, cl, dl = tf2ss(b, a)
-    n1 = al.shape[0]
-    Al, Bl, Cl = np.kron(np.eye(q), al), np.kron(np.eye(q), bl), np.kron(np.eye(q), cl)
-    Dl = float(dl[0, 0]) * np.eye(q)
-    nf = design.order
-    A = np.zeros((nf + q * n1, nf + q * n1))
-    A[:nf, :nf] = design.A
-    A[nf:, :nf] = Bl @ design.C
-    A[nf:, nf:] = Al
-    Bu = np.vstack([design.Bu, Bl @ design.Du])
-    By = np.vstack([design.By, Bl @ design.Dy])
-    C = np.hstack([Dl @ design.C, Cl])
-    info = {**design.info, "band_hz": float(band_hz), "band_order": int(order)}
-    return FilterDesign(A, Bu, By, C, Dl @ design.Du, Dl @ design.Dy, dt, list(design.u_names),
-                        list(design.y_names), list(design.residual_names), info)
-
-
 class ScheduledFilter(ResidualGenerator):
     """A bank of filters designed at several speeds, run in parallel; the residual is the linear
     interpolation, in the measured speed, between the two filters designed at the nearest speeds
@@ -505,7 +459,7 @@ class Rav4LateralFilter(ScheduledFilter):
 
 # ---------------------------------------------------------------------------------- processors
 class Rav4FeatureNorms(FeatureNorms):
-    """:class:`~fdikit.plants.passenger_car.monitor.FeatureNorms` as a saveable, checkpointable
+    """:class:`~fdikit.detect.FeatureNorms` as a saveable, checkpointable
     artifact (``to_dict`` / ``from_dict``; state ``_x``).
 
     Examples
@@ -554,7 +508,7 @@ def _serial_step(x, low, high, std, point, logw, logF, log1mp, logp_pi, logq, lo
 
 
 class Rav4MHSSPT(WarmupMHSSPT):
-    """:class:`~fdikit.plants.passenger_car.monitor.WarmupMHSSPT` as a saveable artifact (the
+    """:class:`~fdikit.detect.WarmupMHSSPT` as a saveable artifact (the
     warm-up length is part of its ``to_dict``).
 
     Examples
@@ -695,7 +649,7 @@ def _local_means(x: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
 
 def real_densities(nominal: np.ndarray, faults: dict[str, dict[float, np.ndarray]], dt: float, window: float,
                    *, inflate: float = 1.0, no_fault: str = "none") -> dict[str, Any]:
-    """Uniform-mean Gaussian densities (paper 1, Section IV-E) calibrated on REAL data.
+    """Uniform-mean Gaussian densities (ng-chen-speyer, Section IV-E) calibrated on REAL data.
 
     On a real road a feature's level is not one number per hypothesis: it moves with the
     surface and the manoeuvre. Every hypothesis (H0 from the no-fault features; each fault's

@@ -1,6 +1,6 @@
 """Passenger car: nonlinear longitudinal + lateral model of a mid-size front-wheel-drive sedan.
 
-The plant of the vehicle health monitor of paper 1 (Ng, Chen & Speyer, Section III). The Buick
+The plant of the vehicle health monitor of ng-chen-speyer (Ng, Chen & Speyer, Section III). The Buick
 LeSabre model used there is not published, so this is a model of a car of that class built
 from textbook sub-models, with every parameter and its source documented in
 :data:`DEFAULT_PARAMS`:

@@ -1,6 +1,6 @@
-"""The complete ABS diagnoser (paper luo-et-al, Sections VI-VIII, Figs. 4-5 and 14).
+"""The complete ABS diagnoser (luo-et-al, Sections VI-VIII, Figs. 4-5 and 14).
 
-Chain: residuals r1, r3, r4 -> five GLRT tests with designed thresholds (:mod:`fdikit.evaluate.campaign`)
+Chain: residuals r1, r3, r4 -> five GLRT tests with designed thresholds (:mod:`fdikit.systems.abs.campaign`)
 -> the optimal diagnostic tree of the learned D-matrix extended with the SVM tests S_Kf / S_Iw
 -> the SVM, run only when the tree requests S_Kf or S_Iw -> severity estimate of the isolated
 parameter by subset output-error estimation (:func:`fdikit.estimate.output_error`).
@@ -35,7 +35,7 @@ paper's own listing (tested; AO* orders G_P1 before G_O_T1, an equal-cost altern
 
 Same as the paper: Go-path = {G_O1} alone; S_Iw redundant; S_Kf separates I_w from K_f after
 G_O1 fails. Redundant here as well: G_O2 and G_O_T2 (expected cost 1.12 vs 1.21). Why: the
-learned matrix is not Table IV (see :mod:`fdikit.evaluate.campaign`). (i) G_P1 fires for both
+learned matrix is not Table IV (see :mod:`fdikit.systems.abs.campaign`). (i) G_P1 fires for both
 sensor classes and both R_w classes, so F1.1/F1.2 and F2.1/F2.2 are ambiguity groups of the
 tests — the paper needs G_O_T2 and G_O2 to split them, we cannot, and the diagnoser splits them
 by the severity estimate instead (estimated k_ws or R_w change against Table II's class ranges:
@@ -43,7 +43,7 @@ F1.1 2-5 %, F1.2 >= 5 %; F2.1 2-20 %, F2.2 >= 20 %). (ii) The sensor fault shows
 sample and the R_w fault only after braking, so the gated G_O_T1 tells R_w from sensor faults
 (one test where the paper uses G_O_T1, G_O_T2, G_O2). (iii) tau_m faults of +15..+50 % trigger no
 GLRT test in this plant: F5 shares the "system OK" leaf. Measured with the same runs (observer with
-the held output injection of eq. (32), :class:`fdikit.residuals.abs_residuals.ABSObserver`): complete
+the held output injection of eq. (32), :class:`fdikit.systems.abs.residuals.ABSObserver`): complete
 tree sensitivity 74.6 % up to the leaf groups (22.4 % exact leaf), specificity 100 % (400 nominal
 runs); full diagnoser (with the estimate splitting the groups) 74.3 % exact on 10 runs per faulty
 class; SVM error 0.14 % (1 of 720 fresh patterns, improved pipeline); the unreliable-test tree on
@@ -56,7 +56,7 @@ Subset estimation (oracle isolation, 20 runs per class, mean relative error): k_
 23 dB process noise, see :mod:`fdikit.estimate.output_error`); Table VI's subset column: K_f 1.05,
 I_w 0.52, tau_m 2.0, R_w 0.004 %.
 
-With the extended test set (:func:`fdikit.evaluate.campaign.extended_tests`; ``fdikit abs campaign
+With the extended test set (:func:`fdikit.systems.abs.campaign.extended_tests`; ``fdikit abs campaign
 --tests extended --complete``), Table V setting (minimum sizes, W = 40, 23 dB, pfa 1e-4 per test,
 10000 design runs, 1000 runs per class for the D-matrix): the learned tree's Go-path becomes
 G_D_Iw (it fires for every class but F5), the tree reaches 81.3 % up to its leaf groups
@@ -83,8 +83,8 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import DataError
-from ..signals import Signals
+from ...errors import DataError
+from ...signals import Signals
 from .campaign import TestBank, abs_residuals, design_tests, paper_tests, residual_generators
 
 __all__ = [
@@ -130,7 +130,7 @@ def svm_rates(iso, per_size: int = 10, seed: int = 2, snr_db: float | None = 23.
         ``rate[test][class]``: fraction of the class's patterns for which the test fires (Pd on its
         own class, Pf on the other); ``error`` (misclassified fraction), ``n`` patterns.
     """
-    from ..isolate.svm import abs_patterns
+    from .svm import abs_patterns
 
     X, lab, _ = abs_patterns(per_size, seed, snr_db=snr_db)
     pred = iso.predict(X)
@@ -181,7 +181,7 @@ def learn_dmatrix(fired: Mapping[str, np.ndarray], labels: Mapping[str, np.ndarr
     DMatrix
         Columns ``tests`` + S_Kf, S_Iw; pd learned per (class, test), pf from the nominal runs.
     """
-    from ..isolate import DMatrix
+    from ...isolate import DMatrix
 
     out = {c: np.hstack([np.asarray(fired[c], bool), svm_outcomes(fired[c], labels[c])]) for c in fired}
     return DMatrix.from_outcomes(out, [*tests, *SVM_TESTS], nominal="F0", level=level)
@@ -209,7 +209,7 @@ def extend_with_svm(dm, rates: Mapping[str, Mapping[str, float]] | None = None):
     >>> extend_with_svm(dm).d.astype(int).tolist()
     [[0, 0, 0], [1, 1, 0], [1, 0, 1]]
     """
-    from ..isolate import DMatrix
+    from ...isolate import DMatrix
 
     nf = len(dm.faults)
     d = np.zeros((nf, 2), bool)
@@ -239,14 +239,14 @@ def abs_tree(dm, prior: Mapping[str, float] | None = None, cost=None, *, tests_m
 
     Examples
     --------
-    >>> from fdikit.evaluate import PAPER_TABLE_IV
+    >>> from fdikit.systems.abs.campaign import PAPER_TABLE_IV
     >>> from fdikit.isolate import DMatrix
     >>> dm = extend_with_svm(DMatrix(list(PAPER_TABLE_IV), ["G_P1", "G_O1", "G_O2", "G_O_T1", "G_O_T2"],
     ...                              list(PAPER_TABLE_IV.values())))
     >>> abs_tree(dm).go_path
     ['G_O1']
     """
-    from ..isolate import DMatrix, ao_star
+    from ...isolate import DMatrix, ao_star
 
     prior = dict(PAPER_PRIOR if prior is None else prior)
     missing = [f for f in dm.faults if f not in prior]
@@ -264,7 +264,7 @@ def abs_tree(dm, prior: Mapping[str, float] | None = None, cost=None, *, tests_m
 
 def abs_tree_report(tree) -> dict[str, Any]:
     """Tree text, IF-THEN-ELSE listing, Go-path and redundant tests, next to Fig. 14's."""
-    from ..isolate import to_listing
+    from ...isolate import to_listing
 
     return {"text": tree.to_text(), "listing": to_listing(tree, _LABELS), "go_path": tree.go_path,
             "redundant": tree.redundant_tests, "expected_cost": tree.expected_cost, "depth": tree.depth,
@@ -290,7 +290,7 @@ def _record(record) -> tuple[Signals, Any]:
 
 def _simulate_class(fault, magnitude, runs, seed, snr_db, scenario=None):
     """Measurements+inputs of ``runs`` runs of one class (same seeds/magnitudes as run_campaign)."""
-    from ..plants.abs import FAULT_CLASSES, Scenario, simulate
+    from .plant import FAULT_CLASSES, Scenario, simulate
 
     fc = FAULT_CLASSES[fault]
     base = scenario if scenario is not None else Scenario()
@@ -337,7 +337,7 @@ class ABSDiagnoser:
 
     Examples
     --------
-    >>> from fdikit.plants.abs import Scenario, simulate
+    >>> from fdikit.systems.abs.plant import Scenario, simulate
     >>> dg = ABSDiagnoser.design(design_runs=60, runs=10, svm_per_size=2)
     >>> out = dg.diagnose(simulate(None, Scenario(fault="F2.2", magnitude=-0.25), seed=7))
     >>> out["fault"], abs(out["relative_change"] + 0.25) < 0.02
@@ -377,15 +377,16 @@ class ABSDiagnoser:
         level : float
             Firing fraction above which a test enters a fault's signature (:func:`learn_dmatrix`).
         """
-        from ..isolate.svm import SVMIsolator, abs_patterns
-        from ..plants.abs import FAULT_CLASSES
+        from ...isolate.svm import SVMIsolator
+        from .plant import FAULT_CLASSES
+        from .svm import abs_patterns, abs_pipeline
 
         t0 = time.perf_counter()
         if bank is None:
             bank = design_tests(paper_tests(), design_runs=design_runs, snr_db=snr_db, seed=seed)
         t_design = time.perf_counter() - t0
         X, lab, _ = abs_patterns(svm_per_size, seed + 1, snr_db=snr_db)
-        iso = SVMIsolator(svm).fit(X, lab)
+        iso = SVMIsolator(abs_pipeline(svm)).fit(X, lab)
         rates = svm_rates(iso, svm_per_size, seed + 2, snr_db)
         fired, labels = {}, {}
         gens = residual_generators(bank.specs)
@@ -408,8 +409,8 @@ class ABSDiagnoser:
         -------
         Monitor, dict test -> alarm channel
         """
-        from ..detect import Hold, TimeGated
-        from ..monitor import Decision, Monitor
+        from ...detect import Hold, TimeGated
+        from ...monitor import Decision, Monitor
 
         procs, chan, made = [], {}, {}
         for s in self.bank.specs:
@@ -438,7 +439,8 @@ class ABSDiagnoser:
 
     def estimate_param(self, y: np.ndarray, param: str, scenario=None) -> dict[str, float]:
         """Subset output-error estimate of one parameter from one record's measurements (T, 2)."""
-        from ..estimate import ABSSimulator, output_error
+        from ...estimate import output_error
+        from .estimation import ABSSimulator
 
         sim = ABSSimulator(scenario if scenario is not None else self.scenario)
         nom = sim.params[param]
@@ -468,7 +470,7 @@ class ABSDiagnoser:
             {test: first alarm time in s} of the GLRT tests that fired, ``svm`` (label or None),
             ``param``, ``estimate``, ``relative_change`` (None when no parametric fault), ``seconds``.
         """
-        from ..plants.abs import FAULT_CLASSES
+        from .plant import FAULT_CLASSES
 
         t0 = time.perf_counter()
         sig, sc = _record(record)
@@ -555,9 +557,10 @@ def complete_campaign(runs: int = 200, *, nominal_runs: int | None = None, bank:
     >>> 0.0 <= out["sensitivity"] <= 1.0 and "F3" in out["estimation"]
     True
     """
-    from ..isolate.svm import SVMIsolator, abs_patterns
-    from ..plants.abs import FAULT_CLASSES
+    from ...isolate.svm import SVMIsolator
     from .campaign import min_magnitudes
+    from .plant import FAULT_CLASSES
+    from .svm import abs_patterns, abs_pipeline
 
     t0 = time.perf_counter()
     nominal_runs = 2 * runs if nominal_runs is None else int(nominal_runs)
@@ -566,7 +569,7 @@ def complete_campaign(runs: int = 200, *, nominal_runs: int | None = None, bank:
         bank = design_tests(paper_tests(), design_runs=design_runs, snr_db=snr_db, seed=seed)
     mags = min_magnitudes() if magnitudes == "min" else dict.fromkeys(FAULT_CLASSES)
     X, lab, _ = abs_patterns(svm_per_size, seed + 1, snr_db=snr_db)
-    iso = SVMIsolator(svm).fit(X, lab)
+    iso = SVMIsolator(abs_pipeline(svm)).fit(X, lab)
     rates = svm_rates(iso, svm_per_size, seed + 2, snr_db)
     fired, label, sigs, truth = {}, {}, {}, {}
     gens = residual_generators(bank.specs)
@@ -656,7 +659,7 @@ def demo_summary() -> dict[str, Any]:
         ``tree`` (Go-path, redundant tests, listing), ``svm_error``, ``cases``: injected fault and
         magnitude -> diagnosed fault, tests fired and severity estimate; ``seconds``.
     """
-    from ..plants.abs import Scenario, simulate
+    from .plant import Scenario, simulate
 
     t0 = time.perf_counter()
     if "dg" not in _DEMO_CACHE:

@@ -3,14 +3,14 @@
 :class:`~fdikit.monitor.Monitor` composes the car monitor from separate stages (filters, parity
 equations, features, MHSSPT, hold), each a Python call per sample: clear, but about 0.2-0.3 ms
 per sample. :class:`FusedCarMonitor` runs the same computation for any number of calibrated
-:class:`~fdikit.plants.passenger_car.monitor.CarMonitor` blocks in one numba kernel:
+:class:`~fdikit.systems.car.monitor.CarMonitor` blocks in one numba kernel:
 
 * the filters of all blocks fused into one block-diagonal filter
   (:func:`~fdikit.residuals.stack_designs`, with the delayed control feedthrough), evaluated as
   sums of columns over the rows each column touches (the block-diagonal zeros skipped);
 * the two parity equations;
 * the residual-norm features (first-order smoothing);
-* the MHSSPT of each block in the log domain (paper 1, Section IV-E; the recursion of the notes,
+* the MHSSPT of each block in the log domain (ng-chen-speyer, Section IV-E; the recursion of the notes,
   :func:`~fdikit.detect.mhsspt.mhsspt_update`) with **tabulated** uniform-mean Gaussian log
   densities (:func:`~fdikit.detect.mhsspt.tabulate_umg`): per feature a uniform grid of spacing
   ``min std / 32`` over ``[min low - 12 max std, max high + 12 max std]``, linear interpolation
@@ -26,7 +26,7 @@ probabilities agree up to the table error (tested).
 
 A fused monitor is also a :class:`~fdikit.monitor.ResidualGenerator` (for config-driven
 monitors), a saveable design (``to_dict`` / ``from_dict``: every array it runs on, nothing
-redesigned on loading) and :class:`~fdikit.monitor.state.Stateful` (checkpoint and restore).
+redesigned on loading) and :class:`~fdikit.base.state.Stateful` (checkpoint and restore).
 """
 
 from __future__ import annotations
@@ -38,9 +38,9 @@ from typing import Any
 import numpy as np
 from numba import njit, prange
 
+from ...base.stage import ResidualGenerator
 from ...detect.mhsspt import mhsspt_update, tabulate_umg, umg_table_add
 from ...errors import DataError
-from ...monitor.core import ResidualGenerator
 from ...residuals import FilterDesign, stack_designs
 from ...signals import Signals
 from .monitor import CarMonitor, OffsetFilter, ParityEquations, delayed_feedthrough
@@ -193,7 +193,7 @@ def _fused_chunk(i0, i1, V, xi_all, par_all, feat_all, logF_all, cnt_all, out_al
                     rc = r[f_idx[c]]
                     s += rc * rc
                 feat[j] = feat[j] + f_alpha * (math.sqrt(s) - feat[j])
-            # ---- MHSSPT per block (paper 1, Section IV-E) on tabulated densities
+            # ---- MHSSPT per block (ng-chen-speyer, Section IV-E) on tabulated densities
             for b in range(blk_c0.shape[0]):
                 h0, h1 = blk_h0[b], blk_h1[b]
                 for j in range(h0, h1):
@@ -306,7 +306,7 @@ class FusedCarMonitor(ResidualGenerator):
     A :class:`~fdikit.monitor.ResidualGenerator`, so it runs inside a :class:`~fdikit.monitor.Monitor`
     (e.g. one built from a TOML config, :mod:`fdikit.monitor.config`); a saveable design
     (:meth:`to_dict` / :meth:`from_dict`, :func:`~fdikit.monitor.save_artifact`) and a
-    :class:`~fdikit.monitor.state.Stateful` component (filter states, parity states, features,
+    :class:`~fdikit.base.state.Stateful` component (filter states, parity states, features,
     log posteriors, hold counters and the sample counter are its checkpoint).
 
     Parameters
@@ -319,9 +319,9 @@ class FusedCarMonitor(ResidualGenerator):
         Table spacing as a fraction of the smallest std of each feature (default 1/32).
     deviations : bool
         ``False`` (default): the monitor reads the channels as measured and subtracts the
-        filters' operating point itself (as :class:`~fdikit.plants.passenger_car.monitor.OffsetFilter`
+        filters' operating point itself (as :class:`~fdikit.systems.car.monitor.OffsetFilter`
         does). ``True``: it reads deviations from the operating point :attr:`operating_point`,
-        subtracted before it (paper 1, Section V: "the nominal values of the control commands
+        subtracted before it (ng-chen-speyer, Section V: "the nominal values of the control commands
         and measurements have to be subtracted"; in a config, the channels' ``offset``); the
         parity equations add it back (they compare absolute command and measurement).
 

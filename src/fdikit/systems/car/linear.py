@@ -1,6 +1,6 @@
 """Linear passenger-car models: linearisation about straight driving, decoupling, reduction.
 
-Paper 1, Section III: the nonlinear model is linearised by central differences about straight
+Ng, Chen & Speyer, Section III: the nonlinear model is linearised by central differences about straight
 driving on a flat road at 20 and 24 m/s; the linear longitudinal and lateral dynamics decouple;
 the fast modes are removed by dynamic truncation with a steady-state correction (singular
 perturbation / residualisation) to 10 longitudinal states (throttle, brake -> 5 sensors) and 6
@@ -225,7 +225,7 @@ def block(full: LinearFaultModel, states: Sequence[str], inputs: Sequence[str], 
 
 def decoupling_residue(full: LinearFaultModel) -> dict[str, float]:
     """Largest longitudinal/lateral cross term of A, B, C, D, each relative to the largest entry of
-    that matrix (paper 1, Section III: the blocks decouple exactly in straight driving)."""
+    that matrix (ng-chen-speyer, Section III: the blocks decouple exactly in straight driving)."""
     L, T = full.state_index(LONGITUDINAL_STATES), full.state_index(LATERAL_STATES)
     uL = [full.input_names().index(s) for s in [*LONGITUDINAL_INPUTS, "slope"] if s in full.input_names()]
     uT = [full.input_names().index(s) for s in LATERAL_INPUTS]

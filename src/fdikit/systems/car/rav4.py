@@ -3,7 +3,7 @@
 Data: ``../shared/data/rav4-highway`` (comma2k19, a 2018 RAV4 on a highway; README there). The
 model is the linear lateral block of the passenger car reduced to what the CAN bus observes —
 a single-track ("bicycle") model with linear axle cornering stiffnesses, a first-order
-steering lag, and a second-order body roll that feeds the lateral accelerometer (paper 1's
+steering lag, and a second-order body roll that feeds the lateral accelerometer (ng-chen-speyer's
 lateral states v_y, r, phi, p):
 
     delta_s' = (delta_sw / i_s - delta_s) / tau_s                   steering lag (road wheel, rad)

@@ -1,4 +1,4 @@
-"""Vehicle health monitor of the passenger car (paper 1, Ng, Chen & Speyer, Sections IV and V).
+"""Vehicle health monitor of the passenger car (ng-chen-speyer, Ng, Chen & Speyer, Sections IV and V).
 
 Residual generator (Section IV-B..D):
 
@@ -53,11 +53,13 @@ from typing import Any
 import numpy as np
 from numba import njit
 
-from ...detect import MHSSPT, Hold
-from ...detect.mhsspt import calibrate_densities
+from ...base import ResidualGenerator
+from ...detect import Hold
+from ...detect.features import FeatureNorms
+from ...detect.mhsspt import WarmupMHSSPT, calibrate_densities, extend_ranges, floor_std
 from ...errors import ConditionError, DataError, ModelError
 from ...faults import Bias, Noise
-from ...monitor.core import Decision, Monitor, ResidualGenerator, ResidualProcessor
+from ...monitor import Decision, Monitor
 from ...residuals import (
     FaultDetectionFilter,
     FilterDesign,
@@ -65,6 +67,7 @@ from ...residuals import (
     internal_form,
     stack_designs,
 )
+from ...residuals.transforms import delayed_feedthrough, whiten_design
 from ...signals import Signals
 from .driving import DRIVE_OUTPUTS, simulate_drive
 from .linear import CarLinearization, linearize_car
@@ -79,22 +82,15 @@ __all__ = [
     "SENSOR_NOISE_STD",
     "CarMonitor",
     "CarMonitorDesign",
-    "FeatureNorms",
     "OffsetFilter",
     "ParityEquations",
     "ScheduledCarFilter",
-    "WarmupMHSSPT",
     "build_monitor",
     "calibrate_monitor",
     "car_signals",
-    "delayed_feedthrough",
-    "demo_summary",
     "design_car_monitor",
-    "extend_ranges",
-    "floor_std",
     "isolation_study",
     "pattern_table",
-    "whiten_design",
 ]
 
 #: The six filter sets of Section IV-B (two targets each).
@@ -271,7 +267,7 @@ def _parity_kernel(u, y, a, state, out):  # pragma: no cover - compiled
 
 
 class ParityEquations(ResidualGenerator):
-    """The two parity equations of paper 1, Section IV-D.
+    """The two parity equations of ng-chen-speyer, Section IV-D.
 
     ``parity1[k] = throttle_meas[k] - throttle[k-1]`` (the throttle actuator follows its command
     within a sample; the measurement at ``t_k`` sees the command held over the previous sample,
@@ -324,114 +320,6 @@ class ParityEquations(ResidualGenerator):
         out = np.empty((signals.runs, signals.n_samples, 2))
         _parity_kernel(np.ascontiguousarray(u), np.ascontiguousarray(y), self.a, self._p, out)
         return Signals(signals.t, out, self.output_names, check=False)
-
-
-@njit(cache=True)
-def _norm_kernel(r, idx, starts, alpha, state, out):  # pragma: no cover - compiled
-    """r (runs, T, R); feature j = low-pass of the norm of r[idx[starts[j]:starts[j+1]]]."""
-    nf = starts.shape[0] - 1
-    for i in range(r.shape[0]):
-        for k in range(r.shape[1]):
-            for j in range(nf):
-                s = 0.0
-                for c in range(starts[j], starts[j + 1]):
-                    v = r[i, k, idx[c]]
-                    s += v * v
-                x = state[i, j] + alpha * (np.sqrt(s) - state[i, j])
-                state[i, j] = x
-                out[i, k, j] = x
-
-
-class FeatureNorms(ResidualProcessor):
-    """Residual features of paper 1, Section IV-E: the norm of each filter's residual vector.
-
-    ``x_j[k] = x_j[k-1] + alpha (|r_(j)[k]| - x_j[k-1])`` (a first-order low-pass of the norm with
-    time constant ``tau``, ``alpha = 1 - exp(-dt / tau)``; ``tau = 0`` gives the plain norm).
-
-    Parameters
-    ----------
-    groups : mapping feature name -> list of residual channel names
-    dt, tau : float
-        Sample time and smoothing time constant (s).
-
-    Examples
-    --------
-    >>> fn = FeatureNorms({"n": ["a", "b"]}, dt=0.01, tau=0.0)
-    >>> fn.reset(1)
-    >>> fn.step([3.0, 4.0]).tolist()
-    [[5.0]]
-    """
-
-    def __init__(self, groups: Mapping[str, Sequence[str]], dt: float, tau: float = 0.0):
-        self.groups = {str(k): list(v) for k, v in groups.items()}
-        self.input_names = list(dict.fromkeys(c for v in self.groups.values() for c in v))
-        self.output_names = list(self.groups)
-        self._idx = np.array([self.input_names.index(c) for v in self.groups.values() for c in v], np.int64)
-        self._starts = np.cumsum([0] + [len(v) for v in self.groups.values()]).astype(np.int64)
-        self.dt, self.tau = float(dt), float(tau)
-        self.alpha = 1.0 if tau <= 0 else float(1.0 - np.exp(-dt / tau))
-        self.reset(1)
-
-    def reset(self, runs: int = 1) -> None:
-        self._x = np.zeros((runs, len(self.output_names)))
-        self._first = True
-
-    def _run(self, r):
-        out = np.empty((r.shape[0], r.shape[1], len(self.output_names)))
-        if self._x.shape[0] != r.shape[0]:
-            raise DataError(f"sample has {r.shape[0]} runs; features were reset for {self._x.shape[0]}")
-        _norm_kernel(np.ascontiguousarray(r), self._idx, self._starts, self.alpha, self._x, out)
-        return out
-
-    def _step(self, r):
-        return self._run(r[:, None])[:, 0]
-
-    def run(self, signals: Signals) -> Signals:
-        r = signals.values[:, :, signals.index(self.input_names)]
-        self.reset(signals.runs)
-        return Signals(signals.t, self._run(r), self.output_names, check=False)
-
-
-class WarmupMHSSPT(MHSSPT):
-    """:class:`~fdikit.detect.MHSSPT` that sees the no-fault mean features for the first
-    ``warmup`` samples, while the filters' start-up transient (filter state zero, plant not at the
-    design trim) dies out; afterwards the exact recursion. Batch and streaming alike.
-
-    Examples
-    --------
-    >>> from fdikit.detect import UniformMeanGaussian
-    >>> t = WarmupMHSSPT(["r"], {"none": UniformMeanGaussian([0], [0], [1]),
-    ...                          "bias": UniformMeanGaussian([2], [4], [1])}, p=1e-3, warmup=5)
-    >>> t.reset(1)
-    >>> float(t.step([9.0])[0, 1]) < 0.01          # ignored during the warm-up
-    True
-    """
-
-    _state_attrs = (*MHSSPT._state_attrs, "_warm_from")
-
-    def __init__(self, *args, warmup: int = 0, **kw):
-        super().__init__(*args, **kw)
-        self.warmup = int(warmup)
-        d0 = self.densities[0]
-        self._x0 = np.asarray(getattr(d0, "low", np.zeros(len(self.input_names))), float)
-
-    def reset(self, runs: int = 1) -> None:
-        super().reset(runs)
-        self._warm_from = 0
-
-    def resume(self, n_held: int) -> None:
-        """Data returns after ``n_held`` held samples (:class:`fdikit.monitor.Monitor`,
-        ``on_invalid="hold"``): the filters' states went stale over the gap, so the warm-up
-        starts again from the next sample (as :meth:`FusedCarMonitor.resume`)."""
-        if n_held > 0:
-            self._warm_from = self._k
-
-    def _advance(self, x):
-        n = self.warmup - (self._k - self._warm_from)
-        if n > 0:
-            x = x.copy()
-            x[:, :n] = self._x0
-        return super()._advance(x)
 
 
 # ---------------------------------------------------------------------------------- design
@@ -497,66 +385,6 @@ def _same_filter(a: FilterDesign, b: FilterDesign) -> bool:
         return np.allclose(x, y, rtol=1e-12, atol=1e-12 * max(1.0, float(np.abs(y).max(initial=0.0))))
 
     return all(close(getattr(a, k), getattr(b, k)) for k in mats)
-
-
-def whiten_design(design: FilterDesign, noise_std: Mapping[str, float], *,
-                  rtol: float = 1e-9) -> FilterDesign:
-    """The same filter with its residual scaled to unit measurement-noise covariance.
-
-    The residual of a filter driven by white measurement noise of standard deviation ``noise_std``
-    on each of its measurements ``y`` has the steady-state covariance
-    ``Sigma = C X C' + Dy S^2 Dy'`` with ``X = A X A' + By S^2 By'`` (discrete Lyapunov equation,
-    ``S = diag(noise_std)``). The returned filter outputs ``W r`` with the symmetric
-    pseudo-inverse square root ``W = V diag(w^-1/2) V'`` over the eigenpairs ``(w, V)`` of
-    ``Sigma`` above ``rtol`` times the largest (a UIO residual lives in a subspace of dimension
-    ``p`` minus the nuisance's output directions: the other directions carry neither noise nor
-    faults and are dropped). Every residual component then has the same noise level, so the norm
-    of the residual (:class:`FeatureNorms`) is a chi-distributed statistic under no fault instead
-    of a sum dominated by the noisiest sensor's units: a fault seen by a precise sensor (the yaw
-    rate, 0.002 rad/s) counts as much as one seen by a noisy one. Blocking is unchanged: the
-    nuisance-to-residual transfer is premultiplied by ``W``.
-
-    Parameters
-    ----------
-    design : FilterDesign
-    noise_std : mapping output name -> float
-        Measurement-noise standard deviation of every channel of ``design.y_names`` (units of the
-        channel).
-    rtol : float
-        Relative eigenvalue cut-off of ``Sigma``.
-
-    Returns
-    -------
-    FilterDesign
-        Same states, inputs and residual names; ``info["whitening"]`` is ``W`` (q, q) and
-        ``info["noise_rank"]`` the rank kept.
-
-    Examples
-    --------
-    >>> d = FilterDesign(np.zeros((0, 0)), np.zeros((0, 0)), np.zeros((0, 2)), np.zeros((2, 0)),
-    ...                  np.zeros((2, 0)), np.eye(2), 0.01, [], ["a", "b"], ["ra", "rb"])
-    >>> w = whiten_design(d, {"a": 0.5, "b": 0.01})
-    >>> np.diag(w.Dy).round(6).tolist()
-    [2.0, 100.0]
-    """
-    import scipy.linalg as sla
-
-    missing = [y for y in design.y_names if y not in noise_std]
-    if missing:
-        raise ModelError(f"no noise standard deviation for the measurements {missing}")
-    S2 = np.diag([float(noise_std[y]) ** 2 for y in design.y_names])
-    X = (sla.solve_discrete_lyapunov(design.A, design.By @ S2 @ design.By.T) if design.order
-         else np.zeros((0, 0)))
-    sig = design.C @ X @ design.C.T + design.Dy @ S2 @ design.Dy.T
-    w, V = np.linalg.eigh(0.5 * (sig + sig.T))
-    if not w.size or w.max() <= 0:
-        raise ModelError(f"filter {design.residual_names[:1]} has no residual noise to whiten with")
-    keep = w > rtol * w.max()
-    W = (V[:, keep] / np.sqrt(w[keep])) @ V[:, keep].T
-    info = {**design.info, "whitening": W, "noise_rank": int(keep.sum())}
-    return FilterDesign(design.A.copy(), design.Bu.copy(), design.By.copy(), W @ design.C, W @ design.Du,
-                        W @ design.Dy, design.dt, list(design.u_names), list(design.y_names),
-                        list(design.residual_names), info)
 
 
 @functools.lru_cache(maxsize=8)
@@ -693,37 +521,6 @@ def _design_projecting_sensors(model, target: str, nuisance: Sequence[str], q: f
     d.info["sensor_nuisance"] = sensor
     d.internal = None  # against the scaled model; the caller recomputes it against ``model``
     return d
-
-
-def delayed_feedthrough(design: FilterDesign) -> FilterDesign:
-    """The same filter with its control feedthrough acting on the previous sample's command.
-
-    A sampled plant under a digital controller measures ``y[k] = C x[k] + D u[k-1]`` (the command
-    ``u[k]`` is computed from ``y[k]`` and held over ``[t_k, t_k+1)``; the state update is
-    ``x[k+1] = A x[k] + B u[k]``). The filter's ``Du u[k]`` becomes ``Du u[k-1]`` by carrying the
-    previous command in ``m`` extra states: ``A' = diag(A, 0)``, ``Bu' = [Bu; I]``,
-    ``By' = [By; 0]``, ``C' = [C, Du]``, ``Du' = 0``, ``Dy' = Dy``. Without it the steering
-    feed-forward step at a curve entry gives a one-sample spike of ``Du (u[k] - u[k-1])``.
-
-    Examples
-    --------
-    >>> d = FilterDesign(np.zeros((0, 0)), np.zeros((0, 1)), np.zeros((0, 1)), np.zeros((1, 0)),
-    ...                  np.array([[-2.0]]), np.array([[1.0]]), 0.1, ["u"], ["y"], ["r"])
-    >>> dd = delayed_feedthrough(d)
-    >>> f = FaultDetectionFilter(dd)
-    >>> f.reset(1)
-    >>> [float(f.step([u], [0.0])[0, 0]) for u in (1.0, 3.0, 0.0)]   # -2 u[k-1]
-    [0.0, -2.0, -6.0]
-    """
-    nf, m = design.order, len(design.u_names)
-    A = np.zeros((nf + m, nf + m))
-    A[:nf, :nf] = design.A
-    Bu = np.vstack([design.Bu, np.eye(m)])
-    By = np.vstack([design.By, np.zeros((m, design.By.shape[1]))])
-    C = np.hstack([design.C, design.Du])
-    info = {**design.info, "delayed_feedthrough": True}
-    return FilterDesign(A, Bu, By, C, np.zeros_like(design.Du), design.Dy.copy(), design.dt,
-                        list(design.u_names), list(design.y_names), list(design.residual_names), info)
 
 
 def _filter_generator(des: CarMonitorDesign, sets: Sequence[int]) -> OffsetFilter:
@@ -902,7 +699,7 @@ def calibrate_monitor(block: str = "longitudinal", speed: float = 20.0, *, kind:
                       schedule: tuple[float, ...] | None = None,
                       fast_accelerometer: bool = False, seed: int = 11,
                       transient: float | None = None) -> CarMonitor:
-    """Calibrate the MHSSPT densities of one block by simulating every fault (paper 1, Section IV-E).
+    """Calibrate the MHSSPT densities of one block by simulating every fault (ng-chen-speyer, Section IV-E).
 
     One vectorised simulation of the nonlinear car on ``kind`` at ``speed``: run 0 nominal, then
     one run per (fault, magnitude) of :data:`MAGNITUDES` with the fault from ``onset``; the
@@ -991,97 +788,9 @@ def calibrate_monitor(block: str = "longitudinal", speed: float = 20.0, *, kind:
     return out
 
 
-def extend_ranges(cal, rise: Mapping[str, Mapping[float, np.ndarray]], *,
-                  split: Mapping[str, float] | None = None, path: Any = None):
-    """Widen every fault hypothesis's uniform-mean range to cover its features' rise.
-
-    ``rise[fault][magnitude]`` (W, C) are the means of the features over short windows after the
-    onset of ``fault`` at ``magnitude``; each hypothesis of the pair (small: magnitudes up to the
-    median, large: from the median, as :func:`~fdikit.detect.calibrate_densities`, or ``split``)
-    gets ``low = min(low, min over its magnitudes' windows)`` and ``high`` likewise, per feature.
-    The standard deviations are kept (they describe the noise about the settled mean, not the
-    trend of the rise). Returns a new :class:`~fdikit.detect.mhsspt.MHSSPTCalibration`.
-
-    With ``path`` (C,) (the no-fault mean), each window is first clipped per feature to the hull
-    of ``path`` and the hypothesis's settled range ``[low, high]``: the range then covers the way
-    the features travel from the no-fault mean to their settled values and nothing beyond it, not
-    a one-sample overshoot at the onset (a wheel-speed-sum step passes straight to two residuals
-    for a sample) nor the noise of a short window in a feature the fault does not move. The
-    uniform-mean density is ``1 / width`` across its range, so every unit of width a hypothesis
-    takes to cover a brief spike it pays for at every later sample, and a noise-widened range of a
-    feature the fault leaves alone lets that hypothesis take another fault's settled features.
-
-    Examples
-    --------
-    >>> from fdikit.detect.mhsspt import MHSSPTCalibration
-    >>> from fdikit.detect import UniformMeanGaussian
-    >>> c = MHSSPTCalibration({"none": UniformMeanGaussian([0.0], [0.0], [1.0]),
-    ...                        "f:small": UniformMeanGaussian([2.0], [3.0], [1.0]),
-    ...                        "f:large": UniformMeanGaussian([4.0], [5.0], [1.0])},
-    ...                       {"f": ["f:small", "f:large"]}, {})
-    >>> e = extend_ranges(c, {"f": {1.0: np.array([[0.5], [2.5]]), 2.0: np.array([[3.5]]),
-    ...                             3.0: np.array([[6.0]])}})
-    >>> [(e.densities[h].low.tolist(), e.densities[h].high.tolist()) for h in ("f:small", "f:large")]
-    [([0.5], [3.5]), ([3.5], [6.0])]
-    >>> e = extend_ranges(c, {"f": {1.0: np.array([[-0.5], [2.5]]), 2.0: np.array([[3.5]]),
-    ...                             3.0: np.array([[6.0]])}}, path=np.array([0.0]))
-    >>> [(e.densities[h].low.tolist(), e.densities[h].high.tolist()) for h in ("f:small", "f:large")]
-    [([0.0], [3.0]), ([3.5], [5.0])]
-    """
-    from ...detect import UniformMeanGaussian
-    from ...detect.mhsspt import MHSSPTCalibration
-
-    dens = dict(cal.densities)
-    for fault, by_mag in rise.items():
-        if fault not in cal.groups:
-            raise DataError(f"no hypotheses for fault {fault!r}; faults: {list(cal.groups)}")
-        mags = sorted(by_mag, key=abs)
-        cut = abs((split or {}).get(fault, float(np.median(np.abs(mags)))))
-        small = [m for m in mags if abs(m) <= cut] or mags[:1]
-        large = [m for m in mags if abs(m) >= cut] or mags[-1:]
-        hyps = cal.groups[fault]
-        for h, ms in zip(hyps, (small, large) if len(hyps) == 2 else (mags,)):
-            x = np.concatenate([np.asarray(by_mag[m], float) for m in ms])
-            if not np.all(np.isfinite(x)):
-                raise DataError(f"fault {fault!r}: rise features contain NaN or inf")
-            d = dens[h]
-            if path is not None:
-                x = np.clip(x, np.minimum(d.low, path), np.maximum(d.high, path))
-            dens[h] = UniformMeanGaussian(np.minimum(d.low, x.min(0)), np.maximum(d.high, x.max(0)), d.std)
-    return MHSSPTCalibration(dens, dict(cal.groups), dict(cal.ranges))
-
-
-def floor_std(cal, frac: float, *, h0_floor: bool = False):
-    """Floor every density's per-feature std at ``frac`` times its own upper mean ``high`` (a
-    relative model error: a few per cent of a residual's level) and, with ``h0_floor``, at the
-    no-fault (first) hypothesis's std (a fault adds to the noise, it does not remove it), as a new
-    :class:`~fdikit.detect.mhsspt.MHSSPTCalibration`.
-
-    Examples
-    --------
-    >>> from fdikit.detect.mhsspt import MHSSPTCalibration
-    >>> from fdikit.detect import UniformMeanGaussian
-    >>> c = MHSSPTCalibration({"none": UniformMeanGaussian([0.1], [0.1], [0.001]),
-    ...                        "f": UniformMeanGaussian([1.0], [2.0], [0.01])}, {}, {})
-    >>> [floor_std(c, 0.05).densities[h].std.round(6).tolist() for h in ("none", "f")]
-    [[0.005], [0.1]]
-    >>> floor_std(c, 0.0, h0_floor=True).densities["f"].std.tolist()
-    [0.01]
-    """
-    from ...detect import UniformMeanGaussian
-    from ...detect.mhsspt import MHSSPTCalibration
-
-    h0 = next(iter(cal.densities.values())).std if h0_floor else 0.0
-    # a fault does not remove the noise: no hypothesis narrower than the no-fault one (h0_floor)
-    dens = {h: UniformMeanGaussian(d.low, d.high, np.maximum(np.maximum(d.std, frac * np.abs(d.high)), h0))
-            for h, d in cal.densities.items()}
-    return MHSSPTCalibration(dens, dict(cal.groups), dict(cal.ranges))
-
-
-# ---------------------------------------------------------------------------------- pattern table
 def pattern_table(speed: float = 20.0, *, kind: str = "straight", duration: float = 6.0, onset: float = 2.0,
                   threshold: float = 3.0, seed: int = 3) -> dict[str, Any]:
-    """Residual pattern table (paper 1, Fig. 2) computed on the nonlinear car.
+    """Residual pattern table (ng-chen-speyer, Fig. 2) computed on the nonlinear car.
 
     Every fault of :data:`LONGITUDINAL_FAULTS` and :data:`LATERAL_FAULTS` is simulated at the middle
     of its calibration magnitudes (throttle actuator and sensor both); a residual "responds"
@@ -1145,18 +854,6 @@ def pattern_table(speed: float = 20.0, *, kind: str = "straight", duration: floa
             "max_cosine": float(cos[i, j]), "closest_pair": [hyp[i], hyp[j]],
             "throttle_actuator_equals_sensor": rows["throttle_actuator"] == rows["throttle"],
             "text": "\n".join(lines)}
-
-
-def demo_summary() -> dict:
-    """Short showcase for ``fdikit demo``: the brake-actuator scenario (paper Fig. 5), shortened."""
-    from .scenarios import run_scenario
-
-    t0 = time.perf_counter()
-    out = run_scenario("brake_actuator_short")
-    s = out["summary"]
-    return {"scenario": s["description"], "detection_delay_s": s["detection_delay_s"],
-            "isolated": s["isolated"], "false_announcements": s["false_announcements"],
-            "seconds": round(time.perf_counter() - t0, 2)}
 
 
 def isolation_study(block: str = "longitudinal", speed: float = 20.0, *, kind: str = "curve",

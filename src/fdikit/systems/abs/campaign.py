@@ -1,4 +1,4 @@
-"""Monte Carlo evaluation of the ABS test design (paper luo-et-al, Sections V-C and VII).
+"""Monte Carlo evaluation of the ABS test design (luo-et-al, Sections V-C and VII).
 
 The five GLRT-based tests of the paper, each a chain residual -> moving-window GLRT (eq. (24))
 -> hold rule over ``Z`` samples (eq. (34)) [-> time gate (eq. (35))]:
@@ -41,7 +41,7 @@ of the D-matrix (:func:`fdikit.isolate.ao_star` on the learned binary matrix), i
 Two test sets (:func:`test_set`): ``"paper"``, the five tests above, and ``"extended"``
 (:func:`extended_tests`), those plus three directional GLRTs of r3 and r4 along their parameter
 signatures (:class:`fdikit.detect.DirectionalGLRT` on the residuals and signatures of
-:func:`fdikit.residuals.abs_residuals.observer_sensitivity`): ``G_D_Iw`` (I_w), ``G_D_Kf`` (K_f
+:func:`fdikit.systems.abs.residuals.observer_sensitivity`): ``G_D_Iw`` (I_w), ``G_D_Kf`` (K_f
 with R_w left free) and ``G_D_Rw`` (R_w with K_f left free).
 
 Measured at the paper's full size (5000 runs per fault class, 10000 nominal, 10000 nominal design
@@ -107,9 +107,12 @@ from typing import Any
 
 import numpy as np
 
-from ..detect import GLRT, DirectionalGLRT, Hold, TimeGated, design_threshold
-from ..errors import DataError
-from ..signals import Signals
+from ...detect import design_threshold
+from ...detect.bank import TestBank, TestSpec
+from ...errors import DataError
+from ...evaluate.progress import progress_bar as _progress
+from ...isolate.decide import diagnose_ml, diagnose_tree
+from ...signals import Signals
 
 __all__ = [
     "DIRECTIONAL_TESTS",
@@ -149,71 +152,6 @@ PAPER_TABLE_V = {17.0: (99.92, 99.76), 20.0: (99.96, 99.84), 23.0: (99.98, 99.99
 _RESIDUALS = ("r1", "r3", "r4")
 
 
-@dataclass(frozen=True)
-class TestSpec:
-    """One GLRT test: residual channel, window ``W``, hold ``Z`` and optional gate time ``T`` (s).
-
-    With ``signature`` (a plant parameter, e.g. ``"I_w"``) the test is the directional GLRT
-    (:class:`fdikit.detect.DirectionalGLRT`) of the residual along its signature channel
-    ``"sig:<residual>:<signature>"`` (:func:`fdikit.residuals.abs_residuals.observer_sensitivity`);
-    ``residual`` may then name several channels joined by ``"+"`` (``"r3+r4"``). ``W = None``
-    anchors it at the start of the record (the parametric fault present throughout),
-    ``min_information`` keeps it silent until the information about the amplitude reaches that
-    value (1/eta^2: 2500 means a standard deviation of 2 % for the relative change), and
-    ``nuisance`` names parameters whose signatures it is decoupled from.
-    """
-
-    __test__ = False  # not a pytest class
-    name: str
-    residual: str
-    W: int | None
-    Z: int
-    gate: float | None = None
-    signature: str | None = None
-    min_information: float = 0.0
-    nuisance: tuple[str, ...] = ()
-
-    def __post_init__(self):
-        if self.W is None and self.signature is None:
-            raise DataError(f"test {self.name}: W = None (anchored) is only for directional tests "
-                            "(signature=)")
-        if self.W is not None and (int(self.W) != self.W or self.W < 1):
-            raise DataError(f"test {self.name}: GLRT window W must be an integer >= 1, got {self.W}")
-        if int(self.Z) != self.Z or self.Z < 1:
-            raise DataError(f"test {self.name}: hold Z must be an integer >= 1, got {self.Z}")
-        if self.signature is None and ("+" in self.residual or self.nuisance):
-            raise DataError(f"test {self.name}: several residuals and nuisance signatures are only for "
-                            "directional tests (signature=)")
-        if self.signature is not None and self.signature in self.nuisance:
-            raise DataError(f"test {self.name}: the tested signature {self.signature!r} is also a nuisance")
-        object.__setattr__(self, "nuisance", tuple(str(n) for n in self.nuisance))
-
-    @property
-    def residuals(self) -> list[str]:
-        """The residual channels (``"r3+r4"`` -> ``["r3", "r4"]``)."""
-        return self.residual.split("+")
-
-    @property
-    def signature_channels(self) -> list[str]:
-        """``"sig:<residual>:<signature>"`` per residual channel of a directional test, else []."""
-        return [] if self.signature is None else [f"sig:{r}:{self.signature}" for r in self.residuals]
-
-    @property
-    def nuisance_channels(self) -> list[list[str]]:
-        """Per nuisance parameter, its signature channel for each residual channel."""
-        return [[f"sig:{r}:{q}" for r in self.residuals] for q in self.nuisance]
-
-    @property
-    def parameters(self) -> list[str]:
-        """Parameters whose signatures the test reads (tested first)."""
-        return [] if self.signature is None else [self.signature, *self.nuisance]
-
-    @property
-    def statistic_channel(self) -> str:
-        """The statistic the hold rule reads: ``"<residual>:glrt"`` or ``"<name>:dglrt"``."""
-        return f"{self.residual}:glrt" if self.signature is None else f"{self.name}:dglrt"
-
-
 def paper_tests(W: int | None = None, *, gate: float = 0.5) -> list[TestSpec]:
     """The five tests of the paper with Table III's windows (all windows ``W`` when given).
 
@@ -244,7 +182,7 @@ def extended_tests(W: int | None = None, *, gate: float = 0.5,
     plant parameter ``p``, anchored at the start of the record
     (:class:`fdikit.detect.DirectionalGLRT`), decoupled from the listed nuisance parameters.
     ``G_D_Iw`` is the test this plant needs for the I_w fault F4, which no change-in-mean test
-    sees (its r3 signature changes sign with every slip cycle; see :mod:`fdikit.evaluate.campaign`);
+    sees (its r3 signature changes sign with every slip cycle; see :mod:`fdikit.systems.abs.campaign`);
     ``G_D_Kf`` (K_f with R_w free) and ``G_D_Rw`` (R_w with K_f free) tell the K_f fault F3 from
     the small R_w fault F2.1, which fire the same GLRT tests. Each speaks once its amplitude
     estimate's standard deviation is below ``resolution`` (default 2 %, the smallest F3/F4 size;
@@ -279,8 +217,8 @@ def test_set(name: str, W: int | None = None, *, gate: float = 0.5) -> list[Test
 def residual_generators(specs: Sequence[TestSpec], dt: float = 0.01) -> tuple:
     """``(ParityR1, observer)`` for a test set: the plain :class:`ABSObserver`, or, when a test is
     directional, the observer with the signatures those tests read
-    (:func:`~fdikit.residuals.abs_residuals.observer_sensitivity`)."""
-    from ..residuals.abs_residuals import ABSObserver, ParityR1, observer_sensitivity
+    (:func:`~fdikit.systems.abs.residuals.observer_sensitivity`)."""
+    from .residuals import ABSObserver, ParityR1, observer_sensitivity
 
     sigs = list(dict.fromkeys(p for s in specs for p in s.parameters))
     obs = observer_sensitivity(dt, sigs) if sigs else ABSObserver(dt)
@@ -298,7 +236,7 @@ def min_magnitudes() -> dict[str, float | None]:
     >>> min_magnitudes()["F2.2"]
     -0.2
     """
-    from ..plants.abs import FAULT_CLASSES
+    from .plant import FAULT_CLASSES
 
     out: dict[str, float | None] = {}
     for name, fc in FAULT_CLASSES.items():
@@ -326,7 +264,7 @@ def abs_residuals(sig: Signals, generators: Sequence[Any] | None = None) -> Sign
     Signals
         Channels ``r1`` (rad/s^2), ``r3``, ``r4`` (rad/s).
     """
-    from ..residuals.abs_residuals import ABSObserver, ParityR1
+    from .residuals import ABSObserver, ParityR1
 
     if generators is None:
         generators = (ParityR1(sig.dt), ABSObserver(sig.dt))
@@ -336,105 +274,11 @@ def abs_residuals(sig: Signals, generators: Sequence[Any] | None = None) -> Sign
     return out
 
 
-@dataclass
-class TestBank:
-    """Designed tests: residual calibration (mu0, sigma^2) and thresholds; runs them on records.
-
-    Attributes
-    ----------
-    specs : list of TestSpec
-    mu0, sigma2 : dict residual -> float
-    thresholds : dict test -> float
-    design : dict test -> dict (achieved_pfa on the design runs, runs, Z, pfa)
-    """
-
-    __test__ = False  # not a pytest class
-
-    specs: list[TestSpec]
-    mu0: dict[str, float]
-    sigma2: dict[str, float]
-    thresholds: dict[str, float]
-    design: dict[str, dict] = field(default_factory=dict)
-
-    @property
-    def names(self) -> list[str]:
-        return [s.name for s in self.specs]
-
-    def processor(self, spec: TestSpec):
-        """The statistic's processor: :class:`GLRT`, or :class:`DirectionalGLRT` for a directional test."""
-        if spec.signature is None:
-            return GLRT([spec.residual], self.mu0[spec.residual], self.sigma2[spec.residual], spec.W)
-        m = [self.mu0[r] for r in spec.residuals]
-        v = [self.sigma2[r] for r in spec.residuals]
-        return DirectionalGLRT(spec.residuals, spec.signature_channels, m, v, spec.W, name=spec.name,
-                               min_information=spec.min_information, nuisance=spec.nuisance_channels)
-
-    def statistic(self, res: Signals, spec: TestSpec) -> Signals:
-        """Statistic of ``spec`` on residual signals (the one channel :attr:`TestSpec.statistic_channel`)."""
-        out = self.processor(spec).run(res)
-        return out.select([spec.statistic_channel]) if spec.signature is not None else out
-
-    def alarms(self, res: Signals) -> tuple[np.ndarray, np.ndarray]:
-        """Outcome and first alarm time of every test.
-
-        Returns
-        -------
-        fired : ndarray of bool (runs, n_tests)
-            Alarm anywhere in the record.
-        first : ndarray (runs, n_tests)
-            Time of the first alarm (s from the start of the record), NaN if none.
-        """
-        fired = np.zeros((res.runs, len(self.specs)), bool)
-        first = np.full((res.runs, len(self.specs)), np.nan)
-        cache: dict[tuple, Signals] = {}
-        for j, s in enumerate(self.specs):
-            key = (s.residual, s.W, s.Z, s.signature, s.nuisance, self.thresholds[s.name])
-            if key not in cache:
-                st = self.statistic(res, s)
-                cache[key] = Hold(st.names, self.thresholds[s.name], s.Z, absolute=False).run(st)
-            al = cache[key]
-            if s.gate is not None:
-                al = TimeGated(al.names, 0.5, s.gate).run(al)
-            a = al.values[:, :, 0] > 0.5
-            fired[:, j] = a.any(axis=1)
-            idx = a.argmax(axis=1)
-            first[:, j] = np.where(fired[:, j], res.t[idx] - res.t[0], np.nan)
-        return fired, first
-
-    def to_dict(self) -> dict:
-        return {"tests": [s.__dict__ for s in self.specs], "mu0": self.mu0, "sigma2": self.sigma2,
-                "thresholds": self.thresholds,
-                "design": {k: {kk: vv for kk, vv in v.items() if kk != "critical_values"}
-                           for k, v in self.design.items()}}
-
-
-def _progress(enabled: bool, total: int, what: str):
-    from contextlib import nullcontext
-
-    if not enabled:
-        return nullcontext(), None
-    from rich.console import Console
-    from rich.progress import (
-        BarColumn,
-        MofNCompleteColumn,
-        Progress,
-        TextColumn,
-        TimeElapsedColumn,
-        TimeRemainingColumn,
-    )
-
-    # on stderr, so that a JSON object on stdout stays the only thing there
-    prog = Progress(TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),
-                    TextColumn("runs"), TimeElapsedColumn(), TimeRemainingColumn(), transient=False,
-                    console=Console(stderr=True))
-    return prog, (what, total)
-
-
 def _simulate_residuals(fault: str, magnitude, runs: int, seed: int, snr_db, batch: int, generators,
                         on_batch=None, first_run: int = 0, noise_hold: float | None = None,
                         pedal_ramp: float | None = None):
     """Yield residual Signals batch by batch for one class (magnitude None: drawn per run)."""
-    from ..plants.abs import FAULT_CLASSES, Scenario, simulate
+    from .plant import FAULT_CLASSES, Scenario, simulate
 
     fc = FAULT_CLASSES[fault]
     pedal = {} if pedal_ramp is None else {"pedal": "ramp", "pedal_ramp": pedal_ramp}
@@ -486,7 +330,7 @@ def design_tests(specs: Sequence[TestSpec] | None = None, *, design_runs: int = 
     skip : int
         Samples left out at the start of each run when calibrating mu0/sigma^2.
     noise_hold : float or None
-        Process-noise hold time of the plant (:class:`fdikit.plants.abs.Scenario`; None: 1 ms).
+        Process-noise hold time of the plant (:class:`fdikit.systems.abs.plant.Scenario`; None: 1 ms).
     pedal_ramp : float or None
         None (default): the step pedal force of eq. (4). A duration, s: the opt-in ramp profile
         (``Scenario(pedal="ramp", pedal_ramp=...)``).
@@ -530,99 +374,6 @@ def design_tests(specs: Sequence[TestSpec] | None = None, *, design_runs: int = 
         bank.design[s.name] = {"achieved_pfa": d.achieved_pfa, "runs": d.runs, "Z": d.Z, "pfa": pfa,
                                "max_nominal_critical_value": float(d.critical_values.max())}
     return bank
-
-
-def diagnose_ml(fired: np.ndarray, fail_prob: np.ndarray, classes: Sequence[str], *,
-                nominal: str | None = "F0") -> tuple[np.ndarray, np.ndarray]:
-    """Diagnosis from binary test outcomes: "system OK" when every test passes, else the most likely fault.
-
-    A run in which no test fired is diagnosed ``nominal`` (the Go path of the paper's diagnostic
-    tree, Section VII). Otherwise the diagnosis is the fault class (``nominal`` excluded) of
-    maximum likelihood ``log P(o | i) = sum_j o_j log p_ij + (1 - o_j) log(1 - p_ij)``, with
-    ``p_ij`` the probability that test ``j`` fires under class ``i`` (clipped to [1e-6, 1 - 1e-6])
-    and equal priors. (Without the Go-path rule, an undetectable fault whose learned firing
-    probabilities are a hair below the nominal false-alarm rates would win every all-pass run.)
-
-    Parameters
-    ----------
-    fired : bool array (runs, n_tests)
-    fail_prob : array (n_classes, n_tests)
-    classes : sequence of str
-    nominal : str or None
-        The no-fault class; None: plain maximum likelihood over every class.
-
-    Returns
-    -------
-    best : ndarray of int (runs,)
-        Index of the diagnosed class (first on ties).
-    tie : ndarray of bool (runs, n_classes)
-        Candidate classes whose likelihood equals the best (to 1e-9); only ``nominal`` for
-        all-pass runs.
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> p = np.array([[0.01, 0.01], [0.99, 0.01], [0.99, 0.99]])
-    >>> best, _ = diagnose_ml(np.array([[0, 0], [1, 0], [1, 1], [0, 1]], bool), p, ["F0", "A", "B"])
-    >>> best.tolist()
-    [0, 1, 2, 2]
-    """
-    o = np.asarray(fired, float)
-    p = np.clip(np.asarray(fail_prob, float), 1e-6, 1 - 1e-6)
-    classes = list(classes)
-    if o.ndim != 2 or p.ndim != 2 or o.shape[1] != p.shape[1] or p.shape[0] != len(classes):
-        raise DataError(f"outcomes {o.shape} and reliabilities {p.shape} do not match {len(classes)} classes")
-    ll = o @ np.log(p).T + (1 - o) @ np.log1p(-p).T
-    if nominal is not None:
-        if nominal not in classes:
-            raise DataError(f"nominal class {nominal!r} not among {classes}")
-        i0 = classes.index(nominal)
-        ll[:, i0] = -np.inf
-        ok = ~o.any(axis=1)
-    best = ll.argmax(axis=1)
-    tie = ll >= ll.max(axis=1, keepdims=True) - 1e-9
-    if nominal is not None:
-        best[ok] = i0
-        tie[ok] = False
-        tie[ok, i0] = True
-    return best, tie
-
-
-def diagnose_tree(fired: np.ndarray, tree, tests: Sequence[str]) -> list[tuple[str, ...]]:
-    """Walk each run's test outcomes down a diagnostic tree (:func:`fdikit.isolate.ao_star`).
-
-    Parameters
-    ----------
-    fired : bool array (runs, n_tests)
-        Outcomes in the order of ``tests`` (True = the test fired, "NG").
-    tree : DiagnosticTree
-    tests : sequence of str
-
-    Returns
-    -------
-    list of tuple of str
-        The leaf group reached by each run (only the tests on its path are read).
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> from fdikit.isolate import DMatrix, ao_star
-    >>> tree = ao_star(DMatrix(["F0", "F1", "F2"], ["t1", "t2"], [[0, 0], [1, 0], [1, 1]]))
-    >>> diagnose_tree(np.array([[0, 0], [1, 1], [0, 1]], bool), tree, ["t1", "t2"])
-    [('F0',), ('F2',), ('F0',)]
-    """
-    tests = list(tests)
-    fired = np.asarray(fired, bool)
-    if fired.ndim != 2 or fired.shape[1] != len(tests):
-        raise DataError(f"outcomes of shape {fired.shape} do not match the tests {tests}")
-    cache: dict[bytes, tuple[str, ...]] = {}
-    out = []
-    for row in fired:
-        key = row.tobytes()
-        if key not in cache:
-            cache[key] = tree.diagnose(dict(zip(tests, row.tolist())))
-        out.append(cache[key])
-    return out
 
 
 @dataclass
@@ -711,7 +462,7 @@ def run_campaign(runs: int = 200, *, nominal_runs: int | None = None, design_run
         Already designed tests (skips the design).
     noise_hold : float or None
         Process-noise hold time of the plant, s (None: a new sample every 1 ms step, the default
-        reading of Section III-A; 0.01: one per 10 ms sample). See :mod:`fdikit.plants.abs`.
+        reading of Section III-A; 0.01: one per 10 ms sample). See :mod:`fdikit.systems.abs.plant`.
     pedal_ramp : float or None
         None (default): the step pedal force of eq. (4). A duration T, s: the opt-in experiment
         ``Scenario(pedal="ramp", pedal_ramp=T)`` (K_p reached linearly over T), for the design
@@ -730,8 +481,8 @@ def run_campaign(runs: int = 200, *, nominal_runs: int | None = None, design_run
     >>> sorted(out.pf) == sorted(t.name for t in paper_tests())
     True
     """
-    from ..isolate import DMatrix
-    from ..plants.abs import FAULT_CLASSES
+    from ...isolate import DMatrix
+    from .plant import FAULT_CLASSES
 
     if runs < 1:
         raise DataError(f"runs per class must be >= 1, got {runs}")
@@ -781,7 +532,7 @@ def run_campaign(runs: int = 200, *, nominal_runs: int | None = None, design_run
     correct = correct_exact = n_fault = detected = 0
     specificity = float("nan")
     for c in classes:
-        best, tie = diagnose_ml(fired[c], pfail, classes)
+        best, tie = diagnose_ml(fired[c], pfail, classes, nominal="F0")
         lab = np.array(classes)[best]
         confusion[c] = {str(k): int(v) for k, v in zip(*np.unique(lab, return_counts=True))}
         if c == "F0":
@@ -796,7 +547,7 @@ def run_campaign(runs: int = 200, *, nominal_runs: int | None = None, design_run
         n_fault += lab.size
     # the paper's decision logic: the optimal diagnostic tree of the learned binary D-matrix
     # (AO*, perfect-test model, equal priors and unit test costs); a leaf holding "F0" is "system OK"
-    from ..isolate import ao_star
+    from ...isolate import ao_star
 
     tree = ao_star(DMatrix(dm.faults, dm.tests, dm.d))
     t_ok = t_n = 0
@@ -841,7 +592,7 @@ def gp1_grid(snrs: Sequence[float] = (17.0, 20.0, 23.0), windows: Sequence[int] 
     >>> sorted(g["pd"])
     ['F1.2', 'F2.2']
     """
-    from ..residuals.abs_residuals import ABSObserver, ParityR1
+    from .residuals import ABSObserver, ParityR1
 
     out = {"snr_db": list(snrs), "W": list(windows), "pd": {"F1.2": [], "F2.2": []}, "pf": [],
            "thresholds": []}

@@ -1,12 +1,12 @@
 """Automated driving of the passenger car: a speed controller (throttle and brake), a path
-controller (steering), a test track, and the scenarios of paper 1, Section V.
+controller (steering), a test track, and the scenarios of ng-chen-speyer, Section V.
 
 The car in the paper runs under automatic control (California PATH Buick LeSabre) while a
 driver injects real actuator faults — extra brake pressure, extra steering angle — that the
 controllers then fight (Section V-A). Here:
 
 * :class:`DrivingCar` appends the planar position and heading (X, Y, psi) to
-  :class:`~fdikit.plants.passenger_car.PassengerCar` and adds two navigation outputs, the
+  :class:`~fdikit.systems.car.PassengerCar` and adds two navigation outputs, the
   lateral offset from the path and the heading error (PATH's cars measured the offset with
   magnetic markers in the road); every sensor of the car stays an output, so sensor faults
   (``"sensor:<output>"``) and actuator faults (``"actuator:throttle" | "brake" | "steer"``) are
@@ -220,7 +220,7 @@ class DriveController:
 def driving_scenario(kind: str = "straight", speed: float = 20.0, *, duration: float = 20.0,
                      faults: Sequence[Any] = (), slope: float | None = None, dt: float = 1e-3,
                      sample_time: float = 0.01, noise=None, params: Mapping[str, Any] | None = None):
-    """A scenario of paper 1, Section V-B, for :func:`fdikit.sim.simulate`.
+    """A scenario of ng-chen-speyer, Section V-B, for :func:`fdikit.sim.simulate`.
 
     Parameters
     ----------

@@ -1,10 +1,10 @@
-"""Residual generators of the ABS benchmark (paper luo-et-al, Section V): parity residuals r1, r2
+"""Residual generators of the ABS benchmark (luo-et-al, Section V): parity residuals r1, r2
 and the nonlinear Luenberger observer residuals r3, r4.
 
 All three generators read the plant's 10 ms measurements ``omega_w``, ``omega_v`` (rad/s) and,
 where needed, the known inputs ``P_m`` (MPa, nominal master-cylinder pressure), ``u_in`` and
 ``u_out`` (the ECU's mean valve openings over ``[t_k, t_k + 10 ms)``) of
-:func:`fdikit.plants.abs.simulate`; each has a vectorised batch :meth:`run` and a streaming
+:func:`fdikit.systems.abs.plant.simulate`; each has a vectorised batch :meth:`run` and a streaming
 :meth:`step` that agree (a test proves it).
 
 * :class:`ParityR1` -- eq. (25): ``r1 = dy2/dt + 4 N_v mu(lambda(y)) / (R_w M_v)`` (rad/s^2) on
@@ -42,10 +42,9 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 from numba import njit, prange
 
-from ..errors import ConditionError, DataError
-from ..monitor.core import ResidualGenerator
-from ..signals import Signals, check_finite
-from .parity import (
+from ...base.stage import ResidualGenerator
+from ...errors import ConditionError, DataError
+from ...residuals.parity import (
     CausalDerivative,
     CausalLowPass,
     butter_sos,
@@ -54,6 +53,7 @@ from .parity import (
     spline_derivative,
     spline_lam,
 )
+from ...signals import Signals, check_finite
 
 __all__ = [
     "ABSObserver",
@@ -70,7 +70,7 @@ _U = ["P_m", "u_in", "u_out"]
 
 
 def _params(params: Mapping[str, float] | None) -> dict[str, float]:
-    from ..plants.abs import PARAMS
+    from .plant import PARAMS
 
     p = dict(PARAMS)
     for k, v in (params or {}).items():
@@ -91,7 +91,7 @@ def _dt_of(signals: Signals) -> float:
 
 def _mu_term(y1, y2, p):
     """``4 N_v mu(lambda) / (R_w M_v)`` (rad/s^2) from wheel and vehicle speeds (eqs. (13)-(16))."""
-    from ..plants.abs import mu, slip
+    from .plant import mu, slip
 
     return 4.0 * p["N_v"] * mu(slip(y1, y2)) / (p["R_w"] * p["M_v"])
 
@@ -100,14 +100,14 @@ def _mu_term(y1, y2, p):
 # Parity residual r1, eq. (25)
 # --------------------------------------------------------------------------------------------
 class ParityR1(ResidualGenerator):
-    """Parity residual r1 of paper luo-et-al, eq. (25), in rad/s^2.
+    """Parity residual r1 of luo-et-al, eq. (25), in rad/s^2.
 
     Parameters
     ----------
     dt : float
         Sample interval of the measurements, s (0.01 for the ABS plant).
     params : mapping, optional
-        Nominal plant parameters (defaults: :data:`fdikit.plants.abs.PARAMS`).
+        Nominal plant parameters (defaults: :data:`fdikit.systems.abs.plant.PARAMS`).
     variant : {"causal", "zero_phase"}
         ``"causal"`` (online, streaming capable): causal Butterworth ``sosfilt`` and the
         causal sliding-window spline derivative. ``"zero_phase"`` (offline only): ``sosfiltfilt``
@@ -163,7 +163,7 @@ class ParityR1(ResidualGenerator):
     _state_attrs = ("_lp", "_der")
 
     def to_dict(self) -> dict:
-        """The design as plain data (a design artifact, :mod:`fdikit.monitor.artifacts`).
+        """The design as plain data (a design artifact, :mod:`fdikit.base.artifacts`).
 
         The constructor's arguments, the nominal parameters and the Butterworth sections
         ``sos`` (ceil(order/2), 6), which the loaded design uses as saved.
@@ -200,7 +200,7 @@ class ParityR1(ResidualGenerator):
         return self._r1(d2[:, 0], yf[:, 0], yf[:, 1])[:, None]
 
     def _r1(self, dy2, y1f, y2f):
-        r1 = dy2 + _mu_term(y1f, y2f, self.p)  # paper 2, eq. (25)
+        r1 = dy2 + _mu_term(y1f, y2f, self.p)  # luo-et-al, eq. (25)
         return np.where(self.p["R_w"] * y2f >= self.v_min, r1, 0.0)
 
     def run(self, signals: Signals) -> Signals:
@@ -331,7 +331,7 @@ def _obs_batch(y, u, xh, q, L, tab, out):  # pragma: no cover - compiled
 # Parity residual r2, eq. (26)
 # --------------------------------------------------------------------------------------------
 class ParityR2(ResidualGenerator):
-    """Parity residual r2 of paper luo-et-al, eq. (26), in N·m/s^2 (the paper drops it).
+    """Parity residual r2 of luo-et-al, eq. (26), in N·m/s^2 (the paper drops it).
 
     ``x3 = R_w N_v mu(lambda) - I_w dy1/dt`` from the low-passed measurements; ``x3'``, ``x3''``
     by smoothing-spline derivatives of ``x3`` (so the wheel speed is differentiated three
@@ -361,7 +361,7 @@ class ParityR2(ResidualGenerator):
         self.reset(1)
 
     def _x3(self, y1f, y2f, dy1):
-        from ..plants.abs import mu, slip
+        from .plant import mu, slip
 
         return self.p["R_w"] * self.p["N_v"] * mu(slip(y1f, y2f)) - self.p["I_w"] * dy1
 
@@ -404,7 +404,7 @@ class ParityR2(ResidualGenerator):
     def _combine(self, x3, x3d, x3dd, x5):
         p = self.p
         wn = p["omega_n"]
-        return x3dd - wn**2 * p["K_f"] * x5 + 2 * p["zeta"] * wn * x3d + wn**2 * x3  # paper 2, eq. (26)
+        return x3dd - wn**2 * p["K_f"] * x5 + 2 * p["zeta"] * wn * x3d + wn**2 * x3  # luo-et-al, eq. (26)
 
     def run(self, signals: Signals) -> Signals:
         u, y = self._inputs(signals)
@@ -440,7 +440,7 @@ def r2_magnitude_study(y: Signals, u: Signals, x_true: Signals | None = None, *,
     Parameters
     ----------
     y, u : Signals
-        Measurements and known inputs of nominal runs (from :func:`fdikit.plants.abs.simulate`).
+        Measurements and known inputs of nominal runs (from :func:`fdikit.systems.abs.plant.simulate`).
     x_true : Signals, optional
         True states (10 ms) to evaluate eq. (26) on noise-free states as a reference.
     skip : float
@@ -456,7 +456,7 @@ def r2_magnitude_study(y: Signals, u: Signals, x_true: Signals | None = None, *,
 
     Examples
     --------
-    >>> from fdikit.plants.abs import Scenario, simulate
+    >>> from fdikit.systems.abs.plant import Scenario, simulate
     >>> res = simulate(None, Scenario(t_end=4.0), runs=2, seed=0)
     >>> out = r2_magnitude_study(res.y, res.u)
     >>> out["fault_to_noise_kf10_causal"] < 0.5     # a 10 % K_f fault is buried in r2's noise
@@ -473,7 +473,7 @@ def r2_magnitude_study(y: Signals, u: Signals, x_true: Signals | None = None, *,
         out[f"rms_r2_{variant}"] = float(np.sqrt(np.mean(r2**2)))
         out[f"max_abs_r2_{variant}"] = float(np.max(np.abs(r2)))
     yf = lowpass(sig.values[:, :, sig.index(_Y)], butter_sos(10, 10.0, 1 / dt), axis=1)
-    from ..plants.abs import mu, slip
+    from .plant import mu, slip
 
     x3 = p["R_w"] * p["N_v"] * mu(slip(yf[:, :, 0], yf[:, :, 1]))
     out["rms_torque_term"] = float(np.sqrt(np.mean((p["omega_n"] ** 2 * x3[:, k0:]) ** 2)))
@@ -511,7 +511,7 @@ def linear_part(params: Mapping[str, float] | None = None) -> tuple[np.ndarray, 
     p = _params(params)
     wn, z = p["omega_n"], p["zeta"]
     A = np.zeros((5, 5))
-    A[0, 2] = -1.0 / p["I_w"]  # paper 2, eq. (30)
+    A[0, 2] = -1.0 / p["I_w"]  # luo-et-al, eq. (30)
     A[2, 3] = 1.0
     A[3, 2] = -wn**2
     A[3, 3] = -2.0 * z * wn
@@ -554,7 +554,7 @@ def observer_gain(params: Mapping[str, float] | None = None, *, method: str = "k
     A, C = linear_part(p)
     if method == "kalman":
         if process_var is None:
-            from ..plants.abs import ABSPlant, Scenario, state_mean_square
+            from .plant import ABSPlant, Scenario, state_mean_square
 
             process_var = state_mean_square(ABSPlant(), Scenario())[:5] * 10 ** (-23.0 / 10)
         qv = np.asarray(process_var, float)
@@ -584,7 +584,7 @@ def observer_gain(params: Mapping[str, float] | None = None, *, method: str = "k
 
 
 class ABSObserver(ResidualGenerator):
-    """Nonlinear Luenberger observer of paper luo-et-al, eqs. (29)-(33); residuals r3, r4 (rad/s).
+    """Nonlinear Luenberger observer of luo-et-al, eqs. (29)-(33); residuals r3, r4 (rad/s).
 
     Parameters
     ----------
@@ -620,7 +620,7 @@ class ABSObserver(ResidualGenerator):
 
     Examples
     --------
-    >>> from fdikit.plants.abs import Scenario, simulate
+    >>> from fdikit.systems.abs.plant import Scenario, simulate
     >>> res = simulate(None, Scenario(t_end=2.0), runs=2, seed=0)
     >>> r = ABSObserver(0.01).run(res.y.concat_channels(res.u))
     >>> r.names, r.values.shape
@@ -629,7 +629,7 @@ class ABSObserver(ResidualGenerator):
 
     def __init__(self, dt: float, params: Mapping[str, float] | None = None, *, L=None, substeps: int = 10,
                  injection: str = "held", v_min: float = 3.0):
-        from ..plants.abs import MU_TABLE
+        from .plant import MU_TABLE
 
         if injection not in ("held", "continuous"):
             raise DataError(f"injection must be 'held' or 'continuous', got {injection!r}")
@@ -750,7 +750,7 @@ def observer_sensitivity(dt: float, names: Sequence[str] = ("I_w",), *, rel_step
     >>> observer_sensitivity(0.01, ["I_w", "K_f"], outputs=["r3"]).output_names
     ['r3', 'r4', 'sig:r3:I_w', 'sig:r3:K_f']
     """
-    from .sensitivity import ParameterSensitivity
+    from ...residuals.sensitivity import ParameterSensitivity
 
     p = _params(params)
     names = [str(n) for n in names]

@@ -3,10 +3,10 @@
 ``fdikit design examples/passenger-car/monitor.toml`` calls :func:`design` with the config's
 ``[design.params]`` and saves what it returns as artifacts: the whole calibrated car monitor
 (both blocks: six filter sets, two parity equations, features, both MHSSPTs, warm-up and
-hold-then-announce) as one :class:`~fdikit.plants.passenger_car.monitor_fused.FusedCarMonitor`,
+hold-then-announce) as one :class:`~fdikit.systems.car.monitor_fused.FusedCarMonitor`,
 whose announcement channels ``A:<fault>`` the config's ``[decision]`` reads directly.
 
-The monitor reads deviations from the operating point (paper 1, Section V: "the nominal values
+The monitor reads deviations from the operating point (ng-chen-speyer, Section V: "the nominal values
 of the control commands and measurements have to be subtracted from the vehicle generated
 data"): the config subtracts them with each channel's ``offset``, and
 :func:`operating_point` gives the values for a design speed.

@@ -2,13 +2,13 @@
 
 ``fdikit design examples/abs/monitor.toml`` calls :func:`design`, which calibrates the residuals
 and designs the thresholds of the paper's five GLRT tests from nominal Monte Carlo runs of the ABS
-plant (:func:`fdikit.evaluate.campaign.design_tests`: thresholds for a target false-alarm
+plant (:func:`fdikit.systems.abs.campaign.design_tests`: thresholds for a target false-alarm
 probability, never hand-tuned) and returns every stage as a design artifact:
 
 ==============  ==============================================================================
 artifact        stage
 ==============  ==============================================================================
-``r1``          parity residual r1, eq. (25) (:class:`~fdikit.residuals.abs_residuals.ParityR1`)
+``r1``          parity residual r1, eq. (25) (:class:`~fdikit.systems.abs.residuals.ParityR1`)
 ``observer``    nonlinear observer residuals r3, r4, eqs. (29)-(33) (``ABSObserver``)
 ``glrt_rK``     moving-window GLRT of residual rK, eq. (24), with its calibrated mu0 and sigma^2
 ``hold_rK``     the alarm rule (34): the statistic above the designed threshold Z samples running
@@ -17,16 +17,16 @@ artifact        stage
                 (:class:`~fdikit.detect.DirectionalGLRT`), and ``hold_NAME`` its alarm rule
 ==============  ==============================================================================
 
-With ``tests = "extended"`` (:func:`fdikit.evaluate.campaign.extended_tests`) the ``observer``
+With ``tests = "extended"`` (:func:`fdikit.systems.abs.campaign.extended_tests`) the ``observer``
 artifact is the observer with its parameter signatures
-(:func:`~fdikit.residuals.abs_residuals.observer_sensitivity`, a
+(:func:`~fdikit.systems.abs.residuals.observer_sensitivity`, a
 :class:`~fdikit.residuals.ParameterSensitivity`) and the decision gains ``G_D_Iw:dglrt:alarm``,
 ``G_D_Kf:dglrt:alarm``, ``G_D_Rw:dglrt:alarm`` (``examples/abs/monitor_extended.toml``).
 
 Decision channels (one per test of Table III): ``r1:glrt:alarm`` = G_P1, ``r3:glrt:alarm`` =
 G_O1, ``r4:glrt:alarm`` = G_O2, ``r3:glrt:alarm:gated`` = G_O_T1, ``r4:glrt:alarm:gated`` =
 G_O_T2. The diagnosis of a whole record (diagnostic tree, SVM, parameter estimate) needs the
-complete record and is :class:`fdikit.evaluate.abs_diagnoser.ABSDiagnoser`, not a per-sample
+complete record and is :class:`fdikit.systems.abs.diagnoser.ABSDiagnoser`, not a per-sample
 stage.
 """
 
@@ -34,7 +34,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from ..errors import DataError
+from ...errors import DataError
 
 __all__ = ["PARAMS", "design"]
 
@@ -69,7 +69,7 @@ def design(params: dict[str, Any] | None = None) -> dict[str, Any]:
     >>> sorted(d)[:3]                                    # doctest: +SKIP
     ['gate_G_O_T1', 'gate_G_O_T2', 'glrt_r1']
     """
-    from ..detect import GLRT, Hold, TimeGated
+    from ...detect import GLRT, Hold, TimeGated
     from .campaign import design_tests, residual_generators, test_set
 
     p = dict(PARAMS)

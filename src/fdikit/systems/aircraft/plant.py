@@ -1,13 +1,13 @@
-"""7th-order lateral aircraft model of paper 3, Section IV (Ng, Tan, Edwards & Kuang, CCA 2007).
+"""7th-order lateral aircraft model of ng-tan-edwards-kuang, Section IV (Ng, Tan, Edwards & Kuang, CCA 2007).
 
-The model (taken by paper 3 from Heck, Yallapragada & Fan, Automatica 1995) has states, in the
+The model (taken by ng-tan-edwards-kuang from Heck, Yallapragada & Fan, Automatica 1995) has states, in the
 paper's order, bank angle, yaw rate, roll rate, sideslip angle, washout filter state, rudder
 deflection and aileron deflection; inputs rudder and aileron commands; outputs the first three
 states (``C = [I3 0]``). The fault is on the first (rudder) actuator, ``M = [0 0 0 0 0 20 0]^T``.
 
 Uncertainty
 -----------
-Paper 3 prints the true matrix ``A + dA`` and a factorisation ``dA x = Q~ xi~`` with
+Ng, Tan, Edwards & Kuang prints the true matrix ``A + dA`` and a factorisation ``dA x = Q~ xi~`` with
 ``Q~ = [0; I3; 0]`` and ``xi~ = Xi x``, and the two disagree. Compared with the nominal ``A`` the
 printed ``A + dA`` changes ``A[1,2]`` 1.5 -> 1.7, ``A[2,2]`` -2.1 -> -2.2, ``A[3,5]`` 0.3 -> 0.4,
 ``A[3,6]`` -1.1 -> -1.2 and prints ``A[3,2] = 0`` where the nominal value is -5.2; the printed
@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..model.linear import LinearFaultModel
+from ...model.linear import LinearFaultModel
 
 __all__ = [
     "A_NOMINAL",
@@ -57,7 +57,7 @@ STATES = ["bank_angle", "yaw_rate", "roll_rate", "sideslip", "washout", "rudder"
 INPUTS = ["rudder_cmd", "aileron_cmd"]
 OUTPUTS = ["bank_angle_meas", "yaw_rate_meas", "roll_rate_meas"]
 
-#: Nominal A of paper 3, Section IV (as printed).
+#: Nominal A of ng-tan-edwards-kuang, Section IV (as printed).
 A_NOMINAL = np.array([
     [0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0],
     [0.0, -0.2, 1.5, 0.0, 0.0, -0.7, 0.0],
@@ -68,7 +68,7 @@ A_NOMINAL = np.array([
     [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, -25.0],
 ])
 
-#: True A + dA: paper 3's printed matrix with A[3, 2] read as the nominal -5.2 (printed: 0).
+#: True A + dA: ng-tan-edwards-kuang's printed matrix with A[3, 2] read as the nominal -5.2 (printed: 0).
 A_TRUE = np.array([
     [0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0],
     [0.0, -0.2, 1.7, 0.0, 0.0, -0.7, 0.0],
@@ -81,18 +81,19 @@ A_TRUE = np.array([
 
 DELTA_A = A_TRUE - A_NOMINAL
 
-#: Uncertainty distribution (paper 3: [0_{1x3}; I3; 0_{3x3}]).
+#: Uncertainty distribution (ng-tan-edwards-kuang: [0_{1x3}; I3; 0_{3x3}]).
 Q_TILDE = np.vstack([np.zeros((1, 3)), np.eye(3), np.zeros((3, 3))])
 
 #: xi~ = XI x~ so that DELTA_A = Q_TILDE @ XI exactly (the consistent reading above).
 XI = DELTA_A[1:4].copy()
 
-#: The factor printed in paper 3 (inconsistent with its printed A + dA; see the module docstring).
+#: The factor printed in ng-tan-edwards-kuang (inconsistent with its printed A + dA; see the module
+#: docstring).
 XI_PRINTED = np.array([[0.0, 0.0, 0.0, 0.1, 0.0, 0.0, 0.0],
                        [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, -0.1],
                        [0.0, 0.0, 0.0, -0.1, 0.0, 0.0, 0.0]])
 
-#: Actuators: first-order lags of 20 and 25 rad/s (the rudder column is paper 3's M).
+#: Actuators: first-order lags of 20 and 25 rad/s (the rudder column is ng-tan-edwards-kuang's M).
 B = np.array([[0.0, 0.0]] * 5 + [[20.0, 0.0], [0.0, 25.0]])
 C = np.hstack([np.eye(3), np.zeros((3, 4))])
 M = B[:, [0]]
@@ -116,7 +117,7 @@ def model(uncertain: bool = False) -> LinearFaultModel:
 
     Examples
     --------
-    >>> from fdikit.plants import aircraft
+    >>> from fdikit.systems import aircraft
     >>> m = aircraft.model()
     >>> m.fault_names, m.B_of("f").ravel().tolist()
     (['actuator:rudder_cmd'], [0.0, 0.0, 0.0, 0.0, 0.0, 20.0, 0.0])
@@ -129,7 +130,7 @@ def model(uncertain: bool = False) -> LinearFaultModel:
 
 
 def true_A(reading: str = "consistent") -> np.ndarray:
-    """The uncertain system matrix ``A + dA`` under one of the three readings of paper 3.
+    """The uncertain system matrix ``A + dA`` under one of the three readings of ng-tan-edwards-kuang.
 
     Parameters
     ----------
@@ -143,7 +144,7 @@ def true_A(reading: str = "consistent") -> np.ndarray:
 
     Examples
     --------
-    >>> from fdikit.plants import aircraft
+    >>> from fdikit.systems import aircraft
     >>> float(aircraft.true_A("literal")[3, 2]), float(aircraft.true_A()[3, 2])
     (0.0, -5.2)
     """
@@ -159,7 +160,7 @@ def true_A(reading: str = "consistent") -> np.ndarray:
 
 
 def fault_signal(t: np.ndarray) -> np.ndarray:
-    """Rudder actuator fault used for Fig. 1 (paper 3 does not print its formula).
+    """Rudder actuator fault used for Fig. 1 (ng-tan-edwards-kuang does not print its formula).
 
     Zero until 2 s, a ramp to 0.2 at 6 s, then ``0.2 + 0.1 sin(1.5 (t - 6))`` (units of the
     rudder command, rad).
@@ -175,25 +176,10 @@ def fault_signal(t: np.ndarray) -> np.ndarray:
 
     Examples
     --------
-    >>> from fdikit.plants.aircraft import fault_signal
+    >>> from fdikit.systems.aircraft import fault_signal
     >>> fault_signal([0.0, 4.0, 6.0]).round(3).tolist()
     [0.0, 0.1, 0.2]
     """
     t = np.asarray(t, float)
     f = np.where(t < 2.0, 0.0, 0.05 * (t - 2.0))
     return np.where(t >= 6.0, 0.2 + 0.1 * np.sin(1.5 * (t - 6.0)), f)
-
-
-def design(params: dict | None = None) -> dict:
-    """Design recipe for a config-driven monitor (``fdikit design``): ``{"smo": reconstructor}``.
-
-    ``params``: ``dt`` (the observers' fixed step and the log's sample time, default 1e-4 s; with
-    the implicit switching step the reconstruction error at 1e-4 is about 1e-4 of the fault),
-    ``rho``, ``delta`` (switching gain and boundary layer, defaults 100 and 1e-5).
-    """
-    from ..residuals.smo import design_reconstructor
-
-    p = {"dt": 1e-4, "rho": 100.0, "delta": 1e-5, **(params or {})}
-    rec = design_reconstructor(model(), dt=float(p["dt"]), rho=float(p["rho"]), delta=float(p["delta"]),
-                               rho2=float(p["rho"]), delta2=float(p["delta"]))
-    return {"smo": rec}

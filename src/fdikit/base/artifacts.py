@@ -1,6 +1,6 @@
 """Design artifacts: every design saved as data, versioned and self-describing, never pickled.
 
-Paper luo-et-al's point: thresholds and designs are *data*, uploaded to a vehicle without
+Luo et al.'s point: thresholds and designs are *data*, uploaded to a vehicle without
 changing the diagnostic software. An artifact is two files with one stem:
 
 * ``NAME.json`` -- the manifest: format version, fdikit version, kind (the class), the channel

@@ -1,4 +1,4 @@
-"""Passenger car (paper 1, Ng, Chen & Speyer): nonlinear mid-size sedan, its linear and reduced
+"""Passenger car (ng-chen-speyer, Ng, Chen & Speyer): nonlinear mid-size sedan, its linear and reduced
 models, and the lateral model fitted to a real Toyota RAV4 minute.
 
 * :class:`PassengerCar` — the nonlinear model (:mod:`.model`, every parameter documented);
@@ -6,7 +6,7 @@ models, and the lateral model fitted to a real Toyota RAV4 minute.
 * :class:`DrivingCar`, :func:`driving_scenario`, :func:`simulate_drive` — automated driving
   (speed and path controllers), the paper's scenarios and injectable faults (:mod:`.driving`);
 * :func:`nonlinearity_directions` — the nonlinearity direction of Section IV-A (:mod:`.nonlinearity`);
-* :func:`~fdikit.plants.passenger_car.rav4.fit_rav4` — the lateral model fitted to a real CAN log
+* :func:`~fdikit.systems.car.rav4.fit_rav4` — the lateral model fitted to a real CAN log
   (:mod:`.rav4`).
 """
 
@@ -88,7 +88,7 @@ __all__ = [
 def demo_summary() -> dict:
     """Short passenger-car showcase for ``fdikit demo``: the linearisation at 20 m/s, a 2-second
     automated drive at 24 m/s in which a driver steps on the brake (a real brake-actuator fault the
-    speed controller fights with the throttle, paper 1 Fig. 5), and the RAV4 fit if the data are
+    speed controller fights with the throttle, ng-chen-speyer Fig. 5), and the RAV4 fit if the data are
     there."""
     import numpy as np
 

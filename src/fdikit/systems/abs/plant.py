@@ -1,10 +1,10 @@
-"""Antilock braking system (ABS) benchmark plant of paper 2 (Luo et al., Sections II-III).
+"""Antilock braking system (ABS) benchmark plant of luo-et-al (Luo et al., Sections II-III).
 
 A quarter-car braking model with a hydraulic modulator and a sliding-mode PWM slip controller,
 the fault universe F0-F5 of Section III-A and its noise model, with a numba Monte Carlo kernel
 vectorised (parallel) over runs.
 
-States (paper 2, eq. (19)) and units used throughout:
+States (luo-et-al, eq. (19)) and units used throughout:
 
 ====  =========  ===========================================  ==========
  x     name       meaning                                      unit
@@ -74,7 +74,7 @@ the step (``Scenario.noise_hold = None``); ``noise_hold = 0.01`` holds each draw
 sample instead (ten times the noise power spectral density), the selectable alternative. Table III
 decides between them: its observer-residual variances 4.5e-3 (r3) and 4.0e-3 (r4) are the
 measurement noise's 0.004 plus a small share. Measured (40 nominal runs, 23 dB, the observer of
-:class:`fdikit.residuals.abs_residuals.ABSObserver`): var(r3), var(r4) = 4.8e-3, 4.9e-3 with the
+:class:`fdikit.systems.abs.residuals.ABSObserver`): var(r3), var(r4) = 4.8e-3, 4.9e-3 with the
 1 ms hold; 7.4e-3, 8.5e-3 with the 10 ms hold; 4.5e-3, 4.5e-3 without process noise. Adding the
 noise to the states themselves (``x += w`` with that variance, 3.4 rad/s per step on the wheel
 speed) would be far larger still. Hence the 1 ms reading. (With the earlier observer, estimate not
@@ -102,9 +102,9 @@ from typing import Any
 import numpy as np
 from numba import njit, prange
 
-from ..errors import DataError, ModelError
-from ..model.nonlinear import NonlinearModel
-from ..signals import Signals
+from ...errors import DataError, ModelError
+from ...model.nonlinear import NonlinearModel
+from ...signals import Signals
 
 __all__ = [
     "FAULT_CLASSES",
@@ -128,7 +128,7 @@ __all__ = [
 ]
 
 # --------------------------------------------------------------------------------------------
-# Parameters: paper 2, Table I, with garbled/missing values replaced (reasons beside each).
+# Parameters: luo-et-al, Table I, with garbled/missing values replaced (reasons beside each).
 # --------------------------------------------------------------------------------------------
 G = 9.81  # m/s^2
 _M_CAR = 1200.0  # kg, vehicle mass m of eq. (30) (not given in the paper; a compact car)
@@ -260,7 +260,7 @@ def mu(lam: Any) -> np.ndarray:
 
     Examples
     --------
-    >>> from fdikit.plants.abs import mu
+    >>> from fdikit.systems.abs.plant import mu
     >>> round(float(mu(0.2)), 3), round(float(mu(1.0)), 3)
     (1.166, 0.76)
     """
@@ -269,11 +269,11 @@ def mu(lam: Any) -> np.ndarray:
 
 
 def slip(omega_w: Any, omega_v: Any) -> np.ndarray:
-    """Wheel slip ``(omega_v - omega_w)/omega_v`` (paper 2, eq. (14)); 0 where the car is at rest.
+    """Wheel slip ``(omega_v - omega_w)/omega_v`` (luo-et-al, eq. (14)); 0 where the car is at rest.
 
     Examples
     --------
-    >>> from fdikit.plants.abs import slip
+    >>> from fdikit.systems.abs.plant import slip
     >>> float(slip(80.0, 100.0))
     0.2
     """
@@ -292,7 +292,7 @@ def _signed_orifice(dp_mpa, rho):
 
 
 class ABSPlant(NonlinearModel):
-    """The ABS plant of paper 2, eq. (19), as a :class:`~fdikit.model.NonlinearModel`.
+    """The ABS plant of luo-et-al, eq. (19), as a :class:`~fdikit.model.NonlinearModel`.
 
     ``f(t, x, u, p)`` is the open-loop vector field (valve openings are inputs; the sliding-mode
     controller and the valve laws live in :func:`simulate`). Everything is vectorised over
@@ -307,7 +307,7 @@ class ABSPlant(NonlinearModel):
     Examples
     --------
     >>> import numpy as np
-    >>> from fdikit.plants.abs import ABSPlant
+    >>> from fdikit.systems.abs.plant import ABSPlant
     >>> plant = ABSPlant()
     >>> x = np.array([[70.0, 80.0, 900.0, 0.0, 10.0, 14.0]])
     >>> u = np.zeros((1, 9)); u[0, 0] = 7.0
@@ -394,7 +394,7 @@ class ABSPlant(NonlinearModel):
 
         Examples
         --------
-        >>> from fdikit.plants.abs import ABSPlant
+        >>> from fdikit.systems.abs.plant import ABSPlant
         >>> ABSPlant().pedal_force([0.0, 2.0, 4.0, 9.0], 0.5, ramp=3.0).round(3).tolist()
         [0.0, 3.5, 7.0, 7.0]
         """
@@ -408,7 +408,7 @@ class ABSPlant(NonlinearModel):
 
 
 # --------------------------------------------------------------------------------------------
-# Fault universe (paper 2, Section III-A, Table II)
+# Fault universe (luo-et-al, Section III-A, Table II)
 # --------------------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class FaultClass:
@@ -864,7 +864,7 @@ class ABSResult:
         Measurements ``omega_w``, ``omega_v`` (rad/s), values (runs, N, 2) at 10 ms.
     u : Signals
         Known inputs, values (runs, N, 3): ``P_m`` (MPa), the master-cylinder pressure of the
-        *nominal* pedal/master-cylinder model (4)-(5) (paper 2, Section V-B: "P_m generated by
+        *nominal* pedal/master-cylinder model (4)-(5) (luo-et-al, Section V-B: "P_m generated by
         (4) and (5)"; a tau_m fault (F5) changes the true pressure, not this input), and
         ``u_in``, ``u_out``: the ECU's inlet/outlet valve openings (PWM duty times A_eff/A_0,
         the ``u_in``/``u_out`` inputs of :class:`ABSPlant`) averaged over each sample interval
@@ -1009,7 +1009,7 @@ def simulate(
 
     Examples
     --------
-    >>> from fdikit.plants.abs import Scenario, simulate
+    >>> from fdikit.systems.abs.plant import Scenario, simulate
     >>> res = simulate(None, Scenario(fault="F3", magnitude=-0.05, t_end=2.0, v0=10.0), runs=2, seed=1)
     >>> res.y.values.shape, res.u.names, res.params["K_f"].tolist()
     ((2, 200, 2), ['P_m', 'u_in', 'u_out'], [95.0, 95.0])
@@ -1078,7 +1078,7 @@ def summarize(res: ABSResult) -> dict[str, Any]:
 
     Examples
     --------
-    >>> from fdikit.plants.abs import Scenario, simulate, summarize
+    >>> from fdikit.systems.abs.plant import Scenario, simulate, summarize
     >>> s = summarize(simulate(None, Scenario(t_end=1.0, v0=5.0, snr_db=None, meas_var=0.0)))
     >>> s["samples"], s["runs"]
     (100, 1)
@@ -1122,7 +1122,7 @@ def demo_summary() -> dict[str, Any]:
 
     Examples
     --------
-    >>> from fdikit.plants.abs import demo_summary
+    >>> from fdikit.systems.abs.plant import demo_summary
     >>> d = demo_summary()
     >>> d["stopped_fraction"], 0.1 < d["mean_slip_abs"] < 0.3
     (1.0, True)
@@ -1136,7 +1136,7 @@ def fault_scenarios(snr_db: float | None = 23.0, **kw) -> dict[str, Scenario]:
 
     Examples
     --------
-    >>> from fdikit.plants.abs import fault_scenarios
+    >>> from fdikit.systems.abs.plant import fault_scenarios
     >>> list(fault_scenarios())[:3]
     ['F0', 'F1.1', 'F1.2']
     """

@@ -1,1 +1,0 @@
-"""fdikit.plants."""
