@@ -12,7 +12,7 @@ Usage::
 Full size (paper, Section VII): 5000 runs per fault class and 10000 nominal runs (plus 10000
 nominal design runs for the thresholds, a separate stream): 55,000 simulated 12.5 s stops.
 ``--table-v`` also prints the Neyman-Pearson bounds of the two faults no test of the paper's set
-detects (F5 tau_m +15 %, F4 I_w +2 %; :mod:`fdikit.evaluate.detectability`).
+detects (F5 tau_m +15 %, F4 I_w +2 %; :mod:`fdikit.systems.abs.detectability`).
 Targets (issue 5): the campaign in <= 15 min on this machine; the GLRT at W = 50 <= 100 ns per
 sample amortised. Prints the figures beside the paper's, and one JSON object as the last line.
 """
@@ -46,7 +46,7 @@ def glrt_cost(W: int = 50, runs: int = 2000, T: int = 1250, repeats: int = 3) ->
 
 
 def _table(res) -> None:
-    from fdikit.evaluate import PAPER_TABLE_III, PAPER_TABLE_IV
+    from fdikit.systems.abs.campaign import PAPER_TABLE_III, PAPER_TABLE_IV
 
     d = res.to_dict()
     print(f"\n== campaign at {res.snr_db} dB, magnitudes {res.magnitudes}: {d['runs']}, "
@@ -96,7 +96,7 @@ def main(argv=None) -> int:
     ap.add_argument("--no-progress", action="store_true")
     args = ap.parse_args(argv)
 
-    from fdikit.evaluate import PAPER_TABLE_V, gp1_grid, run_campaign
+    from fdikit.systems.abs.campaign import PAPER_TABLE_V, gp1_grid, run_campaign
 
     prog = not args.no_progress and sys.stderr.isatty()
     out: dict = {"cores": os.cpu_count(), "runs_per_class": args.runs}

@@ -82,7 +82,7 @@ def main() -> dict:
         },
     }
     print(f"LMIs (primary + secondary): cold {lmi_cold:.3f} s, warm {lmi_warm:.3f} s (target <= 2 s)")
-    print(f"gamma-bar {out['l2_bound']:.5f} (ng-chen-speyer.3131); H-inf of G(s): bisection "
+    print(f"gamma-bar {out['l2_bound']:.5f} (paper 1.3131); H-inf of G(s): bisection "
           f"{out['hinf_bisection']:.5f}, sweep {out['hinf_sweep']:.5f}")
     print(f"15 s at h = 1e-5 ({t.size} steps): plant {out['sim_plant_seconds']:.2f} s + observers "
           f"{out['sim_observers_seconds']:.2f} s = {out['sim_seconds']:.2f} s (target <= 5 s); "

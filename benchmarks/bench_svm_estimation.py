@@ -24,8 +24,8 @@ import time
 
 import numpy as np
 
-from fdikit.estimate import ABS_ESTIMATED, ABS_TABLE_VI_PAPER, abs_table_vi
-from fdikit.isolate.svm import abs_svm_experiment
+from fdikit.systems.abs.estimation import ABS_ESTIMATED, ABS_TABLE_VI_PAPER, abs_table_vi
+from fdikit.systems.abs.svm import abs_svm_experiment
 
 
 def _fmt(v):

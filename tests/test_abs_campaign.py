@@ -9,19 +9,18 @@ from contextlib import redirect_stdout
 import numpy as np
 import pytest
 
-from fdikit.detect import GLRT, Hold, TimeGated
+from fdikit.detect import GLRT, Hold, TestSpec, TimeGated
 from fdikit.errors import DataError
-from fdikit.evaluate import (
+from fdikit.isolate import diagnose_ml
+from fdikit.systems.abs.campaign import (
     PAPER_TABLE_IV,
-    TestSpec,
+    _simulate_residuals,
     abs_residuals,
     design_tests,
-    diagnose_ml,
     min_magnitudes,
     paper_tests,
     run_campaign,
 )
-from fdikit.systems.abs.campaign import _simulate_residuals
 from fdikit.systems.abs.plant import Scenario, simulate
 
 
@@ -76,7 +75,7 @@ def test_diagnose_ml_matches_brute_force():
     rng = np.random.default_rng(4)
     p = rng.uniform(0.01, 0.99, size=(4, 3))
     outcomes = np.array(list(itertools.product([0, 1], repeat=3)), bool)
-    best, tie = diagnose_ml(outcomes, p, ["F0", "a", "b", "c"])
+    best, tie = diagnose_ml(outcomes, p, ["F0", "a", "b", "c"], nominal="F0")
     assert tie[np.arange(len(best)), best].all()
     for o, b in zip(outcomes, best):
         lik = [np.prod([pi if oi else 1 - pi for pi, oi in zip(row, o)]) for row in p]
@@ -89,7 +88,7 @@ def test_diagnose_ml_matches_brute_force():
     # an undetectable fault (learned firing rates below the nominal false-alarm rates) must not
     # take the all-pass runs from "system OK"
     q = np.array([[1e-4, 5e-4], [0.0, 0.0], [0.9, 0.9]])
-    best, _ = diagnose_ml(np.zeros((3, 2), bool), q, ["F0", "F5", "F1"])
+    best, _ = diagnose_ml(np.zeros((3, 2), bool), q, ["F0", "F5", "F1"], nominal="F0")
     assert best.tolist() == [0, 0, 0]
     with pytest.raises(DataError):
         diagnose_ml(outcomes, p[:, :2], ["F0", "a", "b", "c"])
@@ -171,7 +170,7 @@ def test_observer_residual_calibration_matches_table_iii():
     # Table III: mu0 / sigma^2 of r3 = -1.07e-4 / 4.5e-3, of r4 = -1.92e-4 / 4.0e-3 (rad/s, (rad/s)^2):
     # the measurement noise variance 0.004 plus a small process-noise share, means near zero
     b = design_tests(design_runs=60, pfa=0.1, seed=5)
-    from fdikit.evaluate import PAPER_TABLE_III
+    from fdikit.systems.abs.campaign import PAPER_TABLE_III
 
     for r, test in (("r3", "G_O1"), ("r4", "G_O2")):
         _mu0, s2 = PAPER_TABLE_III[test][:2]
@@ -184,7 +183,7 @@ def test_directional_test_detects_the_iw_fault_the_glrt_misses():
     """F4 at its minimum size (I_w +-2 %): the change-in-mean tests on r3/r4 stay at their false-alarm
     level, the directional GLRT G_D_Iw (r3 along its I_w signature, anchored) fires in most runs,
     and its amplitude estimate is the relative I_w change."""
-    from fdikit.evaluate import extended_tests, residual_generators
+    from fdikit.systems.abs.campaign import extended_tests, residual_generators
 
     specs = extended_tests(40)
     b = design_tests(specs, design_runs=300, pfa=0.01, seed=13)
@@ -219,7 +218,7 @@ def test_decoupled_directional_tests_tell_k_f_from_small_r_w():
     """F2.1 (R_w -2 %) and F3 (K_f +-2 %) fire the same GLRT tests (and the plain directional tests
     alike: their signatures have a cosine of -0.94); G_D_Kf (K_f with R_w free) and G_D_Rw (R_w with
     K_f free) split them."""
-    from fdikit.evaluate import extended_tests, residual_generators
+    from fdikit.systems.abs.campaign import extended_tests, residual_generators
 
     specs = extended_tests(40)
     b = design_tests(specs, design_runs=300, pfa=0.01, seed=17)

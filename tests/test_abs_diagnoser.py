@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from fdikit.errors import DataError
-from fdikit.evaluate import PAPER_TABLE_IV
+from fdikit.isolate import DMatrix, compile_python, exhaustive
+from fdikit.systems.abs.campaign import PAPER_TABLE_IV
 from fdikit.systems.abs.diagnoser import (
     PAPER_PRIOR,
     SVM_TESTS,
@@ -16,7 +17,6 @@ from fdikit.systems.abs.diagnoser import (
     extend_with_svm,
     svm_outcomes,
 )
-from fdikit.isolate import DMatrix, compile_python, exhaustive
 from fdikit.systems.abs.plant import PARAMS, Scenario, simulate
 
 GLRT_TESTS = ["G_P1", "G_O1", "G_O2", "G_O_T1", "G_O_T2"]
@@ -113,7 +113,7 @@ def test_diagnoser_isolates_each_detectable_class_on_fresh_seeds(dg, fault, mag)
                    "noise-free, the largest 40-sample mean of the r3 change is 0.007 (+15 %) and "
                    "0.024 rad/s (+50 %) against the ~0.058 rad/s G_O1 needs. F5 is diagnosed 'system OK'. "
                    "No detector can do much better: the Neyman-Pearson bound of the known signature over "
-                   "the whole record (fdikit.evaluate.detectability, 23 dB) is d' = 0.96 at +15 % and "
+                   "the whole record (fdikit.systems.abs.detectability, 23 dB) is d' = 0.96 at +15 % and "
                    "3.25 at +50 %, Pd <= 0.003 and <= 0.32 at Pfa 1e-4")
 def test_tau_m_fault_is_isolated(dg):
     rec = simulate(None, Scenario(fault="F5", magnitude=0.5), seed=5)
@@ -122,7 +122,7 @@ def test_tau_m_fault_is_isolated(dg):
 
 @pytest.mark.parametrize("fault,param,mag", [("F3", "K_f", -0.07), ("F2.1", "R_w", -0.1)])
 def test_estimation_noise_free_exact_and_within_crlb_with_measurement_noise(dg, fault, param, mag):
-    from fdikit.estimate import ABSSimulator
+    from fdikit.systems.abs.estimation import ABSSimulator
 
     truth = PARAMS[param] * (1 + mag)
     clean = simulate(None, Scenario(fault=fault, magnitude=mag, snr_db=None, meas_var=0.0), seed=3)

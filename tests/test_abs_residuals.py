@@ -6,15 +6,6 @@ from scipy.interpolate import make_smoothing_spline
 from scipy.signal import sosfilt
 
 from fdikit.errors import DataError
-from fdikit.systems.abs.plant import PARAMS, Scenario, mu, simulate, slip
-from fdikit.systems.abs.residuals import (
-    ABSObserver,
-    ParityR1,
-    ParityR2,
-    linear_part,
-    observer_gain,
-    r2_magnitude_study,
-)
 from fdikit.residuals.parity import (
     CausalDerivative,
     CausalLowPass,
@@ -25,6 +16,15 @@ from fdikit.residuals.parity import (
     spline_lam,
 )
 from fdikit.signals import Signals
+from fdikit.systems.abs.plant import PARAMS, Scenario, mu, simulate, slip
+from fdikit.systems.abs.residuals import (
+    ABSObserver,
+    ParityR1,
+    ParityR2,
+    linear_part,
+    observer_gain,
+    r2_magnitude_study,
+)
 
 
 @pytest.fixture(scope="module")

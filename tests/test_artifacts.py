@@ -7,11 +7,11 @@ import numpy as np
 import pytest
 
 from fdikit import DataError, Signals
+from fdikit.base.artifacts import KINDS
 from fdikit.detect import GLRT, MHSSPT, Hold, TimeGated, UniformMeanGaussian
 from fdikit.isolate import DMatrix, ao_star
 from fdikit.model import LinearFaultModel
 from fdikit.monitor import load_artifact, save_artifact
-from fdikit.base.artifacts import KINDS
 from fdikit.residuals import FaultDetectionFilter, ObserverResidual, design_observer_residual, design_uio
 
 
@@ -73,8 +73,8 @@ def test_isolation_artifacts(tmp_path):
 
 
 def test_sliding_mode_reconstructor(tmp_path):
-    from fdikit.systems import aircraft
     from fdikit.residuals.smo import design_reconstructor
+    from fdikit.systems import aircraft
 
     rec = design_reconstructor(aircraft.model(), dt=1e-4, hinf_check=False)
     back = roundtrip(tmp_path, rec, "smo")
@@ -126,7 +126,7 @@ def test_svm_artifact(tmp_path):
     rng = np.random.default_rng(4)
     X = np.vstack([rng.normal(0, 1, (40, 6)), rng.normal(2, 1, (40, 6))])
     labels = ["a"] * 40 + ["b"] * 40
-    dec = SVMDecision(SVMIsolator("paper").fit(X, labels).export())
+    dec = SVMDecision(SVMIsolator().fit(X, labels).export())   # the default: scaled, cross-validated
     back = roundtrip(tmp_path, dec, "svm")
     assert (tmp_path / "svm.npz").exists()  # the support vectors travel as an array
     np.testing.assert_array_equal(back.decision_function(X), dec.decision_function(X))
@@ -148,3 +148,60 @@ def test_large_filter_matrices_go_to_npz_exactly(tmp_path):
     for k in ("A", "Bu", "By", "C", "Du", "Dy"):
         assert np.array_equal(getattr(back, k), getattr(d, k)), k
     assert all(isinstance(v, list) for k, v in d.to_dict(inline=None).items() if k in ("A", "C"))
+
+
+# ------------------------------------------------------------- artifacts of the old package layout
+OLD_LAYOUT = [
+    # (how to build a design of a moved class, the class path an old-layout manifest recorded)
+    ("rav4_features", "fdikit.plants.passenger_car.monitor_rav4:Rav4FeatureNorms"),
+    ("abs_observer", "fdikit.residuals.abs_residuals:ABSObserver"),
+    ("abs_sensitivity", "fdikit.residuals.abs_residuals:ParameterSensitivity"),
+]
+
+
+def _old_layout_design(name):
+    if name == "rav4_features":
+        from fdikit.systems.car.monitor_rav4 import Rav4FeatureNorms
+
+        return Rav4FeatureNorms({"n": ["a", "b"], "m": ["b"]}, 0.02, 0.1)
+    from fdikit.systems.abs.residuals import ABSObserver, observer_sensitivity
+
+    return ABSObserver(0.01) if name == "abs_observer" else observer_sensitivity(0.01, ["I_w"])
+
+
+@pytest.mark.parametrize("name,old", OLD_LAYOUT, ids=[o[0] for o in OLD_LAYOUT])
+def test_artifacts_of_the_old_layout_load(tmp_path, name, old):
+    """A manifest written before the systems left the core names fdikit.plants.* /
+    fdikit.residuals.abs_residuals classes; it loads through the layout aliases (MOVED)."""
+    import json
+
+    from fdikit.base.artifacts import MOVED, moved
+
+    obj = _old_layout_design(name)
+    p = save_artifact(tmp_path / name, obj)
+    text = p.read_text()
+    new = json.loads(text)["class"]
+    if name == "abs_sensitivity":   # the wrapper is core; its members were ABS classes
+        assert new == "fdikit.residuals.sensitivity:ParameterSensitivity"
+        assert "fdikit.systems.abs.residuals:ABSObserver" in text
+        text = text.replace("fdikit.systems.abs.residuals:", "fdikit.residuals.abs_residuals:")
+    else:
+        assert moved(old) == new, (old, new)
+        text = text.replace(new, old)
+    assert "fdikit.plants" in text or "abs_residuals" in text
+    p.write_text(text)
+    back = load_artifact(p)
+    assert type(back) is type(obj)
+    a, b = back.to_dict(), obj.to_dict()
+    assert json.dumps(a, sort_keys=True, default=str) == json.dumps(b, sort_keys=True, default=str)
+    assert all(v.startswith("fdikit.") for v in MOVED.values())
+
+
+def test_old_layout_recipes_resolve():
+    from fdikit.base.artifacts import moved
+
+    for old in ("fdikit.evaluate.abs_config:design", "fdikit.plants.passenger_car.recipe:design",
+                "fdikit.plants.passenger_car.monitor_rav4:design", "fdikit.plants.aircraft:design",
+                "fdikit.plants.two_mass:design"):
+        mod, _, fn = moved(old).partition(":")
+        assert callable(getattr(__import__(mod, fromlist=[fn]), fn)), old

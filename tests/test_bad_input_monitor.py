@@ -16,8 +16,8 @@ from fdikit import DataError, Signals
 from fdikit.detect import GLRT, MHSSPT, Hold, UniformMeanGaussian
 from fdikit.faults import Bias
 from fdikit.monitor import Monitor
-from fdikit.systems import two_mass
 from fdikit.residuals import ObserverResidual, design_observer_residual
+from fdikit.systems import two_mass
 
 T = 300
 CHANNELS = ["force", "pos1", "pos2"]

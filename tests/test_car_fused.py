@@ -19,10 +19,10 @@ import pandas as pd
 import pytest
 
 from fdikit import DataError, Signals
+from fdikit.base.artifacts import load_artifact, save_artifact
 from fdikit.detect import Hold
 from fdikit.detect.mhsspt import calibrate_densities
 from fdikit.monitor import Monitor
-from fdikit.base.artifacts import load_artifact, save_artifact
 from fdikit.systems.car.monitor import (
     LATERAL_SETS,
     LONGITUDINAL_SETS,

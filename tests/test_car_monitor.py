@@ -10,6 +10,8 @@ import pytest
 
 from fdikit import Signals
 from fdikit.detect.mhsspt import calibrate_densities
+from fdikit.residuals import internal_form
+from fdikit.residuals.fdf import filter_frequency_response
 from fdikit.systems.car.monitor import (
     FILTER_SETS,
     LATERAL_SETS,
@@ -21,8 +23,6 @@ from fdikit.systems.car.monitor import (
     design_car_monitor,
     pattern_table,
 )
-from fdikit.residuals import internal_form
-from fdikit.residuals.fdf import filter_frequency_response
 
 
 @pytest.fixture(scope="module")
@@ -250,8 +250,8 @@ def test_lateral_residuals_whitened(des):
     """The whitened lateral residuals have unit covariance on their range under the sensor noise:
     sample covariance of the filters driven by simulated white noise (independent of the Lyapunov
     equation used to whiten)."""
-    from fdikit.systems.car.monitor import SENSOR_NOISE_STD
     from fdikit.residuals import FaultDetectionFilter
+    from fdikit.systems.car.monitor import SENSOR_NOISE_STD
 
     rng = np.random.default_rng(3)
     for s in LATERAL_SETS:

@@ -50,9 +50,9 @@ def test_abs_monitor(tmp_path):
 
 
 def test_sliding_mode_reconstructor(tmp_path):
-    from fdikit.systems.aircraft.reconstruction import X0
-    from fdikit.systems import aircraft
     from fdikit.residuals.smo import design_reconstructor, simulate_plant
+    from fdikit.systems import aircraft
+    from fdikit.systems.aircraft.reconstruction import X0
 
     h = 1e-4
     rec = design_reconstructor(aircraft.model(), dt=h, hinf_check=False)

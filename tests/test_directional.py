@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from fdikit import DataError, Signals
-from fdikit.detect import DirectionalGLRT, directional_statistic, glrt_statistic
 from fdikit.base.artifacts import load_artifact, save_artifact
+from fdikit.detect import DirectionalGLRT, directional_statistic, glrt_statistic
 
 
 def brute_force(r, s, mu0, sigma2, W, min_info=0.0):

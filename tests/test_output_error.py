@@ -6,16 +6,11 @@ import numpy as np
 import pytest
 
 from fdikit.errors import DataError, ModelError
-from fdikit.estimate import (
-    ABS_TABLE_VI_TRUE,
-    ABSSimulator,
-    ModelSimulator,
-    abs_table_vi,
-    output_error,
-)
+from fdikit.estimate import ModelSimulator, output_error
 from fdikit.faults import Scenario
 from fdikit.model import NonlinearModel
 from fdikit.systems.abs import plant as A
+from fdikit.systems.abs.estimation import ABS_TABLE_VI_TRUE, ABSSimulator, abs_table_vi
 
 T = np.linspace(0.0, 3.0, 61)
 

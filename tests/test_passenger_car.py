@@ -11,6 +11,7 @@ import pytest
 from fdikit.errors import ConditionError, ModelError
 from fdikit.faults import Scenario
 from fdikit.model import linearize, trim
+from fdikit.sim import simulate
 from fdikit.systems.car import (
     LATERAL_OUTPUTS,
     LATERAL_REDUCED,
@@ -24,7 +25,6 @@ from fdikit.systems.car import (
     linearize_car,
     residualize_states,
 )
-from fdikit.sim import simulate
 
 G = 9.80665
 DATA = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "rav4-highway"

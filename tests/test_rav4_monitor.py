@@ -24,8 +24,8 @@ rav4 = pytest.mark.skipif(not (DATA / "drive.blf").exists(),
 def test_band_limited_filter_is_the_butterworth_low_pass_in_series():
     """A static residual r = y through band_limited: unit DC gain and, at any frequency, the
     magnitude of scipy's Butterworth response (computed independently by freqz)."""
-    from fdikit.systems.car.monitor_rav4 import band_limited
     from fdikit.residuals import FaultDetectionFilter, FilterDesign
+    from fdikit.systems.car.monitor_rav4 import band_limited
 
     dt, fc = 0.02, 3.0
     d = FilterDesign(np.zeros((0, 0)), np.zeros((0, 0)), np.zeros((0, 1)), np.zeros((1, 0)), np.zeros((1, 0)),
@@ -65,8 +65,8 @@ def test_real_densities_match_a_brute_force_moving_average():
 
 
 def test_preprocessing_round_trip_and_inject_mapping():
-    from fdikit.systems.car.monitor_rav4 import RAW_CHANNELS, Rav4Preprocessing, inject
     from fdikit.signals import Signals
+    from fdikit.systems.car.monitor_rav4 import RAW_CHANNELS, Rav4Preprocessing, inject
 
     pre = Rav4Preprocessing(16.88, -0.1, -0.008, -0.05, -1.0, 0.0002, 0.0005)
     assert Rav4Preprocessing.from_dict(json.loads(json.dumps(pre.to_dict()))).to_dict() == pre.to_dict()
@@ -240,8 +240,8 @@ def test_batch_equals_streaming():
 
 @rav4
 def test_example_config_artifacts_refuse_another_model(designed):
-    from fdikit.errors import DataError
     from fdikit.base.artifacts import load_artifact
+    from fdikit.errors import DataError
 
     art = designed.parent / "designs" / "filter"
     g = load_artifact(art, expect_inputs=["steer_angle", "steer_fraction", "speed", "yaw_rate_raw",
@@ -257,9 +257,9 @@ def test_band_limited_filters_still_block_their_nuisance():
     with the UNSCALED fitted model by internal_form: the nuisance fault's transmission to the
     residual stays <= 1e-8 of the target's from DC to 5 Hz (evaluated here as C (zI - A)^-1 B + D),
     and at 12.5 Hz the target's transmission is cut below 10 % of its DC value."""
+    from fdikit.residuals import internal_form
     from fdikit.systems.car.monitor import FILTER_SETS
     from fdikit.systems.car.monitor_rav4 import band_limited, rav4_monitor
-    from fdikit.residuals import internal_form
 
     mon = rav4_monitor()
     dt = mon.record["dt"]

@@ -15,7 +15,6 @@ from fdikit.design.smo_lmi import primary_smo_lmi
 from fdikit.errors import ConditionError
 from fdikit.model.linear import LinearFaultModel
 from fdikit.model.structure import invariant_zeros
-from fdikit.systems import aircraft
 from fdikit.residuals.smo import (
     check_conditions,
     design_reconstructor,
@@ -25,6 +24,7 @@ from fdikit.residuals.smo import (
     simulate_plant,
 )
 from fdikit.signals import Signals
+from fdikit.systems import aircraft
 
 
 # ----------------------------------------------------------------------------- hand-made systems

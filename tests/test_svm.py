@@ -8,17 +8,8 @@ import numpy as np
 import pytest
 
 from fdikit.errors import DataError
-from fdikit.isolate.svm import (
-    SVMDecision,
-    SVMIsolator,
-    WindowFeatures,
-    abs_patterns,
-    abs_svm_experiment,
-    concat_measurements,
-    improved_pipeline,
-    paper_pipeline,
-    rbf_gamma,
-)
+from fdikit.isolate.svm import SVMDecision, SVMIsolator, WindowFeatures, concat_measurements, rbf_gamma
+from fdikit.systems.abs.svm import abs_patterns, abs_svm_experiment, improved_pipeline, paper_pipeline
 
 
 def test_paper_kernel_width():
@@ -60,7 +51,7 @@ def _toy(n=60, seed=0):
 @pytest.mark.parametrize("kind", ["paper", "improved"])
 def test_export_reproduces_sklearn_decision(kind):
     X, lab = _toy()
-    pipe = improved_pipeline(2, 5, (1.0, 0.0), scale=True, cv=3) if kind == "improved" else "paper"
+    pipe = improved_pipeline(2, 5, (1.0, 0.0), scale=True, cv=3) if kind == "improved" else paper_pipeline()
     iso = SVMIsolator(pipe).fit(X, lab)
     data = json.loads(json.dumps(iso.export()))  # plain data, survives JSON
     dec = SVMDecision(data)
@@ -73,7 +64,7 @@ def test_export_reproduces_sklearn_decision(kind):
 
 def test_outcomes_are_complementary_tests():
     X, lab = _toy()
-    iso = SVMIsolator("paper").fit(X, lab)
+    iso = SVMIsolator(paper_pipeline()).fit(X, lab)
     out = iso.outcomes(X)
     assert set(out) == {"S_Kf", "S_Iw"}
     np.testing.assert_array_equal(out["S_Kf"] + out["S_Iw"], 1)  # Pd(S_Kf) = 1 - Pf(S_Iw), Section VII
@@ -94,7 +85,7 @@ def test_errors():
     Xn[3, 7] = np.nan
     with pytest.raises(DataError, match="pattern 3 has NaN/inf at position 7"):
         SVMIsolator().fit(Xn, lab)
-    iso = SVMIsolator("paper").fit(X, lab)
+    iso = SVMIsolator(paper_pipeline()).fit(X, lab)
     with pytest.raises(DataError, match="trained on 40"):
         SVMDecision(iso.export()).predict(X[:, :30])
 
@@ -113,8 +104,8 @@ def test_abs_svm_beats_chance_and_improved_beats_paper():
     """Fresh ABS records, 180 training / 180 test patterns, process noise 20 dB (harder than 23 dB)."""
     Xtr, ztr, _ = abs_patterns(5, 11, snr_db=20.0)
     Xte, zte, _ = abs_patterns(5, 12, snr_db=20.0)
-    paper = SVMIsolator("paper").fit(Xtr, ztr)
-    impr = SVMIsolator("improved").fit(Xtr, ztr)
+    paper = SVMIsolator(paper_pipeline()).fit(Xtr, ztr)
+    impr = SVMIsolator(improved_pipeline()).fit(Xtr, ztr)
     e_p, e_i = paper.error(Xte, zte), impr.error(Xte, zte)
     # chance is 50 %: a binomial(180, 0.5) count below 20 % has probability < 1e-15
     assert e_p < 0.2 and e_i < 0.2
@@ -132,3 +123,26 @@ def test_section_vi_reproduction_720_720():
     assert r["paper"]["n_test"] == 720 and r["n_train"] == 720
     assert r["paper"]["error"] <= 0.047
     assert r["improved"]["error"] <= 0.02
+
+
+def test_default_pipeline_is_scaled_and_cross_validated_for_any_classes():
+    """A system the ABS defaults were not written for: 3 classes, features in units 1e6 apart.
+
+    The informative features are O(1e-3) and an irrelevant one is O(1e3) noise; without scaling an
+    RBF kernel sees only the noise channel. The default (StandardScaler + cross-validated C/gamma)
+    must separate the classes; the ABS paper's fixed kernel (sigma = 20, unscaled) cannot.
+    """
+    rng = np.random.default_rng(7)
+    n = 60
+    centers = np.array([[0.0, 0.0], [3e-3, 0.0], [0.0, 3e-3]])
+    def draw(seed):
+        r = np.random.default_rng(seed)
+        X = np.vstack([np.c_[c + r.normal(0, 5e-4, (n, 2)), r.normal(0, 1e3, (n, 1))] for c in centers])
+        return X, np.repeat(["a", "b", "c"], n)
+    Xtr, ztr = draw(1)
+    Xte, zte = draw(2)
+    iso = SVMIsolator().fit(Xtr, ztr)
+    assert iso.search_ is not None and [s for s, _ in iso.estimator_.steps] == ["scale", "svc"]
+    assert iso.error(Xte, zte) < 0.05
+    assert SVMIsolator(paper_pipeline()).fit(Xtr, ztr).error(Xte, zte) > 0.3
+    del rng

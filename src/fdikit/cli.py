@@ -25,7 +25,10 @@ COMMAND_MODULES = ("demo", "reconstruct", "abs", "car", "monitor")
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="fdikit",
-        description="Model-based fault detection, isolation and reconstruction for vehicles.",
+        description="Model-based fault detection, isolation and reconstruction for vehicles. Run "
+                    "'fdikit COMMAND --help' for what a command does and its options. Commands that "
+                    "report results print a text summary, or exactly one JSON object on standard "
+                    "output with --json.",
     )
     parser.add_argument("--version", action="version", version=f"fdikit {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")

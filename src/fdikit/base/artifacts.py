@@ -33,7 +33,8 @@ import numpy as np
 from ..errors import DataError
 from .state import _atomic_write, _flatten, _unflatten
 
-__all__ = ["ARTIFACT_FORMAT", "KINDS", "artifact_channels", "load_artifact", "save_artifact"]
+__all__ = ["ARTIFACT_FORMAT", "KINDS", "MOVED", "artifact_channels", "load_artifact", "moved",
+           "save_artifact"]
 
 #: Version of the artifact layout; a different major version is refused on loading.
 ARTIFACT_FORMAT = "fdikit-artifact/1"
@@ -53,6 +54,51 @@ KINDS: dict[str, str] = {
 }
 
 
+#: Where code of an older package layout lives now: old module (or ``module:Class``) -> new one.
+#: Artifacts and recipes saved before the layout changed name the old paths; :func:`moved` maps
+#: them (longest prefix first), so they still load.
+MOVED: dict[str, str] = {
+    # the papers' systems left the generic layers (issue 14)
+    "fdikit.plants.passenger_car.monitor:FeatureNorms": "fdikit.detect.features:FeatureNorms",
+    "fdikit.plants.passenger_car.monitor:WarmupMHSSPT": "fdikit.detect.mhsspt:WarmupMHSSPT",
+    "fdikit.evaluate.campaign:TestBank": "fdikit.detect.bank:TestBank",
+    "fdikit.evaluate.campaign:TestSpec": "fdikit.detect.bank:TestSpec",
+    "fdikit.plants.passenger_car": "fdikit.systems.car",
+    "fdikit.plants.abs": "fdikit.systems.abs.plant",
+    "fdikit.plants.aircraft": "fdikit.systems.aircraft",
+    "fdikit.plants.two_mass": "fdikit.systems.two_mass",
+    "fdikit.residuals.abs_residuals": "fdikit.systems.abs.residuals",
+    "fdikit.evaluate.abs_diagnoser": "fdikit.systems.abs.diagnoser",
+    "fdikit.evaluate.abs_config": "fdikit.systems.abs.recipe",
+    "fdikit.evaluate.campaign": "fdikit.systems.abs.campaign",
+    "fdikit.commands.reconstruct": "fdikit.systems.aircraft.reconstruction",
+    "fdikit.monitor.artifacts": "fdikit.base.artifacts",
+    "fdikit.monitor.state": "fdikit.base.state",
+}
+
+
+def moved(path: str) -> str:
+    """The current location of ``"module"`` or ``"module:attribute"`` written by an older layout.
+
+    Examples
+    --------
+    >>> moved("fdikit.plants.passenger_car.monitor_fused:FusedCarMonitor")
+    'fdikit.systems.car.monitor_fused:FusedCarMonitor'
+    >>> moved("fdikit.plants.passenger_car.monitor:FeatureNorms")
+    'fdikit.detect.features:FeatureNorms'
+    >>> moved("fdikit.detect.glrt:GLRT")
+    'fdikit.detect.glrt:GLRT'
+    """
+    path = str(path)
+    if path in MOVED:
+        return MOVED[path]
+    mod, sep, attr = path.partition(":")
+    for old in sorted(MOVED, key=len, reverse=True):
+        if ":" not in old and (mod == old or mod.startswith(old + ".")):
+            return MOVED[old] + mod[len(old):] + sep + attr
+    return path
+
+
 def _class_path(obj: Any) -> str | None:
     """``module:qualname`` of a design class defined inside fdikit with to_dict/from_dict, else None."""
     cls = type(obj)
@@ -70,7 +116,7 @@ def _resolve(kind: str, where: str | None = None) -> type:
     Only modules inside the ``fdikit`` package are ever imported (an artifact cannot name code
     from elsewhere), and the class must provide ``from_dict``.
     """
-    target = KINDS.get(kind) or where
+    target = KINDS.get(kind) or (moved(where) if where else where)
     if not target:
         raise DataError(f"unknown artifact kind {kind!r}; known kinds: {sorted(KINDS)}")
     mod, _, attr = str(target).partition(":")

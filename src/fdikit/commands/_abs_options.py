@@ -19,8 +19,9 @@ def snr_db(text: str) -> float | None:
 def add_manoeuvre_args(p: argparse.ArgumentParser) -> None:
     """``--noise-hold`` and ``--pedal-ramp``: shared by ``abs simulate`` and ``abs campaign``."""
     p.add_argument("--noise-hold", type=float, default=None,
-                   help="process-noise hold time, s (default: a new sample every 1 ms step; 0.01: one per "
-                   "10 ms sample, the alternative reading of Section III-A)")
+                   help="process-noise hold time, s (default: a new noise sample every 1 ms integration "
+                   "step; 0.01: one per 10 ms measurement sample, the alternative reading of Section III-A)")
     p.add_argument("--pedal-ramp", type=float, default=None, metavar="SECONDS",
-                   help="opt-in experiment: pedal force rising linearly to K_p over SECONDS after the brake "
-                   "is applied, then held (default: the step of eq. (4))")
+                   help="ramp time of the pedal force, s: an opt-in experiment where the force rises "
+                   "linearly to K_p over SECONDS after the brake is applied, then is held (default: the "
+                   "step of eq. (4))")

@@ -24,30 +24,56 @@ def register(subparsers) -> argparse.ArgumentParser:
     Nothing heavy is imported here (every ``fdikit`` call registers every command): the fault
     class is checked (by :class:`fdikit.systems.abs.plant.Scenario`) when the action runs.
     """
-    p = subparsers.add_parser("abs", help="antilock braking system benchmark (luo-et-al)",
-                              description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = subparsers.add_parser(
+        "abs", help="antilock braking system benchmark (luo-et-al)",
+        description=(
+            "The antilock braking system (ABS) benchmark of luo-et-al: a quarter-car\n"
+            "braking stop with a hydraulic brake and a slip controller, the fault classes\n"
+            "F0 (nominal) to F5 of Table II, and the GLRT tests that detect and isolate\n"
+            "them.\n"
+            "\n"
+            "Choose an ACTION; 'fdikit abs ACTION --help' lists its options. Every action\n"
+            "prints a text summary, or one JSON object with --json."),
+        formatter_class=argparse.RawDescriptionHelpFormatter)
     actions = p.add_subparsers(dest="abs_action", metavar="ACTION")
     p.set_defaults(func=lambda args: (p.print_help(), 0)[1])
     p.abs_actions = actions  # later issues: register more actions here
 
-    s = actions.add_parser("simulate", help="simulate ABS stops with a fault and print a summary")
+    s = actions.add_parser(
+        "simulate", help="simulate ABS stops with a fault and print a summary",
+        description="Simulate braking stops of the luo-et-al ABS benchmark with one fault class and print "
+                    "a summary, averaged over the runs: the fault and its mean magnitude, the number of "
+                    "runs and samples, the stopping time and distance, when the ABS engaged, the mean "
+                    "wheel slip while it was active, the number of valve switches and the fraction of "
+                    "runs that came to rest. --json prints the summary as one JSON object; --plot also "
+                    "writes a figure of the first run (speeds, slip, brake torque and pressures, like "
+                    "Fig. 3 of the paper).")
     s.add_argument("--fault", default="F0",
-                   help="fault class F0 (nominal, default), F1.1, F1.2, F2.1, F2.2, F3, F4 or F5 (Table II)")
+                   help="fault class (Table II): F0 nominal (default); F1.1, F1.2 wheel-speed sensor reading "
+                   "low; F2.1, F2.2 wheel radius smaller; F3 brake torque gain; F4 wheel inertia; F5 "
+                   "master-cylinder time constant")
     s.add_argument("--magnitude", type=float, default=None,
-                   help="relative parameter change, e.g. -0.05 for -5 %% "
+                   help="relative change of the faulty parameter, a fraction: e.g. -0.05 for -5 %% "
                    "(default: drawn per run inside the class)")
-    s.add_argument("--runs", type=int, default=1, help="number of Monte Carlo runs (default 1)")
-    s.add_argument("--seed", type=int, default=0, help="master seed (default 0)")
+    s.add_argument("--runs", type=int, default=1,
+                   help="number of Monte Carlo runs, each one simulated stop (default 1)")
+    s.add_argument("--seed", type=int, default=0, help="master random seed (default 0)")
     s.add_argument("--snr", type=snr_db, default=23.0,
-                   help="process-noise SNR in dB (23, 20, 17 in the paper) or 'none' (default 23)")
+                   help="process-noise signal-to-noise ratio, dB (the paper uses 23, 20 and 17), or 'none' "
+                   "for no process noise (default 23)")
     s.add_argument("--meas-var", type=float, default=0.004,
-                   help="measurement noise variance, (rad/s)^2 (default 0.004)")
+                   help="variance of the wheel- and vehicle-speed measurement noise, (rad/s)^2 "
+                   "(default 0.004)")
     add_manoeuvre_args(s)
-    s.add_argument("--v0", type=float, default=28.0, help="initial speed, m/s (default 28)")
-    s.add_argument("--t-brake", type=float, default=0.5, help="brake application time, s (default 0.5)")
-    s.add_argument("--t-end", type=float, default=12.5, help="record length, s (default 12.5)")
-    s.add_argument("--json", action="store_true", help="print one JSON object")
-    s.add_argument("--plot", metavar="FILE", default=None, help="write a figure like Fig. 3 (first run)")
+    s.add_argument("--v0", type=float, default=28.0, help="initial vehicle speed, m/s (default 28)")
+    s.add_argument("--t-brake", type=float, default=0.5,
+                   help="time at which the brake is applied, s (default 0.5)")
+    s.add_argument("--t-end", type=float, default=12.5,
+                   help="length of the simulated record, s (default 12.5)")
+    s.add_argument("--json", action="store_true", help="print one JSON object instead of the text summary")
+    s.add_argument("--plot", metavar="FILE", default=None,
+                   help="write a figure of the first run (like Fig. 3) to this image file; the format "
+                   "follows the extension, e.g. .png or .pdf")
     s.set_defaults(func=_simulate)
     from .abs_campaign import add_campaign_parser
     from .abs_detectability import add_detectability_parser

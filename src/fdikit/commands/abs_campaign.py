@@ -33,40 +33,68 @@ def add_campaign_parser(abs_subparsers) -> argparse.ArgumentParser:
     """
     p = abs_subparsers.add_parser(
         "campaign", help="Monte Carlo Pd/Pf, D-matrix, sensitivity and specificity of the ABS tests",
-        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--runs", type=int, default=200, help="runs per fault class (default 200; paper 5000)")
+        description=(
+            "Monte Carlo evaluation of the ABS fault diagnosis of luo-et-al (Section VII).\n"
+            "\n"
+            "Designs the thresholds of the GLRT tests (G_P1, G_O1, G_O2, G_O_T1, G_O_T2;\n"
+            "with --tests extended also the directional tests G_D_Iw, G_D_Kf, G_D_Rw)\n"
+            "from nominal runs, then simulates --runs stops of every fault class (and\n"
+            "twice as many nominal ones by default) and prints the thresholds, the\n"
+            "false-alarm rate Pf of each test, the learned D-matrix (which test fires\n"
+            "for which fault), the sensitivity and specificity of the diagnosis and the\n"
+            "wall time. --json prints all of it, with the detection probabilities Pd and\n"
+            "a histogram of the detection times, as one JSON object.\n"
+            "\n"
+            "--complete also evaluates the complete diagnoser: the decision tree with the\n"
+            "SVM tests S_Kf and S_Iw, the SVM error and the errors of the fault-size\n"
+            "estimates. The paper's size (--runs 5000, 55,000 stops in all) takes a few\n"
+            "minutes."),
+        formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--runs", type=int, default=200,
+                   help="simulated stops per fault class, runs (default 200; the paper uses 5000)")
     p.add_argument("--nominal-runs", type=int, default=None,
-                   help="nominal evaluation runs (default 2 x --runs; paper 10000)")
+                   help="nominal (fault-free) stops for the evaluation, runs (default: 2 x --runs; the "
+                   "paper uses 10000)")
     p.add_argument("--design-runs", type=int, default=None,
-                   help="nominal runs for the threshold design (default: --nominal-runs), separate seeds")
+                   help="nominal stops for the threshold design, simulated with separate seeds, runs "
+                   "(default: --nominal-runs)")
     p.add_argument("--snr", type=snr_db, default=23.0,
-                   help="process-noise SNR in dB (17, 20, 23; default 23)")
-    p.add_argument("--seed", type=int, default=0, help="master seed (default 0)")
+                   help="process-noise signal-to-noise ratio, dB (the paper uses 17, 20 and 23), or 'none' "
+                   "for no process noise (default 23)")
+    p.add_argument("--seed", type=int, default=0, help="master random seed (default 0)")
     p.add_argument("--window", type=int, default=None,
-                   help="one GLRT window for all tests (Table V uses 40; default Table III's 50/10)")
+                   help="one GLRT window length for all tests, samples of 10 ms (Table V uses 40; default: "
+                   "Table III's 50 for G_P1 and 10 for the others)")
     p.add_argument("--magnitudes", choices=["draw", "min"], default="draw",
-                   help="fault sizes: drawn per run inside each class, or each class's minimum (Table V)")
+                   help="fault sizes: 'draw' (default) draws one per run inside each class; 'min' uses each "
+                   "class's smallest fault (Table V)")
     p.add_argument("--pfa", type=float, default=0.0,
-                   help="target per-run false-alarm probability of each test (default 0: thresholds "
-                   "above every nominal design run, plus the margin)")
-    p.add_argument("--margin", type=float, default=0.1, help="relative threshold margin (default 0.1)")
+                   help="target false-alarm probability per run of each test, a probability (default 0: "
+                   "each threshold lies above every nominal design run, plus the margin)")
+    p.add_argument("--margin", type=float, default=0.1,
+                   help="threshold margin, relative to the threshold (default 0.1, i.e. 10 %%)")
     add_manoeuvre_args(p)
-    p.add_argument("--gate", type=float, default=0.5, help="gate time T of G_O_T1/G_O_T2, s (default 0.5)")
+    p.add_argument("--gate", type=float, default=0.5,
+                   help="gate time T of the tests G_O_T1 and G_O_T2, counted from the start of the record "
+                   "(they fire only when the alarm is off up to T and on after it), s (default 0.5)")
     p.add_argument("--tests", choices=["paper", "extended"], default="paper",
-                   help="test set: the paper's five GLRT tests (default), or 'extended': those plus the "
-                   "directional GLRT G_D_Iw of r3 along its I_w signature (detects the I_w fault F4)")
+                   help="test set: 'paper' (default), the paper's five GLRT tests; 'extended', those plus "
+                   "the directional GLRTs G_D_Iw (detects the wheel-inertia fault F4), G_D_Kf and G_D_Rw "
+                   "(tell F3 from F2.1)")
     p.add_argument("--progress", dest="progress", action="store_true", default=None,
-                   help="show a progress bar on stderr (default: when stderr is a terminal)")
-    p.add_argument("--no-progress", dest="progress", action="store_false", help="no progress bar")
+                   help="show a progress bar on standard error (default: when standard error is a terminal)")
+    p.add_argument("--no-progress", dest="progress", action="store_false", help="show no progress bar")
     p.add_argument("--complete", action="store_true",
-                   help="also evaluate the complete diagnoser: tree with the SVM tests S_Kf/S_Iw "
-                   "(sensitivity, specificity), svm_error and the severity estimation errors (JSON key "
-                   "'complete')")
+                   help="also evaluate the complete diagnoser: the tree with the SVM tests S_Kf and S_Iw "
+                   "(sensitivity, specificity), the SVM error and the errors of the fault-size estimates "
+                   "(JSON key 'complete')")
     p.add_argument("--svm-per-size", type=int, default=20,
-                   help="SVM training patterns per fault size with --complete (default 20: 720 patterns)")
+                   help="SVM training patterns per fault size with --complete (default 20, 720 patterns "
+                   "in all)")
     p.add_argument("--estimate-runs", type=int, default=10,
-                   help="runs per class estimated/diagnosed in full with --complete (default 10)")
-    p.add_argument("--json", action="store_true", help="print one JSON object")
+                   help="stops per fault class diagnosed and size-estimated in full with --complete, runs "
+                   "(default 10)")
+    p.add_argument("--json", action="store_true", help="print one JSON object instead of the text report")
     p.set_defaults(func=_campaign)
     return p
 

@@ -4,7 +4,7 @@ For a fault of known class and size, compares the noise-free measurements of the
 nominal stop over a window before the ABS engages, estimates the noise covariance of the same
 quantities from nominal Monte Carlo runs, and prints ``d'`` and the detection probability of the
 likelihood-ratio test for that known change at a false-alarm probability ``--pfa``: an upper
-bound for every residual generator and test (:mod:`fdikit.evaluate.detectability`). When the
+bound for every residual generator and test (:mod:`fdikit.systems.abs.detectability`). When the
 faulty parameter no longer acts after the window (tau_m once the master-cylinder pressure has
 settled), the bound covers the whole record.
 """
@@ -32,17 +32,42 @@ def add_detectability_parser(abs_subparsers) -> argparse.ArgumentParser:
     """
     p = abs_subparsers.add_parser(
         "detectability", help="Neyman-Pearson bound on detecting one ABS fault (known-signal d')",
-        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--fault", required=True, help="fault class: F1.1, F1.2, F2.1, F2.2, F3, F4 or F5")
-    p.add_argument("--magnitude", type=float, required=True, help="relative parameter change (e.g. 0.15)")
-    p.add_argument("--snr", type=snr_db, default=23.0, help="process-noise SNR in dB, or 'none' (default 23)")
+        description=(
+            "The best any detector can do for one ABS fault of known class and size\n"
+            "(luo-et-al benchmark): an upper bound on the detection probability of every\n"
+            "residual generator and test.\n"
+            "\n"
+            "Compares the noise-free measurements of the faulty and the nominal stop over\n"
+            "a time window before the ABS engages, estimates the noise covariance of the\n"
+            "same quantities from nominal Monte Carlo runs, and prints the detectability\n"
+            "d' and the detection probability of the likelihood-ratio test for that known\n"
+            "change at the false-alarm probability --pfa. When the faulty parameter no\n"
+            "longer acts after the window (e.g. the master-cylinder time constant, F5,\n"
+            "once the pressure has settled), it also prints the bound for the whole\n"
+            "record. --json prints the results as one JSON object."),
+        formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--fault", required=True,
+                   help="fault class (Table II): F1.1, F1.2 wheel-speed sensor reading low; F2.1, F2.2 wheel "
+                   "radius smaller; F3 brake torque gain; F4 wheel inertia; F5 master-cylinder time "
+                   "constant")
+    p.add_argument("--magnitude", type=float, required=True,
+                   help="relative change of the faulty parameter, a fraction inside the class (e.g. 0.15 "
+                   "for +15 %%)")
+    p.add_argument("--snr", type=snr_db, default=23.0,
+                   help="process-noise signal-to-noise ratio, dB, or 'none' for measurement noise only "
+                   "(default 23)")
     p.add_argument("--window", type=float, nargs=2, default=[0.5, 2.6], metavar=("START", "END"),
-                   help="window of the record, s (default 0.5 2.6: braking before the ABS engages)")
-    p.add_argument("--block", type=int, default=5, help="samples averaged per quantity (default 5)")
-    p.add_argument("--runs", type=int, default=4000, help="nominal runs for the covariance (default 4000)")
-    p.add_argument("--pfa", type=float, default=1e-4, help="false-alarm probability (default 1e-4)")
-    p.add_argument("--seed", type=int, default=0, help="master seed (default 0)")
-    p.add_argument("--json", action="store_true", help="print one JSON object")
+                   help="start and end of the window, s from the start of the record (default 0.5 2.6: "
+                   "braking before the ABS engages)")
+    p.add_argument("--block", type=int, default=5,
+                   help="consecutive measurement samples averaged into one quantity, samples (default 5)")
+    p.add_argument("--runs", type=int, default=4000,
+                   help="nominal Monte Carlo stops for the noise covariance, runs (default 4000; at least 2, "
+                   "and more than the number of quantities)")
+    p.add_argument("--pfa", type=float, default=1e-4,
+                   help="false-alarm probability at which the bound is given (default 1e-4)")
+    p.add_argument("--seed", type=int, default=0, help="master random seed (default 0)")
+    p.add_argument("--json", action="store_true", help="print one JSON object instead of the text summary")
     p.set_defaults(func=_detectability)
     return p
 

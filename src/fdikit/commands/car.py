@@ -24,30 +24,60 @@ def register(subparsers) -> argparse.ArgumentParser:
     """Add the ``car`` command and its actions; returns the action subparsers."""
     p = subparsers.add_parser("car", help="passenger-car plant (ng-chen-speyer): linearisation, "
                               "real-data fit, scenarios, RAV4 monitor",
-                              description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+                              description=(
+                                  "The passenger car of ng-chen-speyer: a nonlinear sedan model, its\n"
+                                  "linearisation and reduction, a fit of its lateral model to a real\n"
+                                  "Toyota RAV4 CAN log, the health-monitor experiments of the paper, and\n"
+                                  "a lateral monitor run on the recorded RAV4 data.\n"
+                                  "\n"
+                                  "Choose an ACTION; 'fdikit car ACTION --help' lists its options. Every\n"
+                                  "action prints a text summary, or one JSON object with --json."),
+                              formatter_class=argparse.RawDescriptionHelpFormatter)
     actions = p.add_subparsers(dest="car_action", metavar="ACTION")
     p.set_defaults(func=lambda args: (p.print_help(), 0)[1])
     p.car_actions = actions  # later issues: register more actions here
 
-    s = actions.add_parser("linearize", help="linearise at straight driving, reduce, report")
-    s.add_argument("--speed", type=float, default=20.0, help="operating speed, m/s (default 20)")
+    s = actions.add_parser(
+        "linearize", help="linearise at straight driving, reduce, report",
+        description="Linearise the nonlinear passenger car of ng-chen-speyer about straight driving on a "
+                    "flat road at the given speed, split it into longitudinal and lateral models and "
+                    "reduce both. Prints the trim (throttle, engine speed), the size of the "
+                    "longitudinal/lateral cross terms, the states, inputs and outputs of each model, the "
+                    "eigenvalues of the reduced models and the frequency-response error of the reduced "
+                    "models up to --f-max. --json prints one JSON object with the names and the "
+                    "eigenvalues of the full and the reduced models.")
+    s.add_argument("--speed", type=float, default=20.0,
+                   help="operating speed, m/s (default 20; the paper uses 20 and 24)")
     s.add_argument("--method", choices=["modal", "residualize", "balanced"], default="modal",
-                   help="reduction: fast modes truncated with steady-state correction, in the named "
-                   "states (default); residualisation of the named fast states; or balanced "
-                   "residualisation")
-    s.add_argument("--f-max", type=float, default=5.0, help="upper frequency of the error report, Hz")
+                   help="model reduction: 'modal' (default) truncates the fast modes with steady-state "
+                   "correction and keeps named physical states; 'residualize' residualises the fast states "
+                   "(wheel spin, wheel hop); 'balanced' is balanced residualisation. All three keep the DC "
+                   "gain exactly")
+    s.add_argument("--f-max", type=float, default=5.0,
+                   help="upper frequency of the reported frequency-response error, Hz (default 5)")
     s.add_argument("--parity", action="store_true",
-                   help="add the throttle and brake measurements to the longitudinal outputs")
-    s.add_argument("--json", action="store_true", help="print one JSON object")
+                   help="add the throttle and brake measurements (and their sensor faults) to the "
+                   "longitudinal outputs, for the parity equations")
+    s.add_argument("--json", action="store_true", help="print one JSON object instead of the text summary")
     s.set_defaults(func=_linearize)
 
-    f = actions.add_parser("fit", help="fit the lateral model to a real RAV4 CAN log")
+    f = actions.add_parser(
+        "fit", help="fit the lateral model to a real RAV4 CAN log",
+        description="Fit the lateral model of the passenger car (single track plus roll) to one minute "
+                    "of real highway driving of a Toyota RAV4, read from its CAN log. Prints the fitted "
+                    "parameters, the correlation and normalised RMS error of the modelled yaw rate and "
+                    "lateral acceleration against the measured ones, a hold-out check (fit on the first "
+                    "40 s, test on the last 20 s), comparisons with a kinematic bicycle model and a free "
+                    "FIR filter, and the understeer gradient. --json prints one JSON object.")
     f.add_argument("path", nargs="?", default=None,
-                   help="directory with drive.blf and toyota_rav4.dbc (default ../shared/data/rav4-highway)")
-    f.add_argument("--rate", type=float, default=50.0, help="grid rate of the fit, Hz (default 50)")
+                   help="data directory holding the CAN log drive.blf and the signal database "
+                   "toyota_rav4.dbc (default: $FDIKIT_RAV4 if set, else ../shared/data/rav4-highway)")
+    f.add_argument("--rate", type=float, default=50.0,
+                   help="rate of the time grid the signals are resampled to, Hz (default 50)")
     f.add_argument("--ay-weight", type=float, default=0.5,
-                   help="weight of the lateral-acceleration residual (default 0.5)")
-    f.add_argument("--json", action="store_true", help="print one JSON object")
+                   help="weight of the lateral-acceleration error relative to the yaw-rate error in the "
+                   "fit, unitless (default 0.5)")
+    f.add_argument("--json", action="store_true", help="print one JSON object instead of the text summary")
     f.set_defaults(func=_fit)
     from .car_monitor import add_monitor_parsers
 

@@ -26,19 +26,41 @@ def add_monitor_parsers(car_actions) -> None:
     >>> p.parse_args(["scenario", "--list"]).list
     True
     """
-    s = car_actions.add_parser("scenario",
-                               help="run a health-monitor experiment of ng-chen-speyer, Section V")
+    s = car_actions.add_parser(
+        "scenario", help="run a health-monitor experiment of ng-chen-speyer, Section V",
+        description="Run one of the named health-monitor experiments of ng-chen-speyer (Section V) on the "
+                    "simulated passenger car: simulate the drive with its fault, run the monitor and print "
+                    "the detection delay, the isolated fault, the number of false announcements and the "
+                    "peak probability of every fault hypothesis. Without NAME, or with --list, it lists "
+                    "the scenarios. --json prints one JSON object; --plot also writes a figure of the "
+                    "residual norms and the probabilities.")
     s.add_argument("name", nargs="?", help="scenario name (see --list)")
-    s.add_argument("--list", action="store_true", help="list the scenarios")
-    s.add_argument("--json", action="store_true", help="print one JSON object")
-    s.add_argument("--plot", metavar="FILE", help="save the figure of residual norms and probabilities")
-    s.add_argument("--seed", type=int, default=1, help="noise seed (default 1)")
+    s.add_argument("--list", action="store_true", help="list the scenarios with a one-line description")
+    s.add_argument("--json", action="store_true", help="print one JSON object instead of the text summary")
+    s.add_argument("--plot", metavar="FILE",
+                   help="write a figure of the residual norms and probabilities to this image file; the "
+                   "format follows the extension, e.g. .png or .pdf")
+    s.add_argument("--seed", type=int, default=1, help="random seed of the simulated noise (default 1)")
     s.set_defaults(func=_scenario)
 
-    m = car_actions.add_parser("monitor-log", help="lateral monitor on a recorded log, with injected faults")
-    m.add_argument("path", help="data directory (e.g. ../shared/data/rav4-highway)")
-    m.add_argument("--inject", default="none", help="fault SPEC: CHANNEL:MAGNITUDE@START or 'none'")
-    m.add_argument("--json", action="store_true", help="print one JSON object")
+    m = car_actions.add_parser(
+        "monitor-log", help="lateral monitor on a recorded log, with injected faults",
+        description="Run the lateral health monitor designed for the Toyota RAV4 on its recorded minute "
+                    "of highway driving, with sensor faults added to the real signals. The monitor is "
+                    "calibrated on the first half of the minute. Prints the log length, the detection "
+                    "delay and the isolated fault of the first injected fault, the false announcements "
+                    "and the peak probability of every fault hypothesis. --json prints one JSON object.")
+    m.add_argument("path", help="data directory holding the CAN log drive.blf and the signal database "
+                   "toyota_rav4.dbc (e.g. ../shared/data/rav4-highway)")
+    m.add_argument("--inject", default="none",
+                   help="faults to inject, CHANNEL:MAGNITUDE@START with START in s, comma-separated for "
+                   "several: e.g. yaw_rate:0.03@40 (a 0.03 rad/s bias on the yaw-rate sensor from 40 s) or "
+                   "wheel_rl:0.6@40 (+0.6 m/s on the rear-left wheel-speed sensor). CHANNEL is steer "
+                   "(road-wheel angle, rad), a_y (lateral acceleration, m/s^2, left positive), yaw_rate "
+                   "(rad/s), w_front_diff or w_rear_diff (left-right wheel-speed difference of an axle, "
+                   "m/s), or one wheel-speed sensor wheel_fl, wheel_fr, wheel_rl, wheel_rr (m/s). 'none' "
+                   "(default) runs the unaltered log")
+    m.add_argument("--json", action="store_true", help="print one JSON object instead of the text summary")
     m.set_defaults(func=_monitor_log)
 
 

@@ -116,7 +116,14 @@ def _print_section(name: str, out: dict) -> None:
 def register(sub) -> None:
     p = sub.add_parser("demo", help="run a short demonstration of every system",
                        description="Simulate, detect, isolate and reconstruct faults on the "
-                                   "library's example plants, and print what was found.")
-    p.add_argument("--json", action="store_true", help="print one JSON object")
-    p.add_argument("--only", nargs="+", metavar="SECTION", help="run only these sections")
+                                   "library's example plants, and print what was found: one table per "
+                                   "section, with the time each took. The sections are linear (a sensor "
+                                   "bias on a linear two-mass plant), reconstruct (aircraft actuator fault "
+                                   "reconstruction, ng-tan-edwards-kuang), abs, abs_diagnosis and "
+                                   "abs_directional (the ABS benchmark of luo-et-al), car and car_monitor "
+                                   "(the passenger car of ng-chen-speyer). --json prints one JSON object "
+                                   "with one entry per section instead of the tables.")
+    p.add_argument("--json", action="store_true", help="print one JSON object instead of the tables")
+    p.add_argument("--only", nargs="+", metavar="SECTION",
+                   help="run only these sections, e.g. --only linear abs (default: all)")
     p.set_defaults(func=run)

@@ -218,19 +218,48 @@ def _monitor(args) -> int:
 
 def register(sub) -> None:
     p = sub.add_parser("design", help="make the design artifacts of a monitor config",
-                       description="Run the design recipe of a monitor configuration (TOML) and save "
-                                   "every design as a versioned artifact (JSON + NPZ).")
-    p.add_argument("config", help="monitor configuration (TOML)")
-    p.add_argument("--json", action="store_true", help="print one JSON object")
+                       description="Run the design recipe of a monitor configuration (a TOML file) and "
+                                   "save every design it returns as a versioned artifact (a JSON file and "
+                                   "an NPZ file) in the configuration's artifact directory, ready for "
+                                   "'fdikit monitor'. Prints the path of each artifact; --json prints one "
+                                   "JSON object with the paths and the wall time.")
+    p.add_argument("config", help="monitor configuration file (TOML) with a [design] recipe")
+    p.add_argument("--json", action="store_true", help="print one JSON object instead of the paths")
     p.set_defaults(func=_design)
-    p = sub.add_parser("monitor", help="run a config-driven monitor over a log",
-                       description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("log", help="recorded log (CSV or CAN log), or - with --follow for standard input")
-    p.add_argument("--config", required=True, help="monitor configuration (TOML)")
-    p.add_argument("--events", help="write announcements and held samples as JSON lines here")
-    p.add_argument("--stats", help="write residuals and statistics as Parquet here")
-    p.add_argument("--follow", action="store_true", help="stream CSV or candump lines (stdin with LOG = -)")
+    p = sub.add_parser(
+        "monitor", help="run a config-driven monitor over a log",
+        description=(
+            "Run the monitor described by a configuration file (TOML) over a recorded log\n"
+            "and report its fault announcements. Run 'fdikit design CONFIG' first to make\n"
+            "the design artifacts the monitor is built from.\n"
+            "\n"
+            "Batch mode (LOG is a file): reads the log (a CSV table of signals; a BLF, ASC\n"
+            "or candump CAN log, decoded with the config's DBC file; MDF4 or Parquet),\n"
+            "maps its channels (scale, offset), runs the monitor and prints the\n"
+            "number of samples, the announcements and the number of invalid samples that\n"
+            "were held. --json prints this summary as one JSON object; --events and\n"
+            "--stats also write the details to files.\n"
+            "\n"
+            "Follow mode (--follow, LOG '-' for standard input): reads lines as they\n"
+            "arrive, steps the monitor per line and prints each announcement, and each\n"
+            "invalid line or sample, at once as one JSON line. The input is CSV (a header\n"
+            "line with the time column and the source channels first) or, when the config\n"
+            "names a DBC file, 'candump -L' lines, e.g.\n"
+            "    candump -L can0 | fdikit monitor - --config CONFIG --follow\n"
+            "The announcements equal those of a batch run over the same data."),
+        formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("log", help="recorded log file (CSV, BLF, ASC, candump, MDF4 or Parquet), "
+                   "or - with --follow to read standard input")
+    p.add_argument("--config", required=True, help="monitor configuration file (TOML)")
+    p.add_argument("--events",
+                   help="JSON Lines file to write: one line per announcement and per held (invalid) sample")
+    p.add_argument("--stats", help="Parquet file to write: the residuals and test statistics of every sample")
+    p.add_argument("--follow", action="store_true",
+                   help="follow mode: process CSV or candump lines as they arrive (from standard input with "
+                   "LOG = -) and print one JSON line per announcement")
     p.add_argument("--input", choices=("csv", "candump"),
-                   help="follow-mode line format (default: candump when the config has [log].dbc, else CSV)")
-    p.add_argument("--json", action="store_true", help="print one JSON summary object")
+                   help="line format in follow mode (default: candump when the config names a DBC file "
+                   "in [log].dbc, else csv)")
+    p.add_argument("--json", action="store_true",
+                   help="print one JSON summary object (batch mode only; not with --follow)")
     p.set_defaults(func=_monitor)

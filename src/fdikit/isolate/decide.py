@@ -19,8 +19,9 @@ def diagnose_ml(fired: np.ndarray, fail_prob: np.ndarray, classes: Sequence[str]
     With a ``nominal`` class, a run in which no test fired is diagnosed ``nominal`` (the Go path
     of a diagnostic tree, luo-et-al Section VII). Otherwise the diagnosis is the fault class
     (``nominal`` excluded) of maximum likelihood
-    ``log P(o | i) = sum_j o_j log p_ij + (1 - o_j) log(1 - p_ij)``, with ``p_ij`` the probability that test ``j`` fires under class ``i`` (clipped to [1e-6, 1 - 1e-6])
-    and equal priors. (Without the Go-path rule, an undetectable fault whose learned firing
+    ``log P(o | i) = sum_j o_j log p_ij + (1 - o_j) log(1 - p_ij)``, with ``p_ij`` the
+    probability that test ``j`` fires under class ``i`` (clipped to [1e-6, 1 - 1e-6]) and equal
+    priors. (Without the Go-path rule, an undetectable fault whose learned firing
     probabilities are a hair below the nominal false-alarm rates would win every all-pass run.)
 
     Parameters

@@ -48,7 +48,7 @@ from typing import Any
 
 import numpy as np
 
-from ..base.artifacts import load_artifact, save_artifact
+from ..base.artifacts import load_artifact, moved, save_artifact
 from ..errors import DataError
 from ..signals import Signals
 from .core import Decision, Monitor
@@ -187,7 +187,7 @@ def run_design(cfg: MonitorConfig) -> dict[str, Path]:
     recipe = cfg.design.get("recipe")
     if not recipe:
         raise DataError(f"{cfg.path}: [design].recipe is not set (e.g. 'package.module:function')")
-    mod, _, fn = recipe.partition(":")
+    mod, _, fn = moved(recipe).partition(":")
     try:
         func = getattr(importlib.import_module(mod), fn)
     except (ImportError, AttributeError) as exc:

@@ -41,6 +41,7 @@ from .smo import (
     integrate_observers,
     simulate_plant,
 )
+from .transforms import band_limited, delayed_feedthrough, whiten_design
 
 __all__ = [
     "CausalDerivative",
@@ -52,9 +53,11 @@ __all__ = [
     "ParameterSensitivity",
     "SMOConditions",
     "SlidingModeReconstructor",
+    "band_limited",
     "butter_sos",
     "causal_spline_derivative",
     "check_conditions",
+    "delayed_feedthrough",
     "design_filter_set",
     "design_observer_residual",
     "design_optimal_fdf",
@@ -74,4 +77,5 @@ __all__ = [
     "spline_derivative_weights",
     "spline_lam",
     "stack_designs",
+    "whiten_design",
 ]

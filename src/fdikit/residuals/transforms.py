@@ -86,6 +86,7 @@ def delayed_feedthrough(design: FilterDesign) -> FilterDesign:
 
     Examples
     --------
+    >>> from fdikit.residuals import FaultDetectionFilter
     >>> d = FilterDesign(np.zeros((0, 0)), np.zeros((0, 1)), np.zeros((0, 1)), np.zeros((1, 0)),
     ...                  np.array([[-2.0]]), np.array([[1.0]]), 0.1, ["u"], ["y"], ["r"])
     >>> dd = delayed_feedthrough(d)
@@ -116,6 +117,7 @@ def band_limited(design: FilterDesign, band_hz: float, order: int = 2) -> Filter
 
     Examples
     --------
+    >>> from fdikit.residuals import FaultDetectionFilter
     >>> d = FilterDesign(np.zeros((0, 0)), np.zeros((0, 0)), np.zeros((0, 1)), np.zeros((1, 0)),
     ...                  np.zeros((1, 0)), np.ones((1, 1)), 0.02, [], ["y"], ["r"])
     >>> f = FaultDetectionFilter(band_limited(d, 1.0))

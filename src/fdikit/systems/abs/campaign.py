@@ -77,7 +77,7 @@ F2.1 (0.09), ``G_D_Rw`` the reverse (1.00 and 0.00): they are no longer an ambig
 wheel-speed sensor classes F1.1 / F1.2 stay one (every test fires for both; the complete diagnoser
 tells them apart by the severity estimate). What limits every method: F5 at +15 % is not
 detectable in this plant at all. The Neyman-Pearson bound of its known signature over the whole
-record (:func:`fdikit.evaluate.detectability.abs_detectability`) is d' = 0.96 / 0.74 / 0.56 at
+record (:func:`fdikit.systems.abs.detectability.abs_detectability`) is d' = 0.96 / 0.74 / 0.56 at
 23 / 20 / 17 dB, i.e. no detector exceeds Pd = 0.003 at Pfa = 1e-4: the process noise of
 Section III-A masks it (without process noise d' would be 9.0; noise on the speeds alone brings
 it to 1.6, noise on the brake torque alone to 1.5). The sensitivity of any diagnosis is

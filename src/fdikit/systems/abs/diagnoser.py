@@ -63,7 +63,7 @@ G_D_Iw (it fires for every class but F5), the tree reaches 81.3 % up to its leaf
 (specificity 100 %), and the full diagnoser (tree, SVM, severity estimate splitting the sensor
 leaf) 75.2 % exact on 60 runs per class: F1.1 60/60, F1.2 33/60 (at exactly -5 % it sits on the
 class boundary, 27 runs estimated just above it), F2.1 51/60, F2.2 60/60, F3 60/60, F4 52/60,
-F5 0/60 (undetectable, :mod:`fdikit.evaluate.detectability`).
+F5 0/60 (undetectable, :mod:`fdikit.systems.abs.detectability`).
 
 Monitor
 -------

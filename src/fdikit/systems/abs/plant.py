@@ -83,7 +83,7 @@ without it: that observer's own error dominated.) This noise is, however, what m
 smallest parametric faults of Table II invisible to any detector before the ABS engages: the
 Neyman-Pearson bound of the known tau_m +15 % and I_w +2 % signatures over 0.5-2.6 s is
 d' = 0.96 and 1.10 at 23 dB, against 9.0 and 11.1 with measurement noise only
-(:mod:`fdikit.evaluate.detectability`); noise on the speeds alone, or on the brake torque alone,
+(:mod:`fdikit.systems.abs.detectability`); noise on the speeds alone, or on the brake torque alone,
 already brings tau_m's to 1.6 and 1.5.
 
 Random numbers: run ``i`` uses the streams of ``numpy.random.SeedSequence(seed,
