@@ -19,7 +19,7 @@ from ._output import print_json
 
 
 def section_linear(seed: int = 0) -> dict:
-    """Sensor-bias detection on a linear two-mass plant (issue: foundation)."""
+    """Sensor-bias detection on a linear two-mass plant (fdikit.systems.two_mass)."""
     from ..faults import Bias
     from ..monitor import Decision, Monitor
     from ..residuals import ObserverResidual

@@ -4,6 +4,7 @@ filter's residual vector (ng-chen-speyer, Section IV-E), as the input of an MHSS
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from typing import Any
 
 import numpy as np
 from numba import njit
@@ -45,11 +46,13 @@ class FeatureNorms(ResidualProcessor):
 
     Examples
     --------
-    >>> fn = FeatureNorms({"n": ["a", "b"]}, dt=0.01, tau=0.0)
+    >>> fn = FeatureNorms.from_dict(FeatureNorms({"n": ["a", "b"]}, dt=0.01, tau=0.0).to_dict())
     >>> fn.reset(1)
     >>> fn.step([3.0, 4.0]).tolist()
     [[5.0]]
     """
+
+    _state_attrs = ("_x", "_first")
 
     def __init__(self, groups: Mapping[str, Sequence[str]], dt: float, tau: float = 0.0):
         self.groups = {str(k): list(v) for k, v in groups.items()}
@@ -60,6 +63,14 @@ class FeatureNorms(ResidualProcessor):
         self.dt, self.tau = float(dt), float(tau)
         self.alpha = 1.0 if tau <= 0 else float(1.0 - np.exp(-dt / tau))
         self.reset(1)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Configuration as plain data (a design artifact)."""
+        return {"groups": self.groups, "dt": self.dt, "tau": self.tau}
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> FeatureNorms:
+        return cls(d["groups"], d["dt"], d["tau"])
 
     def reset(self, runs: int = 1) -> None:
         self._x = np.zeros((runs, len(self.output_names)))

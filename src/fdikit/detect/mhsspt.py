@@ -850,6 +850,16 @@ class WarmupMHSSPT(MHSSPT):
         super().reset(runs)
         self._warm_from = 0
 
+    def to_dict(self) -> dict:
+        """Configuration as plain data (:meth:`MHSSPT.to_dict` and the warm-up length)."""
+        return {**super().to_dict(), "warmup": self.warmup}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> WarmupMHSSPT:
+        dens = {h: UniformMeanGaussian(v["low"], v["high"], v["std"]) for h, v in d["densities"].items()}
+        return cls(d["inputs"], dens, d["p"], d["pi"], d["q"], d["groups"], tabulate=d.get("tabulate"),
+                   warmup=d.get("warmup", 0))
+
     def resume(self, n_held: int) -> None:
         """Data returns after ``n_held`` held samples (:class:`fdikit.monitor.Monitor`,
         ``on_invalid="hold"``): the filters' states went stale over the gap, so the warm-up

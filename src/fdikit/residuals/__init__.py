@@ -31,6 +31,7 @@ from .parity import (
     spline_derivative_weights,
     spline_lam,
 )
+from .scheduled import ScheduledFilter
 from .sensitivity import ParameterSensitivity
 from .smo import (
     SlidingModeReconstructor,
@@ -52,6 +53,7 @@ __all__ = [
     "ObserverResidual",
     "ParameterSensitivity",
     "SMOConditions",
+    "ScheduledFilter",
     "SlidingModeReconstructor",
     "band_limited",
     "butter_sos",

@@ -57,7 +57,7 @@ from ...base import ResidualGenerator
 from ...detect import Hold
 from ...detect.features import FeatureNorms
 from ...detect.mhsspt import WarmupMHSSPT, calibrate_densities, extend_ranges, floor_std
-from ...errors import ConditionError, DataError, ModelError
+from ...errors import ConditionError, ModelError
 from ...faults import Bias, Noise
 from ...monitor import Decision, Monitor
 from ...residuals import (
@@ -67,6 +67,7 @@ from ...residuals import (
     internal_form,
     stack_designs,
 )
+from ...residuals.scheduled import ScheduledFilter
 from ...residuals.transforms import delayed_feedthrough, whiten_design
 from ...signals import Signals
 from .driving import DRIVE_OUTPUTS, simulate_drive
@@ -84,7 +85,6 @@ __all__ = [
     "CarMonitorDesign",
     "OffsetFilter",
     "ParityEquations",
-    "ScheduledCarFilter",
     "build_monitor",
     "calibrate_monitor",
     "car_signals",
@@ -546,7 +546,9 @@ def _generators(des: CarMonitorDesign, block: str) -> tuple[list[ResidualGenerat
                 speeds.append(other.speed)
                 fs.append(_filter_generator(other, LONGITUDINAL_SETS))
             order = np.argsort(speeds)
-            fg = ScheduledCarFilter([speeds[i] for i in order], [fs[i] for i in order], DEFAULT_PARAMS["r_w"])
+            # the speed measured by the rear (undriven) wheels, v = r_w w_rear_sum / 2
+            fg = ScheduledFilter([speeds[i] for i in order], [fs[i] for i in order], variable="w_rear_sum",
+                                 scale=DEFAULT_PARAMS["r_w"] / 2.0)
         gens: list[ResidualGenerator] = [fg, ParityEquations(des.dt, _tau_b())]
         groups = des.residual_groups(LONGITUDINAL_SETS)
         groups.update({"|parity1|": ["parity1"], "|parity2|": ["parity2"]})
@@ -556,67 +558,6 @@ def _generators(des: CarMonitorDesign, block: str) -> tuple[list[ResidualGenerat
     else:
         raise ModelError(f"block must be 'longitudinal' or 'lateral', got {block!r}")
     return gens, groups
-
-
-class ScheduledCarFilter(ResidualGenerator):
-    """Filters of the same sets designed at several speeds (each about its own trim), run in
-    parallel; the residual is the linear interpolation between the two designs nearest the speed
-    measured by the rear (undriven) wheels, ``v = r_w w_rear_sum / 2`` (gain scheduling by
-    residual blending; every filter runs all the time, so its state is always current).
-
-    Parameters
-    ----------
-    speeds : sequence of float
-        Design speeds (m/s), increasing.
-    filters : sequence of OffsetFilter
-        One per speed, same channels and residual names; ``w_rear_sum`` among the measurements.
-    r_w : float
-        Wheel rolling radius (m).
-    """
-
-    def __init__(self, speeds: Sequence[float], filters: Sequence[OffsetFilter], r_w: float):
-        self.speeds = np.asarray(speeds, float)
-        if self.speeds.ndim != 1 or np.any(np.diff(self.speeds) <= 0):
-            raise DataError(f"speeds must be increasing, got {speeds}")
-        self.filters = list(filters)
-        f0 = self.filters[0]
-        for f in self.filters:
-            if (f.u_names, f.y_names, f.output_names) != (f0.u_names, f0.y_names, f0.output_names):
-                raise DataError("scheduled filters must read and produce the same channels")
-        if "w_rear_sum" not in f0.y_names:
-            raise DataError("the speed schedule needs the rear wheel-speed sum among the measurements")
-        self.u_names, self.y_names = list(f0.u_names), list(f0.y_names)
-        self.output_names = list(f0.output_names)
-        self._iv = self.y_names.index("w_rear_sum")
-        self.r_w = float(r_w)
-        self.reset(1)
-
-    def reset(self, runs: int = 1) -> None:
-        for f in self.filters:
-            f.reset(runs)
-
-    def _blend(self, R, v):
-        K = self.speeds.size
-        out = np.zeros_like(R[0])
-        if K == 1:
-            return out + R[0]
-        vc = np.clip(v, self.speeds[0], self.speeds[-1])
-        i = np.clip(np.searchsorted(self.speeds, vc, side="right") - 1, 0, K - 2)
-        w = (vc - self.speeds[i]) / (self.speeds[i + 1] - self.speeds[i])
-        for k, r in enumerate(R):
-            wk = np.where(i == k, 1.0 - w, 0.0) + np.where(i + 1 == k, w, 0.0)
-            out += wk[..., None] * r
-        return out
-
-    def _step(self, u, y):
-        R = [f._step(u, y) for f in self.filters]
-        return self._blend(R, self.r_w * y[:, self._iv] / 2.0)
-
-    def run(self, signals: Signals) -> Signals:
-        R = [f.run(signals).values for f in self.filters]
-        v = self.r_w * signals.values[:, :, signals.index(["w_rear_sum"])[0]] / 2.0
-        self.reset(signals.runs)
-        return Signals(signals.t, self._blend(R, v), self.output_names, check=False)
 
 
 def _tau_b() -> float:
@@ -711,7 +652,8 @@ def calibrate_monitor(block: str = "longitudinal", speed: float = 20.0, *, kind:
     the hypotheses' ranges, :func:`extend_ranges`) and ``hold`` (samples a probability must stay
     at the announcement level) default to :data:`BLOCK_SETTINGS`. The longitudinal filters are
     also designed at the speeds ``schedule`` (default ``speed + 4``, the scenarios' speed steps)
-    and blended by the measured speed (:class:`ScheduledCarFilter`); ``()`` for one design.
+    and blended by the speed the rear wheels measure (:class:`~fdikit.residuals.ScheduledFilter`);
+    ``()`` for one design.
     Every density's standard deviation of a feature is then floored at ``std_floor`` times its
     upper mean and, with ``h0_floor``, at the no-fault std (:func:`floor_std`; a fault adds to the
     noise, and a fault hypothesis narrower than H0 would out-score H0 at the no-fault mean

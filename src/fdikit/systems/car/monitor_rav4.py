@@ -91,7 +91,6 @@ from typing import Any
 import numpy as np
 from numba import njit
 
-from ...base import ResidualGenerator
 from ...detect import Hold
 from ...detect.features import FeatureNorms
 from ...detect.mhsspt import (
@@ -106,14 +105,15 @@ from ...detect.mhsspt import (
 from ...errors import DataError
 from ...model.linear import GROUPS, LinearFaultModel
 from ...monitor import Decision, Monitor
-from ...residuals import FaultDetectionFilter, FilterDesign, fault_detection_filter, stack_designs
+from ...residuals import FilterDesign, fault_detection_filter, stack_designs
+from ...residuals.scheduled import ScheduledFilter
 from ...residuals.transforms import band_limited, delayed_feedthrough
 from ...signals import Signals
 from .monitor import FILTER_SETS, LATERAL_SETS
 from .rav4 import RAV4, default_data_path
 
 __all__ = ["CHANNELS", "RAV4_FAULTS", "RAW_CHANNELS", "RAW_SOURCES", "Rav4FeatureNorms", "Rav4LateralFilter",
-           "Rav4MHSSPT", "Rav4Monitor", "Rav4Preprocessing", "ScheduledFilter", "design",
+           "Rav4MHSSPT", "Rav4Monitor", "Rav4Preprocessing", "design",
            "inject", "load_rav4_raw", "parse_inject", "rav4_monitor", "run_rav4_log"]
 
 #: Monitored faults of the RAV4 lateral monitor -> (monitor channel the fault is injected on, magnitudes).
@@ -311,92 +311,14 @@ def _preprocessing(raw: Signals, half_s: float, rate: float) -> tuple[Rav4Prepro
 
 
 # ---------------------------------------------------------------------------------- filters
-class ScheduledFilter(ResidualGenerator):
-    """A bank of filters designed at several speeds, run in parallel; the residual is the linear
-    interpolation, in the measured speed, between the two filters designed at the nearest speeds
-    (gain scheduling by residual blending; every filter runs all the time, so its state is
-    always current).
-
-    Parameters
-    ----------
-    speeds : sequence of float
-        Design speeds (m/s), increasing.
-    designs : sequence of FilterDesign
-        One per speed, the same channels and residual names.
-
-    Examples
-    --------
-    >>> from fdikit.residuals import FilterDesign
-    >>> mk = lambda g: FilterDesign(np.zeros((0, 0)), np.zeros((0, 1)), np.zeros((0, 1)), np.zeros((1, 0)),
-    ...                             np.zeros((1, 1)), np.array([[g]]), 0.1, ["u"], ["y"], ["r"])
-    >>> f = ScheduledFilter([10.0, 20.0], [mk(1.0), mk(3.0)])
-    >>> f.reset(1)
-    >>> float(f.step([0.0, 15.0], [1.0])[0, 0])       # halfway: (1 + 3) / 2
-    2.0
-    """
-
-    _state_attrs = ("filters",)
-
-    def __init__(self, speeds, designs):
-        self.speeds = np.asarray(speeds, float)
-        if self.speeds.ndim != 1 or self.speeds.size < 1 or np.any(np.diff(self.speeds) <= 0):
-            raise DataError(f"speeds must be increasing, got {speeds}")
-        designs = list(designs)
-        if len(designs) != self.speeds.size:
-            raise DataError(f"{self.speeds.size} speeds but {len(designs)} designs")
-        self.designs = designs
-        self.filters = [FaultDetectionFilter(d) for d in designs]
-        d0 = designs[0]
-        for d in designs:
-            if d.u_names != d0.u_names or d.y_names != d0.y_names or d.residual_names != d0.residual_names:
-                raise DataError("scheduled designs must read and produce the same channels")
-        self.u_names = [*d0.u_names, "speed"]
-        self.y_names = list(d0.y_names)
-        self.output_names = list(d0.residual_names)
-        self.reset(1)
-
-    def reset(self, runs: int = 1) -> None:
-        for f in self.filters:
-            f.reset(runs)
-
-    def _weights(self, U: np.ndarray) -> np.ndarray:
-        """(..., K) interpolation weights."""
-        K = self.speeds.size
-        W = np.zeros((*U.shape, K))
-        if K == 1:
-            W[..., 0] = 1.0
-            return W
-        Uc = np.clip(U, self.speeds[0], self.speeds[-1])
-        i = np.clip(np.searchsorted(self.speeds, Uc, side="right") - 1, 0, K - 2)
-        w = (Uc - self.speeds[i]) / (self.speeds[i + 1] - self.speeds[i])
-        np.put_along_axis(W, i[..., None], (1.0 - w)[..., None], axis=-1)
-        np.put_along_axis(W, (i + 1)[..., None], w[..., None], axis=-1)
-        return W
-
-    def _blend(self, R: list[np.ndarray], U: np.ndarray) -> np.ndarray:
-        W = self._weights(U)
-        out = np.zeros_like(R[0])
-        for k, r in enumerate(R):
-            out += W[..., k, None] * r
-        return out
-
-    def _step(self, u, y):
-        R = [f._step(u[:, :-1], y) for f in self.filters]
-        return self._blend(R, u[:, -1])
-
-    def run(self, signals: Signals) -> Signals:
-        R = [f.run(signals).values for f in self.filters]
-        U = signals.values[:, :, signals.index(["speed"])[0]]
-        return Signals(signals.t, self._blend(R, U), self.output_names, check=False)
-
-
 class Rav4LateralFilter(ScheduledFilter):
     """The RAV4 lateral residual generator on the raw CAN channels: preprocessing, then the
     speed-scheduled (band-limited) filter bank.
 
     Reads ``u`` = ``steer_angle, steer_fraction, speed`` and ``y`` = ``yaw_rate_raw, accel_y_raw,
     wheel_fl, wheel_fr, wheel_rl, wheel_rr`` (SI: rad, m/s, rad/s, m/s^2; :data:`RAW_CHANNELS`),
-    maps them with ``pre`` to the monitor channels and runs :class:`ScheduledFilter` on them.
+    maps them with ``pre`` to the monitor channels and runs :class:`~fdikit.residuals.ScheduledFilter`
+    (scheduled by the speed) on them.
     Saveable (``to_dict`` / ``from_dict``: a design artifact) and checkpointable (the filter
     states).
 
@@ -458,26 +380,9 @@ class Rav4LateralFilter(ScheduledFilter):
 
 
 # ---------------------------------------------------------------------------------- processors
-class Rav4FeatureNorms(FeatureNorms):
-    """:class:`~fdikit.detect.FeatureNorms` as a saveable, checkpointable
-    artifact (``to_dict`` / ``from_dict``; state ``_x``).
-
-    Examples
-    --------
-    >>> f = Rav4FeatureNorms.from_dict(Rav4FeatureNorms({"n": ["a", "b"]}, 0.02, 0.0).to_dict())
-    >>> f.reset(1)
-    >>> f.step([3.0, 4.0]).tolist()
-    [[5.0]]
-    """
-
-    _state_attrs = ("_x", "_first")
-
-    def to_dict(self) -> dict[str, Any]:
-        return {"groups": self.groups, "dt": self.dt, "tau": self.tau}
-
-    @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> Rav4FeatureNorms:
-        return cls(d["groups"], d["dt"], d["tau"])
+#: The RAV4 monitor's features are the core :class:`~fdikit.detect.FeatureNorms` (saveable and
+#: checkpointable); the name stays for artifacts that recorded it.
+Rav4FeatureNorms = FeatureNorms
 
 
 @njit(cache=True)
@@ -508,8 +413,10 @@ def _serial_step(x, low, high, std, point, logw, logF, log1mp, logp_pi, logq, lo
 
 
 class Rav4MHSSPT(WarmupMHSSPT):
-    """:class:`~fdikit.detect.WarmupMHSSPT` as a saveable artifact (the
-    warm-up length is part of its ``to_dict``).
+    """:class:`~fdikit.detect.WarmupMHSSPT` for the RAV4 monitor: its warm-up features are the
+    middle of the no-fault range, and one streaming sample runs a serial compiled kernel (the same
+    arithmetic as the batch path, without the parallel launch). ``from_dict`` rebuilds the
+    exact-density test (the artifact's ``tabulate`` is not used, as when it was designed).
 
     Examples
     --------
@@ -545,9 +452,6 @@ class Rav4MHSSPT(WarmupMHSSPT):
                      out[:, 0])
         self._k += 1
         return out
-
-    def to_dict(self) -> dict[str, Any]:
-        return {**super().to_dict(), "warmup": self.warmup}
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> Rav4MHSSPT:
