@@ -59,9 +59,10 @@ def test_abs_config_detects_rw_fault_and_stays_quiet_on_nominal(tmp_path):
     run over CSV logs: an R_w fault of -25 % (class F2.2) fires G_P1 (paper: Pd 0.979), nominal
     records announce nothing, the alarms equal TestBank.alarms of the same designs, and a
     checkpoint mid-record continues identically in a fresh monitor."""
+    from fdikit.detect import TestBank
     from fdikit.monitor import load_artifact
     from fdikit.monitor.config import build_monitor, load_config, map_channels, read_log
-    from fdikit.systems.abs.campaign import TestBank, abs_residuals, paper_tests
+    from fdikit.systems.abs.campaign import abs_residuals, paper_tests
 
     shutil.copy(EXAMPLES / "abs" / "monitor.toml", tmp_path / "monitor.toml")
     out = cli("design", tmp_path / "monitor.toml", "--json")
@@ -111,9 +112,10 @@ def test_abs_extended_config_detects_small_iw_fault(tmp_path):
     logs through fdikit monitor: an I_w fault of -3 % (class F4) fires G_D_Iw and no change-in-mean
     test; nominal records announce nothing; the config-built monitor fires what TestBank.alarms fires
     with the same designs."""
+    from fdikit.detect import TestBank
     from fdikit.monitor import load_artifact
     from fdikit.monitor.config import build_monitor, load_config, map_channels, read_log
-    from fdikit.systems.abs.campaign import TestBank, abs_residuals, extended_tests
+    from fdikit.systems.abs.campaign import abs_residuals, extended_tests
 
     shutil.copy(EXAMPLES / "abs" / "monitor_extended.toml", tmp_path / "monitor.toml")
     out = cli("design", tmp_path / "monitor.toml", "--json")

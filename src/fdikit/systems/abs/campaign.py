@@ -120,8 +120,6 @@ __all__ = [
     "PAPER_TABLE_IV",
     "PAPER_TABLE_V",
     "CampaignResult",
-    "TestBank",
-    "TestSpec",
     "abs_residuals",
     "design_tests",
     "diagnose_ml",

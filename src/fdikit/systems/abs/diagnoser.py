@@ -83,9 +83,10 @@ from typing import Any
 
 import numpy as np
 
+from ...detect.bank import TestBank
 from ...errors import DataError
 from ...signals import Signals
-from .campaign import TestBank, abs_residuals, design_tests, paper_tests, residual_generators
+from .campaign import abs_residuals, design_tests, paper_tests, residual_generators
 
 __all__ = [
     "ESTIMATED_PARAM",
