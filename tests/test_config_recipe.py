@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 
@@ -50,9 +51,9 @@ def test_recipe_beside_the_config_through_the_cli(tmp_path):
     module = "my_cli_recipe_41b"
     (tmp_path / f"{module}.py").write_text(RECIPE)
     (tmp_path / "monitor.toml").write_text(CONFIG.format(module=module))
-    env = {k: v for k, v in __import__("os").environ.items() if k != "PYTHONPATH"}
-    res = subprocess.run([sys.executable, "-m", "fdikit.cli", "design", str(tmp_path / "monitor.toml"), "--json"],
-                         capture_output=True, text=True, cwd="/", env=env, timeout=300)
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    cmd = [sys.executable, "-m", "fdikit.cli", "design", str(tmp_path / "monitor.toml"), "--json"]
+    res = subprocess.run(cmd, capture_output=True, text=True, cwd="/", env=env, timeout=300)
     assert res.returncode == 0, res.stderr
     assert "hold" in json.loads(res.stdout.strip().splitlines()[-1])["artifacts"]
 
