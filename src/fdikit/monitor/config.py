@@ -65,7 +65,8 @@ RUNTIMES = {
 _SCHEMA: dict[str, dict[str, type | tuple[type, ...]]] = {
     "monitor": {"name": str, "artifacts": str, "on_invalid": str},
     "log": {"format": str, "time": str, "dbc": str, "rate": (int, float)},
-    "design": {"recipe": str, "params": dict},
+    "design": {"recipe": str, "params": dict, "sample_time": (int, float), "plant": dict, "faults": dict,
+               "disturbances": dict, "noise": dict, "alarm": dict, "structure": dict},
     "decision": {"channels": list, "level": (int, float), "names": dict},
 }
 _CHANNEL_KEYS: dict[str, type | tuple[type, ...]] = {"source": str, "scale": (int, float),

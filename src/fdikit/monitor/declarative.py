@@ -1,0 +1,419 @@
+"""Your own system from a config file: the plant, its faults, its noise and the false-alarm target
+declared in TOML instead of written in a Python recipe.
+
+The ``[design]`` table of a monitor config (:mod:`fdikit.monitor.config`) may declare, instead of
+(or beside) a ``recipe``::
+
+    [design]
+    sample_time = 0.01                 # s: the monitor's sample time (the log's grid)
+
+    [design.plant]                     # ONE of: matrices inline, a file, or a Python object
+    A = [[-2.0, 1.0], [0.0, -5.0]]     # inline state-space matrices (continuous unless dt is given)
+    B = [[0.0], [5.0]]
+    C = [[1.0, 0.0], [0.0, 1.0]]
+    # D = [[0.0], [0.0]]
+    # dt = 0.01                        # the matrices are already discrete with this sample time
+    # file = "plant.npz"               # arrays A, B, C (and D, dt) in an NPZ file beside the config
+    # object = "my_plant:model"        # a python-control StateSpace / TransferFunction, a
+    #                                  # LinearFaultModel, a fdikit NonlinearModel, or a function
+    #                                  # returning one; "module:attr", the module may sit beside
+    #                                  # the config
+    states = ["i", "w"]
+    inputs = ["V"]
+    outputs = ["i_meas", "w_meas"]
+
+    [design.plant.operating_point]     # NonlinearModel only: where to linearise
+    x = { i = 0.0, w = 10.0 }          # state name -> value
+    u = { V = 12.0 }                   # input name -> value
+
+    [design.faults]                    # the faults to detect and isolate, by name
+    names = ["actuator:V", "sensor:i_meas", "sensor:w_meas"]
+
+    [design.disturbances]              # unknown inputs to decouple: name -> state-equation column
+    load = [0.0, -1.0]
+
+    [design.noise]                     # measurement noise: variances per output (unit^2) ...
+    measurement = { i_meas = 1e-4, w_meas = 4e-4 }
+    process = 1e-8                     # state noise variance (scalar or one per state)
+    # nominal_log = "nominal.csv"      # ... or estimated from a nominal log (see estimate_noise)
+
+    [design.alarm]                     # the false-alarm target
+    pfa = 1e-3
+    per = "hour"                       # "sample", "run" or "hour"
+    run_length = 60.0                  # s: the length of a "run" when per = "run"
+    hold = 5                           # samples over the threshold before an alarm
+
+:func:`plant_from_config`, :func:`noise_from_config` and :func:`alarm_from_config` turn those tables
+into a :class:`~fdikit.model.LinearFaultModel`, noise variances and an :class:`AlarmTarget`; every
+key is checked and an error names the key and the file.
+"""
+
+from __future__ import annotations
+
+import importlib
+import math
+import sys
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import DataError, ModelError
+from ..model import LinearFaultModel, linearize
+from ..signals import Signals
+
+__all__ = ["DESIGN_KEYS", "AlarmTarget", "alarm_from_config", "estimate_noise", "import_object",
+           "noise_from_config", "plant_from_config"]
+
+#: Keys of the declarative ``[design]`` sub-tables and their types.
+DESIGN_KEYS: dict[str, dict[str, type | tuple[type, ...]]] = {
+    "plant": {"A": list, "B": list, "C": list, "D": list, "dt": (int, float), "file": str, "object": str,
+              "states": list, "inputs": list, "outputs": list, "operating_point": dict, "params": dict},
+    "faults": {"names": list},
+    "disturbances": {},
+    "noise": {"measurement": (dict, int, float), "process": (list, int, float), "nominal_log": str,
+              "time": str},
+    "alarm": {"pfa": (int, float), "per": str, "run_length": (int, float), "hold": int},
+    "structure": {},
+}
+
+
+def _check(table: Any, allowed: Mapping[str, Any], where: str) -> dict:
+    if not isinstance(table, Mapping):
+        raise DataError(f"config: [{where}] must be a table, got {type(table).__name__}")
+    for k, v in table.items():
+        if allowed and k not in allowed:
+            raise DataError(f"config: unknown key {k!r} in [{where}]; allowed: {sorted(allowed)}")
+        want = allowed.get(k) if allowed else None
+        if want is not None and (not isinstance(v, want) or (isinstance(v, bool) and want is not bool)):
+            names = want.__name__ if isinstance(want, type) else " or ".join(t.__name__ for t in want)
+            raise DataError(f"config: [{where}].{k} must be {names}, got {type(v).__name__} {v!r}")
+    return dict(table)
+
+
+def import_object(spec: str, base_dir: str | Path | None = None, *, where: str = "config") -> Any:
+    """The object named ``"module:attribute"``; a module beside the config (``base_dir``) is found
+    there without PYTHONPATH.
+
+    Examples
+    --------
+    >>> import_object("fdikit.model:LinearFaultModel").__name__
+    'LinearFaultModel'
+    """
+    mod, sep, attr = str(spec).partition(":")
+    if not sep or not mod or not attr:
+        raise DataError(f"{where}: {spec!r} must be 'module:attribute'")
+    here = None if base_dir is None else Path(base_dir).resolve()
+    top = mod.split(".")[0]
+    local = here is not None and ((here / f"{top}.py").is_file() or (here / top / "__init__.py").is_file())
+    if local:
+        sys.path.insert(0, str(here))
+    try:
+        obj: Any = importlib.import_module(mod)
+        for part in attr.split("."):
+            obj = getattr(obj, part)
+    except (ImportError, AttributeError) as exc:
+        raise DataError(f"{where}: {spec!r} cannot be imported ({exc})") from None
+    finally:
+        if local and sys.path and sys.path[0] == str(here):
+            sys.path.pop(0)
+    return obj
+
+
+def _names(spec: Mapping[str, Any], key: str, n: int | None, where: str) -> list[str] | None:
+    v = spec.get(key)
+    if v is None:
+        return None
+    if not all(isinstance(s, str) for s in v):
+        raise DataError(f"config: [{where}].{key} must be a list of names, got {v!r}")
+    if n is not None and len(v) != n:
+        raise DataError(f"config: [{where}].{key} has {len(v)} names for {n} {key}")
+    return list(v)
+
+
+def _matrix(v: Any, what: str, where: str) -> np.ndarray:
+    try:
+        M = np.atleast_2d(np.asarray(v, dtype=float))
+    except (TypeError, ValueError):
+        raise DataError(f"config: [{where}].{what} must be a matrix of numbers (a list of rows)") from None
+    if M.ndim != 2:
+        raise DataError(f"config: [{where}].{what} must be 2-D (a list of rows), got shape {M.shape}")
+    if not np.all(np.isfinite(M)):
+        i, j = np.argwhere(~np.isfinite(M))[0]
+        raise DataError(f"config: [{where}].{what}[{i}][{j}] is not finite")
+    return M
+
+
+def _from_object(obj: Any, spec: Mapping[str, Any], where: str) -> LinearFaultModel:
+    if callable(obj) and not isinstance(obj, type) and not hasattr(obj, "A") and not hasattr(obj, "f"):
+        obj = obj()
+    if isinstance(obj, LinearFaultModel):
+        return obj.copy()
+    if hasattr(obj, "f") and hasattr(obj, "h") and hasattr(obj, "states"):    # a NonlinearModel
+        op = _check(spec.get("operating_point", {}), {"x": dict, "u": dict}, f"{where}.operating_point")
+        if "x" not in op:
+            raise DataError(f"config: a nonlinear plant needs [{where}.operating_point] "
+                            "x = {state = value}")
+        try:
+            return linearize(obj, op["x"], op.get("u"), spec.get("params"))
+        except (ModelError, DataError) as exc:
+            raise DataError(f"config: [{where}]: cannot linearise at the operating point ({exc})") from None
+    try:
+        import control
+    except ImportError:  # pragma: no cover - a dependency
+        control = None
+    if control is not None and isinstance(obj, control.TransferFunction | control.StateSpace):
+        ss = control.ss(obj) if isinstance(obj, control.TransferFunction) else obj
+        return LinearFaultModel.from_statespace(ss)
+    raise DataError(f"config: [{where}].object is a {type(obj).__name__}: expected a LinearFaultModel, a "
+                    "NonlinearModel, a python-control StateSpace/TransferFunction, or a function "
+                    "returning one")
+
+
+def plant_from_config(design: Mapping[str, Any], base_dir: str | Path = ".", *,
+                      where: str = "design") -> LinearFaultModel:
+    """The plant of a declarative ``[design]`` table, with its faults and disturbances declared.
+
+    Parameters
+    ----------
+    design : mapping
+        The ``[design]`` table (``plant``, ``faults``, ``disturbances``; see the module docstring).
+    base_dir : path
+        Where relative file names and modules are looked up (the config's folder).
+
+    Returns
+    -------
+    LinearFaultModel
+        Continuous or discrete as declared, with ``faults.names`` declared and the disturbances
+        as the ``d`` group.
+
+    Examples
+    --------
+    >>> m = plant_from_config({"plant": {"A": [[-1.0]], "B": [[1.0]], "C": [[1.0]], "inputs": ["u"],
+    ...                                  "outputs": ["y"]},
+    ...                        "faults": {"names": ["actuator:u", "sensor:y"]}})
+    >>> m.fault_names, m.dt is None
+    (['actuator:u', 'sensor:y'], True)
+    """
+    if "plant" not in design:
+        raise DataError(f"config: [{where}.plant] is missing (state-space matrices, a file or an object)")
+    spec = _check(design["plant"], DESIGN_KEYS["plant"], f"{where}.plant")
+    base = Path(base_dir)
+    given = [k for k in ("A", "file", "object") if k in spec]
+    if len(given) != 1:
+        raise DataError(f"config: [{where}.plant] needs exactly one of A/B/C matrices, file or object; "
+                        f"got {given or 'none'}")
+    if "object" in spec:
+        model = _from_object(import_object(spec["object"], base, where=f"[{where}.plant].object"), spec,
+                             f"{where}.plant")
+        if any(k in spec for k in ("states", "inputs", "outputs")):
+            raise DataError(f"config: [{where}.plant] names come from the object; remove "
+                            "states/inputs/outputs")
+    else:
+        if "file" in spec:
+            path = (base / spec["file"]).resolve()
+            try:
+                with np.load(path, allow_pickle=False) as z:
+                    mats = {k: z[k] for k in z.files}
+            except FileNotFoundError:
+                raise DataError(f"config: [{where}.plant].file {str(path)!r} does not exist") from None
+            except (ValueError, OSError) as exc:
+                raise DataError(f"config: [{where}.plant].file {str(path)!r} is not an NPZ file "
+                                f"({exc})") from None
+            missing = [k for k in ("A", "B", "C") if k not in mats]
+            if missing:
+                raise DataError(f"config: [{where}.plant].file {str(path)!r} lacks the arrays {missing}")
+            dt = float(mats["dt"]) if "dt" in mats else spec.get("dt")
+        else:
+            missing = [k for k in ("B", "C") if k not in spec]
+            if missing:
+                raise DataError(f"config: [{where}.plant] has A but not {missing}")
+            mats = {k: spec[k] for k in ("A", "B", "C", "D") if k in spec}
+            dt = spec.get("dt")
+        A = _matrix(mats["A"], "A", f"{where}.plant")
+        n = A.shape[0]
+        B = _matrix(mats["B"], "B", f"{where}.plant")
+        C = _matrix(mats["C"], "C", f"{where}.plant")
+        D = _matrix(mats["D"], "D", f"{where}.plant") if "D" in mats else None
+        if A.shape != (n, n):
+            raise DataError(f"config: [{where}.plant].A must be square, got shape {A.shape}")
+        if B.shape[0] != n:
+            if B.shape[1] == n:
+                raise DataError(f"config: [{where}.plant].B has shape {B.shape}: it needs {n} rows (one per "
+                                "state); is it transposed?")
+            raise DataError(f"config: [{where}.plant].B must have {n} rows, got shape {B.shape}")
+        if C.shape[1] != n:
+            raise DataError(f"config: [{where}.plant].C must have {n} columns, got shape {C.shape}")
+        if D is not None and D.shape != (C.shape[0], B.shape[1]):
+            raise DataError(f"config: [{where}.plant].D must have shape {(C.shape[0], B.shape[1])}, "
+                            f"got {D.shape}")
+        if dt is not None and not (float(dt) > 0 and math.isfinite(float(dt))):
+            raise DataError(f"config: [{where}.plant].dt must be a positive sample time, got {dt}")
+        try:
+            model = LinearFaultModel(A, B, C, D, dt=None if dt is None else float(dt),
+                                     states=_names(spec, "states", n, f"{where}.plant"),
+                                     inputs=_names(spec, "inputs", B.shape[1], f"{where}.plant"),
+                                     outputs=_names(spec, "outputs", C.shape[0], f"{where}.plant"))
+        except ModelError as exc:
+            raise DataError(f"config: [{where}.plant]: {exc}") from None
+    dist = _check(design.get("disturbances", {}), {}, f"{where}.disturbances")
+    if dist:
+        cols = []
+        for name, col in dist.items():
+            v = np.asarray(col, dtype=float).ravel()
+            if v.size != model.n_states or not np.all(np.isfinite(v)):
+                raise DataError(f"config: [{where}.disturbances].{name} must be {model.n_states} finite "
+                                f"numbers (a state-equation column for the states {model.states}), "
+                                f"got {col!r}")
+            cols.append(v)
+        Bd = np.column_stack([model.B_of("d"), *cols])
+        Dd = np.column_stack([model.D_of("d"), np.zeros((model.n_outputs, len(cols)))])
+        names_w = model.input_names("w")
+        model = LinearFaultModel(model.A, model.B_of("u"), model.C, model.D_of("u"), dt=model.dt,
+                                 states=model.states, inputs=model.input_names("u"), outputs=model.outputs,
+                                 Bd=Bd, Dd=Dd, disturbances=[*model.input_names("d"), *dist],
+                                 Bw=model.B_of("w") if names_w else None,
+                                 Dw=model.D_of("w") if names_w else None,
+                                 noises=names_w or None, faults=model.fault_names, name=model.name)
+    faults = _check(design.get("faults", {}), DESIGN_KEYS["faults"], f"{where}.faults").get("names", [])
+    if not faults:
+        eg = [f"actuator:{u}" for u in model.inputs[:1]] + [f"sensor:{y}" for y in model.outputs[:1]]
+        raise DataError(f"config: [{where}.faults] names = [...] is missing: which faults should the "
+                        f"monitor find? e.g. {eg}")
+    try:
+        model = model.without_faults().with_faults(*faults)
+    except ModelError as exc:
+        raise DataError(f"config: [{where}.faults]: {exc}") from None
+    return model
+
+
+def estimate_noise(signals: Signals, channels: Sequence[str] | None = None) -> dict[str, float]:
+    """Measurement-noise variance of each channel of a nominal record, from its second differences.
+
+    For a smooth signal ``s`` plus white noise ``e`` of variance ``sigma^2``, the second difference
+    ``y[k+1] - 2 y[k] + y[k-1]`` is ``e``'s (variance ``6 sigma^2``) plus a signal part of order
+    ``dt^2 s''``, negligible at a sampled rate well above the signal's band. A robust scale (1.4826
+    times the median absolute deviation) keeps rare spikes and steps out of it:
+    ``sigma = 1.4826 MAD(d2) / sqrt(6)``. Samples flagged invalid (NaN) are skipped.
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(0)
+    >>> t = np.arange(20000) * 0.01
+    >>> s = Signals(t, np.sin(t)[None, :, None] + rng.normal(0, 0.02, (1, t.size, 1)), ["y"])
+    >>> round(estimate_noise(s)["y"] ** 0.5, 3)
+    0.02
+    """
+    chans = list(channels) if channels is not None else list(signals.names)
+    out = {}
+    for c in chans:
+        v = signals.values[:, :, signals.index([c])[0]]
+        d2 = v[:, 2:] - 2 * v[:, 1:-1] + v[:, :-2]
+        d2 = d2[np.isfinite(d2)]
+        if d2.size < 100:
+            raise DataError(f"channel {c!r}: {d2.size} valid second differences; need at least 100 "
+                            "samples to estimate its noise")
+        s = 1.4826 * float(np.median(np.abs(d2 - np.median(d2)))) / math.sqrt(6.0)
+        if not s > 0:
+            raise DataError(f"channel {c!r}: no measurement noise visible (quantised or constant "
+                            "signal); give [design.noise].measurement for it")
+        out[c] = s * s
+    return out
+
+
+def noise_from_config(design: Mapping[str, Any], model: LinearFaultModel, base_dir: str | Path = ".", *,
+                      where: str = "design") -> dict[str, Any]:
+    """``{"measurement": {output: variance}, "process": (n,) variances}`` of a declarative config.
+
+    Measurement variances are given per output (a number applies to every output) or estimated from
+    ``nominal_log`` (:func:`estimate_noise`); the process variance defaults to 1e-8 of the unit
+    squared per state (a nearly exact model).
+    """
+    spec = _check(design.get("noise", {}), DESIGN_KEYS["noise"], f"{where}.noise")
+    meas = spec.get("measurement")
+    if meas is None and "nominal_log" not in spec:
+        raise DataError(f"config: [{where}.noise] needs measurement = {{output = variance}} or nominal_log")
+    if meas is not None and "nominal_log" in spec:
+        raise DataError(f"config: [{where}.noise]: give measurement or nominal_log, not both")
+    if "nominal_log" in spec:
+        from ..io import read_log
+
+        path = (Path(base_dir) / spec["nominal_log"]).resolve()
+        log = read_log(path, **({"time": spec["time"]} if "time" in spec else {}))
+        missing = [y for y in model.outputs if y not in log.names]
+        if missing:
+            raise DataError(f"config: [{where}.noise].nominal_log {str(path)!r} has no column for the "
+                            f"outputs {missing}; its channels: {log.names}")
+        var = estimate_noise(log, model.outputs)
+    elif isinstance(meas, int | float):
+        var = {y: float(meas) for y in model.outputs}
+    else:
+        unknown = [k for k in meas if k not in model.outputs]
+        missing = [y for y in model.outputs if y not in meas]
+        if unknown or missing:
+            raise DataError(f"config: [{where}.noise].measurement: unknown outputs {unknown}, missing "
+                            f"{missing} (outputs: {model.outputs})")
+        var = {y: float(meas[y]) for y in model.outputs}
+    bad = {k: v for k, v in var.items() if not (math.isfinite(v) and v > 0)}
+    if bad:
+        raise DataError(f"config: [{where}.noise]: measurement variances must be > 0 and finite, got {bad}")
+    proc = spec.get("process", 1e-8)
+    q = np.broadcast_to(np.asarray(proc, dtype=float), (model.n_states,)).copy() if np.ndim(proc) == 0 or \
+        np.size(proc) == model.n_states else None
+    if q is None or not np.all(np.isfinite(q)) or np.any(q < 0):
+        raise DataError(f"config: [{where}.noise].process must be one variance >= 0 or {model.n_states} of "
+                        f"them, got {proc!r}")
+    return {"measurement": var, "process": q}
+
+
+@dataclass(frozen=True)
+class AlarmTarget:
+    """A false-alarm target with explicit semantics.
+
+    ``pfa`` is the probability of at least one false alarm per ``per``: one ``"sample"``, one
+    ``"run"`` of ``run_length`` seconds, or one ``"hour"`` of operation; ``hold`` samples over the
+    threshold make an alarm. :meth:`per_sample` converts it, for a sample time ``dt``, to the
+    per-sample probability of a new alarm, ``1 - (1 - pfa)^(dt / T)``.
+
+    Examples
+    --------
+    >>> a = AlarmTarget(1e-3, "hour")
+    >>> f"{a.per_sample(0.01):.3e}"
+    '2.779e-09'
+    """
+
+    pfa: float
+    per: str = "sample"
+    run_length: float | None = None
+    hold: int = 1
+
+    def __post_init__(self):
+        if not (0 < self.pfa < 1):
+            raise DataError(f"the false-alarm target pfa must lie in (0, 1), got {self.pfa}")
+        if self.per not in ("sample", "run", "hour"):
+            raise DataError(f"per must be 'sample', 'run' or 'hour', got {self.per!r}")
+        if self.per == "run" and not (self.run_length and self.run_length > 0):
+            raise DataError("a per-run target needs run_length (s) > 0")
+        if int(self.hold) != self.hold or self.hold < 1:
+            raise DataError(f"hold must be an integer >= 1, got {self.hold}")
+
+    def span(self, dt: float) -> float:
+        """Seconds the target refers to (one sample, one run or one hour)."""
+        return {"sample": float(dt), "run": float(self.run_length or 0.0), "hour": 3600.0}[self.per]
+
+    def per_sample(self, dt: float) -> float:
+        """The per-sample probability of a false alarm that meets the target."""
+        if not dt > 0:
+            raise DataError(f"the sample time must be > 0, got {dt}")
+        n = self.span(dt) / float(dt)
+        return float(-math.expm1(math.log1p(-self.pfa) / max(n, 1.0)))
+
+
+def alarm_from_config(design: Mapping[str, Any], *, where: str = "design") -> AlarmTarget:
+    """The :class:`AlarmTarget` of ``[design.alarm]`` (default: 1e-3 per hour, hold 5)."""
+    spec = _check(design.get("alarm", {}), DESIGN_KEYS["alarm"], f"{where}.alarm")
+    run_length = None if "run_length" not in spec else float(spec["run_length"])
+    return AlarmTarget(float(spec.get("pfa", 1e-3)), str(spec.get("per", "hour")), run_length,
+                       int(spec.get("hold", 5)))
