@@ -327,7 +327,8 @@ def test_batch_and_streaming_agree(rec):
     rec.reset(2)
     stream = np.stack([rec.step(U[:, k], Y[:, k]) for k in range(T)], axis=1)
     np.testing.assert_array_equal(batch, stream)
-    assert batch.shape == (2, T, 1) and np.all(np.isfinite(batch))
+    # q = 1 reconstruction, then the combined, primary and secondary sliding status
+    assert batch.shape == (2, T, 4) and np.all(np.isfinite(batch))
 
 
 def test_run_rejects_wrong_sample_time(rec):

@@ -17,33 +17,142 @@ output states) and return plain gain matrices. Strict inequalities are imposed w
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import ConditionError
+from ..errors import ConditionError, DataError
 
-__all__ = ["PrimaryGains", "SecondaryGains", "primary_smo_lmi", "secondary_smo_lmi"]
+__all__ = ["GAMMA_O_FACTORS", "PrimaryGains", "SecondaryGains", "primary_smo_lmi", "secondary_smo_lmi",
+           "secondary_smo_lmi_search"]
 
 _OK = ("optimal", "optimal_inaccurate")
+
+#: Clarabel settings of the refinement solve of an inaccurate solution (more iterations, tighter
+#: tolerances, more iterative refinement of the KKT solves).
+REFINE_SETTINGS = {"max_iter": 400, "tol_gap_abs": 1e-10, "tol_gap_rel": 1e-10, "tol_feas": 1e-10,
+                   "tol_ktratio": 1e-8, "iterative_refinement_max_iter": 50}
 
 
 def _sym(M: np.ndarray) -> np.ndarray:
     return 0.5 * (M + M.T)
 
 
-def _solve(prob, what: str) -> float:
+def _violation(prob) -> float:
+    """Largest violation of the program's constraints at the returned point (0 when all hold)."""
+    worst = 0.0
+    for c in prob.constraints:
+        try:
+            v = c.violation()
+        except (ValueError, TypeError):  # pragma: no cover - a constraint without a value
+            return float("inf")
+        v = float(np.max(v)) if np.size(v) else 0.0
+        worst = max(worst, v if np.isfinite(v) else float("inf"))
+    return worst
+
+
+def _stats(prob, status: str, attempt: str) -> dict:
+    st = prob.solver_stats
+    return {"attempt": attempt, "status": status,
+            "iterations": None if st is None or st.num_iters is None else int(st.num_iters),
+            "solve_seconds": None if st is None or st.solve_time is None else float(st.solve_time),
+            "value": None if prob.value is None else float(prob.value)}
+
+
+def _solve(prob, what: str, eps: float = 1e-7) -> tuple[float, dict]:
+    """Solve with Clarabel; record the status; refine an inaccurate solution or refuse it.
+
+    The strict LMIs are imposed as ``<= -eps I``. An ``optimal_inaccurate`` answer is solved again
+    with :data:`REFINE_SETTINGS`; the result is accepted only when every constraint holds at the
+    returned point to within ``eps / 2`` (so each strict inequality still holds with margin
+    ``eps / 2``), otherwise :class:`ConditionError` ``"LMI"`` is raised.
+
+    Returns
+    -------
+    value : float
+    record : dict
+        ``status`` (final), ``attempts`` (status, iterations, seconds and value of each solve),
+        ``max_violation`` (largest constraint violation at the accepted point), ``refined``.
+    """
     import cvxpy as cp
 
-    try:
-        prob.solve(solver=cp.CLARABEL)
-    except cp.error.SolverError as exc:
+    attempts = []
+
+    def run(attempt: str, **settings) -> str:
+        try:
+            prob.solve(solver=cp.CLARABEL, **settings)
+        except cp.error.SolverError as exc:
+            attempts.append({"attempt": attempt, "status": "solver_error", "message": str(exc)})
+            return "solver_error"
+        attempts.append(_stats(prob, prob.status, attempt))
+        return prob.status
+
+    status = run("default")
+    refined = False
+    if status == "optimal_inaccurate":
+        refined = True
+        status = run("refine", **REFINE_SETTINGS)
+    record = {"solver": "CLARABEL", "status": status, "attempts": attempts, "refined": refined}
+    if status == "solver_error":
         raise ConditionError("LMI", f"{what} has no solution: the Clarabel solver failed "
-                             f"(infeasible or numerically ill-posed: {exc})",
-                             {"status": "solver_error"}) from None
-    if prob.status not in _OK:
-        raise ConditionError("LMI", f"{what} is {prob.status} (Clarabel)", {"status": prob.status})
-    return float(prob.value)
+                             f"(infeasible or numerically ill-posed: {attempts[-1]['message']})",
+                             {"status": "solver_error", "solver": record})
+    if status not in _OK:
+        raise ConditionError("LMI", f"{what} is {status} (Clarabel)", {"status": status, "solver": record})
+    viol = _violation(prob)
+    record["max_violation"] = viol
+    if status == "optimal_inaccurate" and not viol <= 0.5 * eps:
+        raise ConditionError("LMI", f"{what}: Clarabel's solution is inaccurate even after refinement and "
+                             f"violates the LMIs by {viol:.3g} (> eps/2 = {0.5 * eps:.3g}); refused",
+                             {"status": status, "solver": record})
+    record["verified"] = bool(viol <= 0.5 * eps)
+    return float(prob.value), record
+
+
+def _square(X, n: int, what: str, *, spd: bool = False, invertible: bool = False) -> np.ndarray:
+    """``X`` as a finite float ``(n, n)`` matrix, checked (DataError naming ``what``)."""
+    X = np.asarray(X, dtype=float)
+    if X.shape != (n, n):
+        raise DataError(f"{what} must have shape ({n}, {n}), got {X.shape}")
+    if not np.all(np.isfinite(X)):
+        raise DataError(f"{what} contains NaN or inf")
+    if spd:
+        if not np.allclose(X, X.T, rtol=1e-10, atol=1e-12 * max(1.0, np.abs(X).max(initial=0.0))):
+            raise DataError(f"{what} must be symmetric positive definite; it is not symmetric")
+        ev = np.linalg.eigvalsh(_sym(X)) if n else np.zeros(0)
+        if ev.size and ev.min() <= 0:
+            raise DataError(f"{what} must be symmetric positive definite; smallest eigenvalue {ev.min():.3g}")
+    if invertible and n and np.linalg.svd(X, compute_uv=False).min() <= n * np.finfo(float).eps * \
+            np.linalg.norm(X, 2):
+        raise DataError(f"{what} must be invertible")
+    return X
+
+
+def _positive(x, what: str) -> float:
+    try:
+        v = float(x)
+    except (TypeError, ValueError):
+        raise DataError(f"{what} must be a positive number, got {x!r}") from None
+    if not (np.isfinite(v) and v > 0):
+        raise DataError(f"{what} must be finite and > 0, got {x!r}")
+    return v
+
+
+def _canonical(A, C, what: str) -> tuple[np.ndarray, np.ndarray]:
+    A = np.asarray(A, dtype=float)
+    C = np.asarray(C, dtype=float)
+    if A.ndim != 2 or A.shape[0] != A.shape[1]:
+        raise DataError(f"{what}: A must be square, got shape {A.shape}")
+    n = A.shape[0]
+    if C.ndim != 2 or C.shape[1] != n or C.shape[0] > n:
+        raise DataError(f"{what}: C must have shape (p, {n}) with p <= {n}, got {C.shape}")
+    if not (np.all(np.isfinite(A)) and np.all(np.isfinite(C))):
+        raise DataError(f"{what}: A or C contains NaN or inf")
+    p = C.shape[0]
+    if p and np.abs(C[:, :n - p]).max(initial=0.0) > 1e-9 * max(1.0, np.abs(C).max()):
+        raise DataError(f"{what}: C must be in the canonical coordinates C = [0 T] (its first "
+                        f"{n - p} columns are not zero)")
+    return A, C
 
 
 @dataclass
@@ -75,6 +184,7 @@ class PrimaryGains:
     Po: np.ndarray
     Gn: np.ndarray
     trace_X: float
+    solver: dict = field(default_factory=dict)
 
 
 def primary_smo_lmi(A: np.ndarray, C: np.ndarray, V1: np.ndarray, V2: np.ndarray, *,
@@ -115,7 +225,11 @@ def primary_smo_lmi(A: np.ndarray, C: np.ndarray, V1: np.ndarray, V2: np.ndarray
     """
     import cvxpy as cp
 
+    A, C = _canonical(A, C, "primary_smo_lmi")
     n, p = A.shape[0], C.shape[0]
+    V1 = _square(V1, n, "V1", spd=True)
+    V2 = _square(V2, p, "V2", spd=True)
+    eps = _positive(eps, "eps")
     T = C[:, n - p:]
     V2i = np.linalg.inv(V2)
     V1i = np.linalg.inv(V1)
@@ -127,7 +241,7 @@ def primary_smo_lmi(A: np.ndarray, C: np.ndarray, V1: np.ndarray, V2: np.ndarray
     cons = [0.5 * (lmi42 + lmi42.T) << -eps * np.eye(2 * n),
             0.5 * (lmi43 + lmi43.T) << -eps * np.eye(2 * n)]
     prob = cp.Problem(cp.Minimize(cp.trace(X)), cons)
-    val = _solve(prob, "primary observer LMI (42)-(43)")
+    val, rec = _solve(prob, "primary observer LMI (42)-(43)", eps)
     Pv, Xv = _sym(P.value), _sym(X.value)
     if np.linalg.eigvalsh(Pv).min() <= 0:
         raise ConditionError("LMI", "primary LMI returned a P that is not positive definite",
@@ -142,7 +256,7 @@ def primary_smo_lmi(A: np.ndarray, C: np.ndarray, V1: np.ndarray, V2: np.ndarray
     if ev.size and ev.real.max() >= 0:
         raise ConditionError("LMI", "the sliding motion A1 + L A3 of the primary design is not stable",
                              {"eigenvalues": ev})
-    return PrimaryGains(Pv, Xv, Gl, L, Po, Gn, val)
+    return PrimaryGains(Pv, Xv, Gl, L, Po, Gn, val, rec)
 
 
 @dataclass
@@ -174,6 +288,8 @@ class SecondaryGains:
     Gn: np.ndarray
     W: np.ndarray
     gamma: float
+    solver: dict = field(default_factory=dict)
+    gamma_o: float = float("nan")
 
 
 def secondary_smo_lmi(A: np.ndarray, M: np.ndarray, C: np.ndarray, Q: np.ndarray, *,
@@ -222,8 +338,18 @@ def secondary_smo_lmi(A: np.ndarray, M: np.ndarray, C: np.ndarray, Q: np.ndarray
     """
     import cvxpy as cp
 
-    nb, pb, q = A.shape[0], C.shape[0], M.shape[1]
-    h = Q.shape[1]
+    A, C = _canonical(A, C, "secondary_smo_lmi")
+    nb, pb = A.shape[0], C.shape[0]
+    M = np.asarray(M, dtype=float)
+    Q = np.asarray(Q, dtype=float)
+    if M.ndim != 2 or M.shape[0] != nb or not 0 < M.shape[1] <= pb:
+        raise DataError(f"secondary_smo_lmi: M must have shape ({nb}, q) with 0 < q <= {pb}, got {M.shape}")
+    if Q.ndim != 2 or Q.shape[0] != nb:
+        raise DataError(f"secondary_smo_lmi: Q must have shape ({nb}, h), got {Q.shape}")
+    q, h = M.shape[1], Q.shape[1]
+    D1 = _square(D1, pb, "D1", invertible=True)
+    gamma_o = _positive(gamma_o, "gamma_o")
+    eps = _positive(eps, "eps")
     k = nb - pb  # non-output states
     m1 = pb - q  # free columns of L
     T = C[:, k:]
@@ -271,7 +397,7 @@ def secondary_smo_lmi(A: np.ndarray, M: np.ndarray, C: np.ndarray, Q: np.ndarray
     if h == 0:
         cons += [gam == 1.0]  # nothing to attenuate: feasibility only
     prob = cp.Problem(cp.Minimize(gam), cons)
-    val = _solve(prob, "secondary observer LMIs (46)-(47)")
+    val, rec = _solve(prob, "secondary observer LMIs (46)-(47)", eps)
     Pv = _sym(np.asarray(Pl.value))
     Wv = np.asarray(W.value).reshape(q, pb)
     Gl = gamma_o * np.linalg.solve(Pv, C.T @ R)
@@ -294,4 +420,66 @@ def secondary_smo_lmi(A: np.ndarray, M: np.ndarray, C: np.ndarray, Q: np.ndarray
         raise ConditionError("LMI", "secondary Po is not positive definite",
                              {"eig_Po": np.linalg.eigvalsh(Po)})
     gamma = float(val) if h else 0.0
-    return SecondaryGains(Pv, Gl, L, Po, Gn, Wv, gamma)
+    return SecondaryGains(Pv, Gl, L, Po, Gn, Wv, gamma, rec, float(gamma_o))
+
+
+#: Multipliers of ``gamma_o`` tried, in this order, when the secondary LMIs are infeasible.
+GAMMA_O_FACTORS = (10.0, 100.0, 1e3, 1e4, 0.1, 0.01)
+
+
+def secondary_smo_lmi_search(A: np.ndarray, M: np.ndarray, C: np.ndarray, Q: np.ndarray, *,
+                             D1: np.ndarray, gamma_o: float, eps: float = 1e-7, retry: bool = True,
+                             factors: tuple[float, ...] = GAMMA_O_FACTORS) -> SecondaryGains:
+    """:func:`secondary_smo_lmi` at ``gamma_o``; when that fails, at ``gamma_o * factor``.
+
+    ``gamma_o`` is the fixed level of the filter inequality (47) that sets ``G_l``; (46), and so
+    gamma-bar, do not depend on it, but (47) may be infeasible at one level and feasible at
+    another (e.g. a slow invariant zero needs a larger level).
+
+    Parameters
+    ----------
+    A, M, C, Q, D1, eps
+        As :func:`secondary_smo_lmi`.
+    gamma_o : float
+        The level tried first.
+    retry : bool
+        ``True``: return the first level that designs the observer (``solver["gamma_o_tried"]``
+        lists the levels and their outcomes). ``False``: raise, naming the level that works.
+    factors : tuple of float
+        Multipliers of ``gamma_o`` tried in order.
+
+    Returns
+    -------
+    SecondaryGains
+        ``gamma_o`` is the level used.
+
+    Raises
+    ------
+    ConditionError
+        ``"LMI"``: infeasible at ``gamma_o`` (``retry=False``; the message names a level that
+        works, if one was found) or at every level tried.
+    """
+    gamma_o = _positive(gamma_o, "gamma_o")
+    tried = []
+    levels = [gamma_o] + [gamma_o * float(f) for f in factors]
+    first = None
+    for go in levels:
+        try:
+            g = secondary_smo_lmi(A, M, C, Q, D1=D1, gamma_o=go, eps=eps)
+        except ConditionError as exc:
+            first = first or exc
+            tried.append({"gamma_o": go, "ok": False, "status": exc.details.get("status", exc.condition),
+                          "message": str(exc)})
+            continue
+        tried.append({"gamma_o": go, "ok": True, "status": g.solver.get("status")})
+        g.solver["gamma_o_tried"] = tried
+        if go == gamma_o or retry:
+            return g
+        raise ConditionError(
+            "LMI", f"secondary observer LMIs (46)-(47) fail at gamma_o = {gamma_o:g} ({first}); "
+            f"gamma_o = {go:g} designs them: pass gamma_o={go:g} (or let the design retry)",
+            {"gamma_o": gamma_o, "gamma_o_works": go, "gamma_o_tried": tried})
+    raise ConditionError(
+        "LMI", f"secondary observer LMIs (46)-(47) fail at gamma_o = {gamma_o:g} and at every level tried "
+        f"({', '.join(format(t['gamma_o'], 'g') for t in tried)}): {first}",
+        {"gamma_o": gamma_o, "gamma_o_works": None, "gamma_o_tried": tried})

@@ -18,11 +18,25 @@ A fault maps the healthy value ``v`` of its channel (shape ``(runs,)``) to the f
 ``Bias`` (Step)    ``v + b``
 ``Ramp`` (Drift)   ``v + slope * (t - start)``
 ``Sinusoid``       ``v + a * sin(2 pi f (t - start) + phase)``
+``Chirp``          ``v + a * sin(phase(t))``, frequency swept linearly from ``f0`` to ``f1``
 ``Intermittent``   ``v + b`` inside on-windows (explicit list, or ``period`` and ``duty``)
 ``Gain``           ``g * v``
 ``Stuck``          ``value`` (stuck-at), or the value ``v`` had at onset (``value=None``)
 ``Parametric``     ``v * (1 + change)`` (relative), ``v + change`` (absolute) or ``change`` (set)
 =================  =====================================================================
+
+A new additive shape needs one public method: subclass :class:`Fault` and implement
+``shape(t, p)``, the value added to the channel at time ``t`` while the fault is active (``p``
+maps each name in ``per_run_fields`` to its value for every run)::
+
+    @dataclass
+    class Square(Fault):
+        amplitude: float = 1.0
+        period: float = 1.0
+        per_run_fields: ClassVar[tuple[str, ...]] = ("amplitude",)
+
+        def shape(self, t, p):
+            return p["amplitude"] * np.sign(np.sin(2 * np.pi * (t - self.start) / self.period))
 """
 
 from __future__ import annotations
@@ -185,8 +199,32 @@ class Fault:
                 for name in self.per_run_fields if getattr(self, name) is not None}
         return BoundFault(self, vals, run_ids.size)
 
+    def shape(self, t: float, p: dict[str, Any]) -> Any:
+        """The additive fault signal at time ``t`` (s) while the fault is active: the public hook.
+
+        A subclass for a new additive shape implements only this method.
+
+        Parameters
+        ----------
+        t : float
+            Time (s), ``start <= t < end``.
+        p : dict
+            Each name in ``per_run_fields`` with its value: a float, or an array of shape
+            ``(runs,)`` when the field holds one value per run.
+
+        Returns
+        -------
+        float or ndarray (runs,)
+            Added to the healthy value of the channel.
+        """
+        raise NotImplementedError(f"{type(self).__name__} must implement shape(t, p) "
+                                  "(the additive fault signal while active)")
+
     def _apply(self, t: float, v: np.ndarray, vals: dict[str, Any], mem: dict) -> np.ndarray:
-        raise NotImplementedError
+        if type(self).shape is Fault.shape:
+            raise NotImplementedError(f"{type(self).__name__} must implement shape(t, p) "
+                                      "(the additive fault signal while active)")
+        return v + np.asarray(self.shape(t, vals), dtype=float)
 
     def apply(self, t: float, v: Any, run_ids: Sequence[int] | None = None) -> np.ndarray:
         """The faulty value at one time for a healthy value ``v`` (convenience, memoryless).
@@ -307,6 +345,44 @@ class Sinusoid(Fault):
     def _apply(self, t, v, vals, mem):
         return v + vals["amplitude"] * np.sin(2.0 * np.pi * vals["frequency"] * (t - self.start)
                                               + vals["phase"])
+
+
+@dataclass
+class Chirp(Fault):
+    """Additive linear chirp ``v + a sin(2 pi (f0 tau + (f1 - f0) tau^2 / (2 sweep_time)) + phase)``.
+
+    ``tau = t - start``; the frequency rises linearly from ``f0`` to ``f1`` (Hz) over
+    ``sweep_time`` (s) and stays at ``f1`` afterwards (continuous phase). Written with the public
+    :meth:`Fault.shape` hook only.
+
+    Examples
+    --------
+    >>> c = Chirp("sensor:v", 2.0, f0=0.0, f1=1.0, sweep_time=1.0)
+    >>> round(float(c.apply(0.5, [0.0])[0]), 12)  # sin(2 pi * 0.125) * 2
+    1.414213562373
+    """
+
+    amplitude: Any = 1.0
+    f0: Any = 0.1
+    f1: Any = 1.0
+    sweep_time: float = 1.0
+    phase: Any = 0.0
+    per_run_fields: ClassVar[tuple[str, ...]] = ("amplitude", "f0", "f1", "phase")
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        st = float(self.sweep_time)
+        if not (np.isfinite(st) and st > 0):
+            raise DataError(f"{self._label()}: sweep_time must be finite and > 0, got {self.sweep_time!r}")
+        self.sweep_time = st
+
+    def shape(self, t, p):
+        tau = t - self.start
+        f0, f1 = p["f0"], p["f1"]
+        k = (f1 - f0) / self.sweep_time
+        ts = min(tau, self.sweep_time)
+        cyc = f0 * ts + 0.5 * k * ts * ts + f1 * max(tau - self.sweep_time, 0.0)
+        return p["amplitude"] * np.sin(2.0 * np.pi * cyc + p["phase"])
 
 
 @dataclass

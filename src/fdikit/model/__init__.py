@@ -14,6 +14,7 @@ from .reduction import (
     residualize,
 )
 from .structure import (
+    RankDecision,
     RelativeDegree,
     default_tol,
     invariant_zeros,
@@ -22,6 +23,7 @@ from .structure import (
     markov_parameters,
     observability_matrix,
     rank,
+    rank_decision,
     relative_degree,
     unobservable_modes,
 )
@@ -33,6 +35,7 @@ __all__ = [
     "LinearFaultModel",
     "NonlinearModel",
     "NonlinearModelProtocol",
+    "RankDecision",
     "RelativeDegree",
     "balanced_truncation",
     "dc_gain",
@@ -46,6 +49,7 @@ __all__ = [
     "markov_parameters",
     "observability_matrix",
     "rank",
+    "rank_decision",
     "reduce_fast_modes",
     "relative_degree",
     "residualize",

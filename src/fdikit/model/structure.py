@@ -32,6 +32,7 @@ from ..errors import ModelError
 from .linear import LinearFaultModel
 
 __all__ = [
+    "RankDecision",
     "RelativeDegree",
     "default_tol",
     "invariant_zeros",
@@ -40,6 +41,7 @@ __all__ = [
     "markov_parameters",
     "observability_matrix",
     "rank",
+    "rank_decision",
     "relative_degree",
     "unobservable_modes",
 ]
@@ -163,6 +165,72 @@ def rank(M: Any, tol: float | None = None) -> int:
         tol = default_tol(M.shape, s[0])
     return int(np.sum(s > tol))
 
+
+@dataclass
+class RankDecision:
+    """A rank decision with the numbers behind it.
+
+    Attributes
+    ----------
+    rank : int
+        Number of singular values larger than ``tol``.
+    singular_values : ndarray
+        All singular values, largest first.
+    atol, rtol : float
+        The absolute and relative tolerances; ``tol = max(atol, rtol * sigma_max)``.
+    tol : float
+        The threshold applied.
+    """
+
+    rank: int
+    singular_values: np.ndarray
+    atol: float
+    rtol: float
+    tol: float
+
+    def as_dict(self) -> dict:
+        """Plain-data form (for an ``info`` record)."""
+        return {"rank": self.rank, "singular_values": [float(x) for x in self.singular_values],
+                "atol": self.atol, "rtol": self.rtol, "tol": self.tol}
+
+
+def rank_decision(M: Any, *, atol: float = 0.0, rtol: float | None = None) -> RankDecision:
+    """Numerical rank with an absolute and a relative tolerance, and the singular values behind it.
+
+    A singular value counts as non-zero when it exceeds ``max(atol, rtol * sigma_max(M))``. With
+    the defaults (``atol = 0``, ``rtol = max(rows, cols) * eps``) this is :func:`rank`'s rule; an
+    ``atol`` taken from the scale of the factors a product was formed from (e.g.
+    ``||C|| ||A|| ||M||`` for ``C A M``) stops a product that is zero up to rounding from being
+    promoted to full rank by its own small norm.
+
+    Parameters
+    ----------
+    M : array_like (r, c)
+    atol : float
+        Absolute threshold (units of ``M``), >= 0.
+    rtol : float, optional
+        Relative threshold, >= 0.
+
+    Returns
+    -------
+    RankDecision
+
+    Examples
+    --------
+    >>> from fdikit.model.structure import rank_decision
+    >>> rank_decision([[1e-16]]).rank, rank_decision([[1e-16]], atol=1e-12).rank
+    (1, 0)
+    """
+    M = _arr(M, "M") if np.ndim(M) else np.atleast_2d(np.asarray(M, float))
+    atol = float(atol)
+    if not (np.isfinite(atol) and atol >= 0):
+        raise ModelError(f"atol must be finite and >= 0, got {atol}")
+    r = float(max(M.shape, default=0) * _EPS) if rtol is None else float(rtol)
+    if not (np.isfinite(r) and r >= 0):
+        raise ModelError(f"rtol must be finite and >= 0, got {rtol}")
+    s = np.linalg.svd(M, compute_uv=False) if M.size else np.zeros(0)
+    tol = max(atol, r * (float(s[0]) if s.size else 0.0))
+    return RankDecision(int(np.sum(s > tol)), s, atol, r, tol)
 
 # ---------------------------------------------------------------------------------- observability
 def observability_matrix(A: Any, C: Any = None) -> np.ndarray:
