@@ -1,5 +1,6 @@
-"""Residual processors: threshold rules, GLRT, directional GLRT, MHSSPT, feature norms, and banks
-of tests designed together."""
+"""Residual processors: threshold rules, GLRT, directional GLRT, MHSSPT (also from labelled real data,
+pre-whitened), feature norms, banks of tests designed together, and threshold design for a target per
+sample, per run or per hour (:mod:`.tail`: block bootstrap and GPD tails)."""
 
 from .bank import TestBank, TestSpec
 from .directional import DirectionalGLRT, directional_statistic
@@ -7,33 +8,48 @@ from .features import FeatureNorms
 from .glrt import GLRT, ThresholdDesign, TimeGated, design_threshold, glrt_statistic
 from .mhsspt import (
     MHSSPT,
+    LineMeanGaussian,
     MHSSPTCalibration,
     UniformMeanGaussian,
     WarmupMHSSPT,
+    WhitenedMHSSPT,
     calibrate_densities,
+    calibrate_segments,
+    design_mhsspt,
+    detection_time,
     extend_ranges,
+    final_diagnosis,
     floor_std,
 )
-from .threshold import Hold, consecutive_count
+from .threshold import ABSOLUTE_DEFAULT, Hold, consecutive_count
+from .whiten import VARWhitener
 
 __all__ = [
+    "ABSOLUTE_DEFAULT",
     "GLRT",
     "MHSSPT",
     "DirectionalGLRT",
     "FeatureNorms",
     "Hold",
+    "LineMeanGaussian",
     "MHSSPTCalibration",
     "TestBank",
     "TestSpec",
     "ThresholdDesign",
     "TimeGated",
     "UniformMeanGaussian",
+    "VARWhitener",
     "WarmupMHSSPT",
+    "WhitenedMHSSPT",
     "calibrate_densities",
+    "calibrate_segments",
     "consecutive_count",
+    "design_mhsspt",
     "design_threshold",
+    "detection_time",
     "directional_statistic",
     "extend_ranges",
+    "final_diagnosis",
     "floor_std",
     "glrt_statistic",
 ]

@@ -36,9 +36,15 @@ from ..signals import Signals
 __all__ = [
     "MHSSPT",
     "NEGLIGIBLE_NATS",
+    "LineMeanGaussian",
     "MHSSPTCalibration",
     "UniformMeanGaussian",
+    "WhitenedMHSSPT",
     "calibrate_densities",
+    "calibrate_segments",
+    "design_mhsspt",
+    "detection_time",
+    "final_diagnosis",
     "mhsspt_update",
     "tabulate_umg",
     "umg_component_logpdf",
@@ -957,3 +963,391 @@ def floor_std(cal, frac: float, *, h0_floor: bool = False):
 
 
 # ---------------------------------------------------------------------------------- pattern table
+
+
+# ------------------------------------------------------------------- MHSSPT from real, labelled data
+
+
+class LineMeanGaussian:
+    """Multivariate Gaussian density with full covariance whose mean is unknown and uniformly
+    distributed on the segment from ``a`` to ``b`` (the multivariate form of
+    :class:`UniformMeanGaussian`: a fault of unknown size moves the mean along its direction).
+
+    With ``Sigma = L L'``, ``z = L^-1 (x - a)``, ``v = L^-1 (b - a)``, ``w = |v|``, ``u = v / w``
+    and ``t = u' z``, integrating the mean out gives::
+
+        f(x) = N(z - t u; 0, I) / |L| * [Phi(t) - Phi(t - w)] / w
+
+    (in one dimension exactly :class:`UniformMeanGaussian`); ``a == b`` is the Gaussian density.
+
+    Parameters
+    ----------
+    a, b : array_like (C,)
+        Ends of the mean segment.
+    cov : array_like (C, C)
+        Covariance (symmetric positive definite).
+
+    Examples
+    --------
+    >>> d = LineMeanGaussian([0.0], [2.0], [[1.0]])
+    >>> u = UniformMeanGaussian([0.0], [2.0], [1.0])
+    >>> bool(abs(d.logpdf([0.7]) - u.logpdf([0.7])) < 1e-12)
+    True
+    """
+
+    def __init__(self, a, b, cov):
+        self.a = np.atleast_1d(np.asarray(a, float))
+        self.b = np.atleast_1d(np.asarray(b, float))
+        self.cov = np.atleast_2d(np.asarray(cov, float))
+        C = self.a.size
+        if self.a.ndim != 1 or self.b.shape != (C,) or self.cov.shape != (C, C):
+            raise DataError(f"a, b must be (C,) and cov (C, C); got {self.a.shape}, {self.b.shape}, "
+                            f"{self.cov.shape}")
+        if not all(np.all(np.isfinite(v)) for v in (self.a, self.b, self.cov)):
+            raise DataError("density parameters must be finite")
+        try:
+            self._L = np.linalg.cholesky(0.5 * (self.cov + self.cov.T))
+        except np.linalg.LinAlgError:
+            ev = np.linalg.eigvalsh(0.5 * (self.cov + self.cov.T))
+            raise DataError(f"covariance is not positive definite (smallest eigenvalue {ev.min():.3g})") \
+                from None
+        self._Linv = np.linalg.inv(self._L)
+        v = self._Linv @ (self.b - self.a)
+        self._w = float(np.linalg.norm(v))
+        self._u = v / self._w if self._w > 1e-12 else np.zeros(C)
+        self._logdet = float(np.sum(np.log(np.diag(self._L))))
+
+    @property
+    def size(self) -> int:
+        return self.a.size
+
+    def logpdf(self, x) -> np.ndarray:
+        """Log density of ``x`` shaped (..., C) -> (...)."""
+        x = np.asarray(x, float)
+        if x.shape[-1] != self.size:
+            raise DataError(f"density has {self.size} components, sample has {x.shape[-1]}")
+        C = self.size
+        d = x - self.a
+        # elementwise sums in a fixed order (no BLAS): one sample gives the bits of a whole record
+        z = [sum(self._Linv[i, j] * d[..., j] for j in range(i + 1)) for i in range(C)]  # L^-1 lower
+        zz = sum(zi * zi for zi in z)
+        if self._w <= 1e-12:
+            return -0.5 * zz - self._logdet - C * _LOG_SQRT_2PI
+        t = sum(self._u[i] * z[i] for i in range(C))
+        perp2 = np.maximum(zz - t * t, 0.0)
+        return (-0.5 * perp2 - (C - 1) * _LOG_SQRT_2PI - self._logdet
+                + _log_diff_ndtr(t, t - self._w) - np.log(self._w))
+
+    def to_dict(self) -> dict:
+        return {"a": self.a.tolist(), "b": self.b.tolist(), "cov": self.cov.tolist()}
+
+
+def _segment_list(x, what: str, C: int | None) -> list[np.ndarray]:
+    segs = [x] if isinstance(x, np.ndarray) and x.ndim == 2 else list(x)
+    out = []
+    for i, s in enumerate(segs):
+        s = np.asarray(s, float)
+        if s.ndim != 2 or s.shape[0] < 2 or (C is not None and s.shape[1] != C):
+            raise DataError(f"{what} segment {i}: features must be (N >= 2, {C or 'C'}), got {s.shape}")
+        if not np.all(np.isfinite(s)):
+            k, c = np.argwhere(~np.isfinite(s))[0]
+            raise DataError(f"{what} segment {i}: feature {c} is not finite at sample {k}")
+        out.append(s)
+    return out
+
+
+def calibrate_segments(
+    nominal,
+    segments: Mapping[str, Any],
+    *,
+    no_fault: str = "none",
+    scale: tuple[float, float] = (0.5, 2.0),
+    ridge: float = 1e-9,
+) -> MHSSPTCalibration:
+    """Full-covariance densities from labelled segments of real data, one unknown magnitude each.
+
+    The no-fault hypothesis is the Gaussian with the nominal mean and covariance. Every labelled
+    fault segment (one fault at one magnitude, which need not be known, after the onset
+    transient) gives one hypothesis: a :class:`LineMeanGaussian` whose mean runs along the
+    segment's offset ``d = mean(segment) - mean(nominal)`` from ``scale[0] d`` to ``scale[1] d``
+    (the same fault at other sizes moves the features along the same direction) with the
+    covariance of the segment about its mean. A fault with several segments gets one hypothesis
+    per segment (``<fault>:0``, ``<fault>:1``, ...) and a group summing them; one segment is
+    named ``<fault>``. Feed whitened features (:class:`~fdikit.detect.whiten.VARWhitener`) when
+    the residuals are serially correlated (:func:`design_mhsspt` does).
+
+    Parameters
+    ----------
+    nominal : array (N, C) or sequence of arrays (N_i, C)
+        Fault-free features.
+    segments : mapping fault -> array (N, C) or sequence of arrays
+        Labelled fault segments.
+    no_fault : str
+        Name of the no-fault hypothesis.
+    scale : (float, float)
+        Range of fault sizes covered, relative to each segment's own (``(1, 1)``: exactly the
+        observed size, a plain Gaussian).
+    ridge : float
+        Added to each covariance's diagonal, relative to its mean diagonal (numerical safety).
+
+    Returns
+    -------
+    MHSSPTCalibration
+        ``ranges`` holds ``scale`` per fault hypothesis.
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(0)
+    >>> nom = rng.normal(size=(2000, 2))
+    >>> cal = calibrate_segments(nom, {"f": rng.normal(size=(500, 2)) + [3.0, 1.0]})
+    >>> list(cal.densities), np.round(cal.densities["f"].b, 0).tolist()
+    (['none', 'f'], [6.0, 2.0])
+    """
+    nom = np.concatenate(_segment_list(nominal, "nominal", None))
+    C = nom.shape[1]
+    if nom.shape[0] < 2 * C + 2:
+        raise DataError(f"{nom.shape[0]} nominal samples are too few for a {C} x {C} covariance")
+    lo, hi = (float(s) for s in scale)
+    if not (0 <= lo <= hi) or not np.isfinite(hi):
+        raise DataError(f"scale must be 0 <= low <= high, got {scale}")
+
+    def cov_of(x):
+        S = np.atleast_2d(np.cov(x, rowvar=False))
+        return S + ridge * max(float(np.mean(np.diag(S))), 1e-300) * np.eye(C)
+
+    mu0 = nom.mean(0)
+    dens: dict[str, Any] = {no_fault: LineMeanGaussian(mu0, mu0, cov_of(nom))}
+    groups: dict[str, list[str]] = {}
+    ranges: dict[str, tuple[float, float]] = {no_fault: (0.0, 0.0)}
+    for fault, segs in segments.items():
+        segs = _segment_list(segs, f"fault {fault!r}", C)
+        names = [str(fault)] if len(segs) == 1 else [f"{fault}:{i}" for i in range(len(segs))]
+        for h, s in zip(names, segs):
+            if s.shape[0] < 2 * C + 2:
+                raise DataError(f"fault {fault!r}: segment of {s.shape[0]} samples is too short for a "
+                                f"{C} x {C} covariance")
+            d = s.mean(0) - mu0
+            dens[h] = LineMeanGaussian(mu0 + lo * d, mu0 + hi * d, cov_of(s))
+            ranges[h] = (lo, hi)
+        groups[str(fault)] = names
+    return MHSSPTCalibration(dens, groups, ranges)
+
+
+class WhitenedMHSSPT(MHSSPT):
+    """:class:`MHSSPT` on pre-whitened features: every sample first passes a
+    :class:`~fdikit.detect.whiten.VARWhitener` (its innovations are serially uncorrelated under
+    the nominal model, so multiplying their likelihoods is right), then the recursion runs with
+    densities calibrated on whitened data (e.g. :class:`LineMeanGaussian`, full covariance).
+    The first ``whitener.order`` samples after :meth:`reset` (the whitener's history is not full
+    yet, so its output is not an innovation) are seen as the no-fault mean, as
+    :class:`WarmupMHSSPT` does. Batch and streaming alike; the whitener's history is part of the
+    state.
+
+    Parameters
+    ----------
+    inputs : sequence of str
+        Feature channels (raw, not whitened).
+    densities : mapping
+        As :class:`MHSSPT`, on the whitened features.
+    p, pi, q, groups
+        As :class:`MHSSPT`.
+    whitener : VARWhitener
+        Fitted on nominal data of ``inputs``.
+
+    Examples
+    --------
+    >>> from fdikit.detect.whiten import VARWhitener
+    >>> w = VARWhitener(["r"], [0.0], [[[0.5]]])
+    >>> t = WhitenedMHSSPT(["r"], {"none": LineMeanGaussian([0], [0], [[1]]),
+    ...                            "f": LineMeanGaussian([1], [3], [[1]])}, p=1e-3, whitener=w)
+    >>> x = np.r_[np.zeros(50), np.full(50, 4.0)]
+    >>> P = t.run(Signals(np.arange(100.0), x, ["r"]))["P:f"][0]
+    >>> bool(P[49] < 0.01), bool(P[-1] > 0.99)
+    (True, True)
+    """
+
+    _state_attrs = (*MHSSPT._state_attrs, "whitener")
+
+    def __init__(self, inputs, densities, p, pi=None, q=0.0, groups=None, *, whitener):
+        super().__init__(inputs, densities, p, pi, q, groups)
+        if list(whitener.input_names) != list(self.input_names):
+            raise DataError(f"whitener inputs {whitener.input_names} differ from the test's "
+                            f"{self.input_names}")
+        self.whitener = whitener
+        self.whitener.reset(1)
+
+    def reset(self, runs: int = 1) -> None:
+        super().reset(runs)
+        if hasattr(self, "whitener"):
+            self.whitener.reset(runs)
+
+    def _advance(self, x):
+        e = self.whitener.whiten(x)
+        n = self.whitener.order - self._k  # whitening transient: the history is not full yet
+        if n > 0:
+            e = e.copy()
+            e[:, :n] = self._x0
+        return super()._advance(e)
+
+    @property
+    def _x0(self) -> np.ndarray:
+        d0 = self.densities[0]
+        return np.asarray(getattr(d0, "a", getattr(d0, "low", np.zeros(len(self.input_names)))), float)
+
+    def to_dict(self) -> dict:
+        """Configuration as plain data (densities must be :class:`LineMeanGaussian`)."""
+        if not all(isinstance(d, LineMeanGaussian) for d in self.densities):
+            raise DataError("only WhitenedMHSSPTs with LineMeanGaussian densities can be exported")
+        return {"inputs": list(self.input_names),
+                "densities": {h: d.to_dict() for h, d in zip(self.hypotheses, self.densities)},
+                "p": self.p, "pi": self.pi.tolist(), "q": self.q, "groups": self.groups,
+                "whitener": self.whitener.to_dict()}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> WhitenedMHSSPT:
+        from .whiten import VARWhitener
+
+        dens = {h: LineMeanGaussian(v["a"], v["b"], v["cov"]) for h, v in d["densities"].items()}
+        return cls(d["inputs"], dens, d["p"], d["pi"], d["q"], d["groups"],
+                   whitener=VARWhitener.from_dict(d["whitener"]))
+
+
+def design_mhsspt(
+    inputs: Sequence[str],
+    nominal,
+    segments: Mapping[str, Any],
+    p: float,
+    *,
+    whiten: bool = True,
+    order: int | None = None,
+    max_order: int = 10,
+    scale: tuple[float, float] = (0.5, 2.0),
+    q: float = 0.0,
+    no_fault: str = "none",
+) -> WhitenedMHSSPT:
+    """An MHSSPT from labelled real data: pre-whitening fitted on the nominal records, then
+    full-covariance densities from one segment per fault and magnitude (:func:`calibrate_segments`).
+
+    Parameters
+    ----------
+    inputs : sequence of str
+        Feature channel names (C).
+    nominal : array (T, C) or sequence of arrays (T_i, C)
+        Fault-free records (each one contiguous record).
+    segments : mapping fault -> array (N, C) or sequence of arrays
+        Labelled contiguous fault segments (after the onset transient), magnitudes unknown.
+    p : float
+        Change probability per sample.
+    whiten : bool
+        Fit a :class:`~fdikit.detect.whiten.VARWhitener` (False: mean removal only; right for
+        serially independent features).
+    order, max_order : int
+        VAR order (None: BIC up to ``max_order``).
+    scale, no_fault
+        As :func:`calibrate_segments`.
+    q : float
+        Return probability (:class:`MHSSPT`).
+
+    Returns
+    -------
+    WhitenedMHSSPT
+        Its ``calibration`` attribute is the :class:`MHSSPTCalibration` used.
+
+    Examples
+    --------
+    >>> from scipy.signal import lfilter
+    >>> rng = np.random.default_rng(0)
+    >>> ar = lambda n: lfilter([1.0], [1.0, -0.9], rng.normal(size=(n, 2)), axis=0)
+    >>> t = design_mhsspt(["a", "b"], ar(20_000), {"f": ar(3000) + [4.0, -4.0]}, p=1e-4)
+    >>> t.whitener.order, t.hypotheses
+    (1, ['none', 'f'])
+    """
+    from .whiten import VARWhitener
+
+    C = len(inputs)
+    nom = _segment_list(nominal, "nominal", C)
+    if whiten:
+        w = VARWhitener.fit(nom, inputs, order=order, max_order=max_order)
+    else:
+        w = VARWhitener(inputs, np.concatenate(nom).mean(0), np.zeros((0, C, C)))
+    k0 = w.order  # the first samples of each record are whitening transients
+
+    def white(seg):
+        w.reset(1)
+        e = w.whiten(seg[None])[0]
+        return e[k0:]
+
+    wn = [white(s) for s in nom]
+    ws = {f: [white(s) for s in _segment_list(v, f"fault {f!r}", C)] for f, v in segments.items()}
+    cal = calibrate_segments(wn, ws, no_fault=no_fault, scale=scale)
+    groups = {g: m for g, m in cal.groups.items() if m != [g]}
+    test = WhitenedMHSSPT(inputs, cal.densities, p, q=q, groups=groups, whitener=w)
+    test.calibration = cal
+    return test
+
+
+def _fault_outputs(out: Signals, outputs: Sequence[str] | None) -> tuple[str, list[str]]:
+    h0 = out.names[0]
+    if outputs is not None:
+        return h0, [str(o) for o in outputs]
+    groups = [n for n in out.names if n.startswith("P:")]
+    # the hypotheses that a group sums are not decisions of their own: prefer groups, else hypotheses
+    members = {n for n in groups if ":" in n[2:] and "P:" + n[2:].rsplit(":", 1)[0] in groups}
+    return h0, [n for n in groups[1:] if n not in members]
+
+
+def detection_time(out: Signals, level: float = 0.9, *, outputs: Sequence[str] | None = None) -> dict:
+    """First sample at which a fault's posterior reaches ``level``, per run.
+
+    Parameters
+    ----------
+    out : Signals
+        An MHSSPT's output (``P:<hypothesis>`` channels, H0 first).
+    level : float
+        Posterior probability that counts as a detection.
+    outputs : sequence of str, optional
+        Fault outputs to consider (default: every ``P:`` output except H0, a group's member
+        hypotheses replaced by the group).
+
+    Returns
+    -------
+    dict
+        ``sample`` (runs,) int (-1: never), ``time`` (runs,) s (nan: never), ``fault`` (list of
+        the output that crossed first, or None).
+
+    Examples
+    --------
+    >>> P = np.array([[0.99, 0.01], [0.5, 0.5], [0.05, 0.95]])
+    >>> d = detection_time(Signals(np.arange(3.0), P, ["P:none", "P:f"]))
+    >>> d["sample"].tolist(), d["fault"]
+    ([2], ['P:f'])
+    """
+    _, names = _fault_outputs(out, outputs)
+    P = out.values[:, :, out.index(names)]
+    hit = P >= level
+    anyhit = hit.any(axis=2)
+    first = np.where(anyhit.any(axis=1), anyhit.argmax(axis=1), -1)
+    times = np.where(first >= 0, out.t[np.maximum(first, 0)], np.nan)
+    faults = [names[int(np.argmax(P[r, k]))] if k >= 0 else None for r, k in enumerate(first)]
+    return {"sample": first, "time": times, "fault": faults}
+
+
+def final_diagnosis(out: Signals, *, outputs: Sequence[str] | None = None) -> dict:
+    """The most probable hypothesis at the last sample of each run (H0 included).
+
+    Returns
+    -------
+    dict
+        ``diagnosis`` (list of output names per run), ``probability`` (runs,).
+
+    Examples
+    --------
+    >>> P = np.array([[0.99, 0.01], [0.05, 0.95]])
+    >>> final_diagnosis(Signals(np.arange(2.0), P, ["P:none", "P:f"]))["diagnosis"]
+    ['P:f']
+    """
+    h0, names = _fault_outputs(out, outputs)
+    cols = [h0, *names]
+    last = out.values[:, -1, out.index(cols)]
+    k = last.argmax(axis=1)
+    return {"diagnosis": [cols[i] for i in k], "probability": last[np.arange(last.shape[0]), k]}

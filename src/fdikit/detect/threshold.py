@@ -14,7 +14,13 @@ from ..base.stage import ResidualProcessor
 from ..errors import DataError
 from ..signals import Signals
 
-__all__ = ["Hold", "consecutive_count"]
+__all__ = ["ABSOLUTE_DEFAULT", "Hold", "consecutive_count"]
+
+#: The one default of ``absolute`` in :class:`Hold` and :func:`~fdikit.detect.design_threshold`:
+#: compare ``|x|`` with the threshold. A residual's false alarms come from both signs; a statistic
+#: that is never negative (GLRT, a norm, a probability) is unchanged by it, so one default serves
+#: both (pass ``absolute=False`` for a one-sided test of a signed signal).
+ABSOLUTE_DEFAULT = True
 
 
 def consecutive_count(exceed: np.ndarray, axis: int = 1) -> np.ndarray:
@@ -47,7 +53,8 @@ class Hold(ResidualProcessor):
     Z : int
         Number of consecutive exceedances required (>= 1).
     absolute : bool
-        Compare ``|x|`` (default) or the signed ``x`` with the threshold.
+        Compare ``|x|`` (default, :data:`ABSOLUTE_DEFAULT`, the same as
+        :func:`~fdikit.detect.design_threshold`'s) or the signed ``x`` with the threshold.
 
     Outputs one alarm channel per input, named ``"<input>:alarm"``, valued 0.0 or 1.0.
 
@@ -61,7 +68,7 @@ class Hold(ResidualProcessor):
     [[0.0, 0.0, 1.0, 0.0, 0.0, 1.0]]
     """
 
-    def __init__(self, inputs: Sequence[str], threshold, Z: int = 1, *, absolute: bool = True):
+    def __init__(self, inputs: Sequence[str], threshold, Z: int = 1, *, absolute: bool = ABSOLUTE_DEFAULT):
         self.input_names = [str(s) for s in inputs]
         if not self.input_names:
             raise DataError("Hold needs at least one input channel")

@@ -64,6 +64,7 @@ def design(params: dict | None = None) -> dict[str, Any]:
                                                    R=np.eye(2) * NOISE_STD**2)
     gen = ObserverResidual(obs)
     r_nom = gen.run(record((), int(p["runs"]), int(p["seed"])))
-    thr = [design_threshold(r_nom[name][:, 100:], float(p["pfa"]), Z=int(p["Z"]), absolute=True).threshold
+    thr = [design_threshold(r_nom[name][:, 100:], float(p["pfa"]), Z=int(p["Z"]), absolute=True,
+                            margin=0.05, min_events=0.0).threshold
            for name in gen.output_names]
     return {"observer": obs, "hold": Hold(gen.output_names, thr, Z=int(p["Z"]))}
