@@ -48,7 +48,13 @@ def add_campaign_parser(abs_subparsers) -> argparse.ArgumentParser:
             "--complete also evaluates the complete diagnoser: the decision tree with the\n"
             "SVM tests S_Kf and S_Iw, the SVM error and the errors of the fault-size\n"
             "estimates. The paper's size (--runs 5000, 55,000 stops in all) takes a few\n"
-            "minutes."),
+            "minutes.\n"
+            "\n"
+            "--workers N runs the simulations as tasks of --chunk-size runs on a local Dask\n"
+            "cluster of N worker processes, --scheduler ADDRESS on a running Dask cluster.\n"
+            "Every run has its own seed, so the numbers are bitwise those of a run in this\n"
+            "process, for any number of workers and chunk size, even when a worker dies\n"
+            "and its chunk is rerun."),
         formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--runs", type=int, default=200,
                    help="simulated stops per fault class, runs (default 200; the paper uses 5000)")
@@ -94,6 +100,14 @@ def add_campaign_parser(abs_subparsers) -> argparse.ArgumentParser:
     p.add_argument("--estimate-runs", type=int, default=10,
                    help="stops per fault class diagnosed and size-estimated in full with --complete, runs "
                    "(default 10)")
+    p.add_argument("--workers", type=int, default=None,
+                   help="run the simulations on a local Dask cluster of this many worker processes "
+                   "(default: in this process)")
+    p.add_argument("--scheduler", default=None,
+                   help="run the simulations on a running Dask cluster, given by its scheduler address "
+                   "(e.g. tcp://127.0.0.1:8786)")
+    p.add_argument("--chunk-size", type=int, default=None,
+                   help="runs per task with --workers or --scheduler (default 250)")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of the text report")
     p.set_defaults(func=_campaign)
     return p
@@ -113,12 +127,33 @@ def _campaign(args) -> int:
         raise DataError("--complete does not support --pedal-ramp (the complete diagnoser uses the step)")
     if args.window is not None and args.window < 1:
         raise DataError(f"--window must be >= 1, got {args.window}")
-    res = run_campaign(args.runs, nominal_runs=args.nominal_runs, design_runs=args.design_runs,
-                       snr_db=args.snr, seed=args.seed, W=args.window, gate=args.gate,
-                       magnitudes=args.magnitudes, pfa=args.pfa, margin=args.margin,
-                       noise_hold=args.noise_hold, pedal_ramp=args.pedal_ramp, tests=args.tests,
-                       progress=sys.stderr.isatty() if args.progress is None else args.progress)
-    out = res.to_dict()
+    if args.workers is not None and args.workers < 1:
+        raise DataError(f"--workers must be >= 1, got {args.workers}")
+    if args.chunk_size is not None and args.chunk_size < 1:
+        raise DataError(f"--chunk-size must be >= 1, got {args.chunk_size}")
+    if args.chunk_size is not None and args.workers is None and args.scheduler is None:
+        raise DataError("--chunk-size needs --workers or --scheduler")
+    engine = None
+    if args.workers is not None or args.scheduler is not None:
+        from ..evaluate.distributed import Engine
+
+        engine = Engine(args.workers, scheduler=args.scheduler, dask=True,
+                        env={"NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"})
+    try:
+        if engine is not None:
+            engine.start()
+        res = run_campaign(args.runs, nominal_runs=args.nominal_runs, design_runs=args.design_runs,
+                           snr_db=args.snr, seed=args.seed, W=args.window, gate=args.gate,
+                           magnitudes=args.magnitudes, pfa=args.pfa, margin=args.margin,
+                           noise_hold=args.noise_hold, pedal_ramp=args.pedal_ramp, tests=args.tests,
+                           progress=sys.stderr.isatty() if args.progress is None else args.progress,
+                           engine=engine, chunk_size=args.chunk_size or (250 if engine else None))
+        out = res.to_dict()
+        if engine is not None:
+            out["engine"] = engine.describe()
+    finally:
+        if engine is not None:
+            engine.close()
     if args.complete:
         from ..systems.abs.diagnoser import complete_campaign
 

@@ -22,6 +22,7 @@ from __future__ import annotations
 import argparse
 import csv
 import json
+import os
 import sys
 import time
 from pathlib import Path
@@ -100,7 +101,136 @@ def _batch(args, cfg) -> int:
     return 0
 
 
-def _follow_candump(args, cfg, mon, stream) -> int:
+class _Output:
+    """Follow mode's records: one JSON line each on stdout and, with ``--events``, in the event log.
+
+    With ``--checkpoint`` the follower saves, every ``--checkpoint-every`` samples, the monitor's
+    state, the gridder's state, how far the input was read and the event log's length, in one
+    atomic file. ``--resume`` loads it, cuts the event log back to that length (records written
+    after the checkpoint are written again, so none is doubled) and skips the input up to that
+    position: the events of a crashed run plus those of its resumed run equal an uninterrupted run.
+    """
+
+    def __init__(self, args, cfg, mon, kind: str):
+        self.args, self.cfg, self.mon, self.kind = args, cfg, mon, kind
+        self.every = args.checkpoint_every
+        self.ckpt = Path(args.checkpoint) if args.checkpoint else None
+        self.n = 0                 # grid samples (candump) or data rows (CSV) stepped
+        self.lines = 0             # input lines read up to the last one consumed
+        self.t_last: float | None = None   # latest time of a consumed input line
+        self.resumed: dict | None = None
+        self.header: list[str] | None = None
+        self._since = 0
+        self.fh = None
+        if args.events:
+            self.fh = open(args.events, "a+b")  # closed in close()
+
+    def start(self, gridder=None) -> None:
+        """Fresh start (the event log emptied) or, with --resume and a checkpoint, continue."""
+        if self.args.resume and self.ckpt is not None and self.ckpt.exists():
+            from ..base.state import load_state
+
+            state, meta = load_state(self.ckpt)
+            if meta.get("kind") != "follow" or meta.get("input") != self.kind:
+                raise DataError(f"{self.ckpt}: not a follow-mode checkpoint of {self.kind} input "
+                                f"(kind {meta.get('kind')!r}, input {meta.get('input')!r})")
+            if meta.get("config") != str(self.cfg.path.resolve()):
+                raise DataError(f"{self.ckpt}: checkpoint of config {meta.get('config')!r}, not "
+                                f"{str(self.cfg.path.resolve())!r}")
+            self.mon.restore(state["monitor"])
+            f = state["follow"]
+            self.n, self.lines, self.t_last = int(f["n"]), int(f["lines"]), f["t_last"]
+            self.header = f.get("header")
+            if gridder is not None:
+                _gridder_restore(gridder, state["gridder"])
+            if self.fh is not None:
+                size = int(f["events_bytes"])
+                if self.fh.seek(0, 2) < size:
+                    raise DataError(f"{self.args.events}: the event log is shorter ({self.fh.tell()} bytes) "
+                                    f"than at the checkpoint ({size} bytes); it is not this run's log")
+                self.fh.truncate(size)
+            self.resumed = {"lines": self.lines, "t_last": self.t_last}
+        elif self.fh is not None:
+            self.fh.truncate(0)
+        self._gridder = gridder
+
+    def skip(self, index: int, t: float | None) -> bool:
+        """Was input line ``index`` (0-based) consumed before the checkpoint?
+
+        Yes while the line is among the first ``lines`` and not later than the last consumed
+        time: a replay of the input from its start skips exactly what was consumed, and a live
+        stream that goes on (later times) is not skipped at all.
+        """
+        r = self.resumed
+        if r is None:
+            return False
+        done = index < r["lines"] and (t is None or r["t_last"] is None or t <= r["t_last"])
+        if not done:
+            self.resumed = None  # past the checkpoint: nothing more is skipped
+        return done
+
+    def consumed(self, index: int, t: float | None) -> None:
+        self.lines = index + 1
+        if t is not None and (self.t_last is None or t > self.t_last):
+            self.t_last = t
+
+    def write(self, rec: dict) -> None:
+        line = json.dumps(rec)
+        print(line, flush=True)
+        if self.fh is not None:
+            self.fh.write(line.encode() + b"\n")
+            self.fh.flush()
+
+    def stepped(self) -> None:
+        self.n += 1
+        self._since += 1
+
+    def maybe_checkpoint(self, force: bool = False) -> None:
+        if self.ckpt is None or not (force or self._since >= self.every):
+            return
+        from ..base.state import save_state
+
+        size = 0
+        if self.fh is not None:
+            self.fh.flush()
+            os.fsync(self.fh.fileno())
+            size = self.fh.seek(0, 2)
+        follow = {"n": self.n, "lines": self.lines, "t_last": self.t_last, "events_bytes": size,
+                  "header": self.header}
+        state = {"monitor": self.mon.state(), "follow": follow,
+                 "gridder": None if self._gridder is None else _gridder_state(self._gridder)}
+        save_state(self.ckpt, state, meta={"kind": "follow", "input": self.kind,
+                                           "config": str(self.cfg.path.resolve())})
+        self._since = 0
+
+    def close(self) -> None:
+        if self.fh is not None:
+            self.fh.close()
+
+
+def _gridder_state(g) -> dict:
+    """The streaming state of a :class:`fdikit.io.stream.FrameGridder` as plain data."""
+    series = {name: {"t": list(s.t), "v": list(s.v), "intervals": list(s.intervals), "first": s.first}
+              for name, s in g._series.items()}
+    return {"series": series, "bus": {str(k): v for k, v in g._bus.items()}, "t0": g._t0,
+            "t_last": g._t_last, "start": g._start, "k": g._k, "frames": g.frames,
+            "undecodable": g.undecodable}
+
+
+def _gridder_restore(g, st: dict) -> None:
+    if sorted(st["series"]) != sorted(g._series):
+        raise DataError(f"checkpoint grids signals {sorted(st['series'])}, the config {sorted(g._series)}")
+    for name, d in st["series"].items():
+        s = g._series[name]
+        s.t, s.v, s.first = [float(x) for x in d["t"]], [float(x) for x in d["v"]], d["first"]
+        s.intervals.clear()
+        s.intervals.extend(float(x) for x in d["intervals"])
+    g._bus = {int(k): v for k, v in st["bus"].items()}
+    g._t0, g._t_last, g._start = st["t0"], st["t_last"], st["start"]
+    g._k, g.frames, g.undecodable = int(st["k"]), int(st["frames"]), int(st["undecodable"])
+
+
+def _follow_candump(args, cfg, mon, stream, out: _Output) -> int:
     """Stream candump lines through the gridder and the monitor, printing events as they happen."""
     from ..io.stream import FrameGridder, parse_candump_line
     from ..monitor.config import map_sample
@@ -113,92 +243,127 @@ def _follow_candump(args, cfg, mon, stream) -> int:
                         "measure the source rate ahead of time")
     sources = list(dict.fromkeys(c.source for c in cfg.channels))
     grid = FrameGridder(cfg.path.parent / dbc, sources, rate)
-    n = 0
+    out.start(grid)
 
     def feed(samples):
-        nonlocal n
         for t, vals, why in samples:
             _, _, events = mon.step(t, map_sample(cfg, vals))
             if mon.last_invalid is not None:
-                print(json.dumps({"t": t, "sample": n, "invalid": mon.last_invalid}), flush=True)
+                out.write({"t": t, "sample": out.n, "invalid": mon.last_invalid})
             elif why:  # cannot happen: an invalid grid value is NaN and the monitor flags it
                 raise AssertionError(why)
             for e in events:
-                print(json.dumps(_event_record(e)), flush=True)
-            n += 1
+                out.write(_event_record(e))
+            out.stepped()
 
-    for lineno, line in enumerate(stream, start=1):
+    for index, line in enumerate(stream):
+        lineno = index + 1
         try:
             frame = parse_candump_line(line, lineno)
         except DataError as exc:
-            print(json.dumps({"line": lineno, "invalid": str(exc)}), flush=True)
+            if not out.skip(index, None):
+                out.write({"line": lineno, "invalid": str(exc)})
+                out.consumed(index, None)
             continue
+        t = None if frame is None else frame[0]
+        if out.skip(index, t):
+            continue
+        out.consumed(index, t)
         if frame is None:
             continue
         t, bus, fid, data = frame
         try:
             samples = grid.push(t, fid, data, bus)
         except DataError as exc:  # e.g. time going back: the frame is refused, the stream goes on
-            print(json.dumps({"line": lineno, "invalid": str(exc)}), flush=True)
+            out.write({"line": lineno, "invalid": str(exc)})
             continue
         feed(samples)
+        out.maybe_checkpoint()
     feed(grid.flush())
+    out.maybe_checkpoint(force=True)
+    return 0
+
+
+def _follow_csv(args, cfg, mon, stream, out: _Output) -> int:
+    from ..monitor.config import map_sample
+
+    tcol = cfg.log.get("time", "t")
+    out.start()
+    lines = iter(stream)
+    header = out.header
+    first = next(lines, None)
+    if header is None or (first is not None and [h.strip() for h in next(csv.reader([first]))] == header):
+        if first is None:
+            raise DataError("follow mode: no header line on the input")
+        header = [h.strip() for h in next(csv.reader([first]))]
+        lines_iter = lines
+    else:  # resumed on a stream that goes on without repeating its header
+        lines_iter = iter([first, *lines]) if first is not None else lines
+    if tcol not in header:
+        raise DataError(f"follow mode: the header has no time column {tcol!r}: {header}")
+    out.header = header
+    it = header.index(tcol)
+    for index, text in enumerate(lines_iter):
+        lineno = index + 2
+        row = next(csv.reader([text]), [])
+        if not row:
+            continue
+        t_row = None
+        if len(row) == len(header):
+            try:
+                t_row = float(row[it])
+            except ValueError:
+                t_row = None
+            if t_row is not None and not np.isfinite(t_row):
+                t_row = None
+        if out.skip(index, t_row):
+            continue
+        out.consumed(index, t_row)
+        if len(row) != len(header):
+            out.write({"line": lineno, "invalid": f"{len(row)} fields, expected {len(header)}"})
+            continue
+        vals = {}
+        for h, v in zip(header, row):
+            try:
+                vals[h] = float(v)
+            except ValueError:
+                vals[h] = float("nan")
+        t = vals.pop(tcol)
+        if not np.isfinite(t):
+            out.write({"line": lineno, "invalid": f"time {row[it]!r} is not a number"})
+            continue
+        _, _, events = mon.step(t, map_sample(cfg, vals))
+        if mon.last_invalid is not None:
+            out.write({"t": t, "sample": out.n, "invalid": mon.last_invalid})
+        for e in events:
+            out.write(_event_record(e))
+        out.stepped()
+        out.maybe_checkpoint()
+    out.maybe_checkpoint(force=True)
     return 0
 
 
 def _follow(args, cfg) -> int:
     """Stream CSV (or candump) lines from stdin through the monitor, printing events as they happen."""
-    from ..monitor.config import build_monitor, map_sample
+    from ..monitor.config import build_monitor
 
+    if args.resume and not args.checkpoint:
+        raise DataError("--resume needs --checkpoint FILE (the checkpoint to continue from)")
+    if args.checkpoint_every < 1:
+        raise DataError(f"--checkpoint-every must be >= 1 sample, got {args.checkpoint_every}")
     mon = build_monitor(cfg)
     mon.reset(1)
     kind = args.input or ("candump" if cfg.log.get("dbc") else "csv")
-    if kind == "candump":
-        stream = sys.stdin if args.log == "-" else open(args.log)  # closed below
-        try:
-            return _follow_candump(args, cfg, mon, stream)
-        finally:
-            if stream is not sys.stdin:
-                stream.close()
-    tcol = cfg.log.get("time", "t")
     stream = sys.stdin if args.log == "-" else open(args.log)  # closed below
+    out = _Output(args, cfg, mon, kind)
     try:
-        reader = csv.reader(stream)
-        header = next(reader, None)
-        if header is None:
-            raise DataError("follow mode: no header line on the input")
-        header = [h.strip() for h in header]
-        if tcol not in header:
-            raise DataError(f"follow mode: the header has no time column {tcol!r}: {header}")
-        n = 0
-        for lineno, row in enumerate(reader, start=2):
-            if not row:
-                continue
-            if len(row) != len(header):
-                print(json.dumps({"line": lineno, "invalid": f"{len(row)} fields, expected {len(header)}"}),
-                      flush=True)
-                continue
-            vals = {}
-            for h, v in zip(header, row):
-                try:
-                    vals[h] = float(v)
-                except ValueError:
-                    vals[h] = float("nan")
-            t = vals.pop(tcol)
-            if not np.isfinite(t):
-                bad_t = row[header.index(tcol)]
-                print(json.dumps({"line": lineno, "invalid": f"time {bad_t!r} is not a number"}), flush=True)
-                continue
-            _, _, events = mon.step(t, map_sample(cfg, vals))
-            if mon.last_invalid is not None:
-                print(json.dumps({"t": t, "sample": n, "invalid": mon.last_invalid}), flush=True)
-            for e in events:
-                print(json.dumps(_event_record(e)), flush=True)
-            n += 1
+        if kind == "candump":
+            return _follow_candump(args, cfg, mon, stream, out)
+        return _follow_csv(args, cfg, mon, stream, out)
     finally:
+        out.close()
         if stream is not sys.stdin:
             stream.close()
-    return 0
 
 
 def _monitor(args) -> int:
@@ -252,7 +417,8 @@ def register(sub) -> None:
                    "or - with --follow to read standard input")
     p.add_argument("--config", required=True, help="monitor configuration file (TOML)")
     p.add_argument("--events",
-                   help="JSON Lines file to write: one line per announcement and per held (invalid) sample")
+                   help="JSON Lines file to write: one line per announcement and per held (invalid) sample "
+                   "(in follow mode the same lines as on standard output, exactly once across --resume)")
     p.add_argument("--stats", help="Parquet file to write: the residuals and test statistics of every sample")
     p.add_argument("--follow", action="store_true",
                    help="follow mode: process CSV or candump lines as they arrive (from standard input with "
@@ -260,6 +426,16 @@ def register(sub) -> None:
     p.add_argument("--input", choices=("csv", "candump"),
                    help="line format in follow mode (default: candump when the config names a DBC file "
                    "in [log].dbc, else csv)")
+    p.add_argument("--checkpoint",
+                   help="follow mode: checkpoint file (NPZ), written atomically every --checkpoint-every "
+                   "samples and at the end: the monitor's state, how far the input was read and the event "
+                   "log's length")
+    p.add_argument("--checkpoint-every", type=int, default=500,
+                   help="follow mode: samples between checkpoints (default 500, 10 s at 50 Hz)")
+    p.add_argument("--resume", action="store_true",
+                   help="follow mode: continue from --checkpoint if it exists (after a crash or kill -9): "
+                   "the event log is cut back to the checkpoint and the input lines read before it are "
+                   "skipped (replay the input from its start, or let a live stream go on)")
     p.add_argument("--json", action="store_true",
                    help="print one JSON summary object (batch mode only; not with --follow)")
     p.set_defaults(func=_monitor)

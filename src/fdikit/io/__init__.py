@@ -7,7 +7,11 @@
 * per-format readers :func:`read_blf`, :func:`read_asc`, :func:`read_candump`, :func:`read_mdf`,
   :func:`read_parquet`, :func:`read_table_csv`;
 * :class:`FrameGridder` and :func:`parse_candump_line` — live CAN frames (e.g. ``candump -L``)
-  onto the same grid as they arrive, with the batch loader's arithmetic.
+  onto the same grid as they arrive, with the batch loader's arithmetic;
+* :mod:`fdikit.io.decode` — the vectorised CAN path under the frame readers: a BLF file as a
+  frame table (:func:`read_blf_table`), DBC signals decoded per message id over all its frames
+  (:func:`decode_message`, equal to cantools frame by frame), and the inverses for generated or
+  fault-injected logs (:func:`set_signal`, :func:`write_blf_table`).
 
 They return :class:`LogSignals` (or its subclass :class:`LoadedSignals`), a Signals whose values
 may hold NaN where the source had a gap or a bad sample; ``valid`` marks the samples that hold
@@ -17,6 +21,7 @@ are never interpolated across (see :mod:`fdikit.io.can`).
 
 from .can import LogSignals, SignalInfo, convert_units, resample_to_grid
 from .csv import read_csv
+from .decode import FramePayloads, decode_message, read_blf_table, set_signal, write_blf_table
 from .formats import (
     FORMATS,
     LoadedSignals,
@@ -39,17 +44,20 @@ from .stream import FrameGridder, parse_candump_line
 __all__ = [
     "FORMATS",
     "FrameGridder",
+    "FramePayloads",
     "LoadedSignals",
     "LogSignals",
     "SignalInfo",
     "SignalQuality",
     "SourceReport",
     "convert_units",
+    "decode_message",
     "detect_format",
     "frames_to_signals",
     "parse_candump_line",
     "read_asc",
     "read_blf",
+    "read_blf_table",
     "read_can_log",
     "read_candump",
     "read_csv",
@@ -59,4 +67,6 @@ __all__ = [
     "read_table_csv",
     "resample_to_grid",
     "series_to_grid",
+    "set_signal",
+    "write_blf_table",
 ]

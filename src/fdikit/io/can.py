@@ -325,6 +325,39 @@ def _read_frames(path: Path) -> tuple[np.ndarray, np.ndarray, list[bytes]]:
     return np.asarray(ts, float), np.asarray(ids, np.int64), data
 
 
+def _read_frame_table(path: Path):
+    """The frames of a BLF log as a table ``(ts, ids, FramePayloads)``: the vectorised reader
+    (:func:`fdikit.io.decode.read_blf_table`) with :func:`_read_frames`' integrity checks; any file
+    it does not read exactly the way python-can reads it goes to :func:`_read_frames`."""
+    from .decode import FramePayloads, read_blf_table
+
+    table = None
+    if path.is_file() and path.suffix.lower() == ".blf":
+        try:
+            table = read_blf_table(path)
+        except (ValueError, IndexError, struct.error, OSError):  # unusual layout: python-can decides
+            table = None
+    if table is None:
+        ts, ids, data = _read_frames(path)
+        return ts, ids, FramePayloads.from_bytes(data)
+    ts, ids, payloads, header = table
+    size = path.stat().st_size
+    if header["file_size"] and header["file_size"] != size:
+        raise DataError(f"BLF file {str(path)!r} is truncated or padded: its header says "
+                        f"{header['file_size']} bytes, the file has {size} bytes "
+                        f"({len(ts)} frames readable of {header['object_count']})")
+    if header["object_count"] and len(ts) < header["object_count"]:
+        raise DataError(f"BLF file {str(path)!r} is truncated: its header counts "
+                        f"{header['object_count']} objects, only {len(ts)} frames could be read")
+    if not len(ts):
+        raise DataError(f"CAN log {str(path)!r} holds no CAN frames (empty or not a log)")
+    return ts, ids, payloads
+
+
+#: Parsed DBC files by (path, modification time, size): a fleet decodes thousands of logs with one DBC.
+_DBC_CACHE: dict[tuple[str, int, int], Any] = {}
+
+
 def _load_dbc(dbc: Any):
     import cantools
 
@@ -333,10 +366,18 @@ def _load_dbc(dbc: Any):
     p = Path(dbc)
     if not p.exists():
         raise DataError(f"DBC file {str(p)!r} does not exist")
+    st = p.stat()
+    key = (str(p.resolve()), st.st_mtime_ns, st.st_size)
+    if key in _DBC_CACHE:
+        return _DBC_CACHE[key]
     try:
-        return cantools.database.load_file(str(p), strict=False)
+        db = cantools.database.load_file(str(p), strict=False)
     except Exception as exc:  # cantools raises several parse error types
         raise DataError(f"cannot parse DBC {str(p)!r}: {type(exc).__name__}: {exc}") from None
+    if len(_DBC_CACHE) >= 8:
+        _DBC_CACHE.pop(next(iter(_DBC_CACHE)))
+    _DBC_CACHE[key] = db
+    return db
 
 
 def _resolve(db, signals: Sequence[str]):

@@ -55,11 +55,12 @@ from .can import (
     SignalInfo,
     _load_dbc,
     _norm_unit,
-    _read_frames,
+    _read_frame_table,
     _resolve,
     convert_units,
     resample_to_grid,
 )
+from .decode import FramePayloads, decode_message
 
 __all__ = [
     "FORMATS",
@@ -436,9 +437,10 @@ def frames_to_signals(
         Frame times (s), non-decreasing; time 0 of the result is ``ts[0]``.
     ids : ndarray of int, shape (N,)
         Arbitration ids.
-    data : sequence of bytes, length N
+    data : sequence of bytes or FramePayloads, length N
         Payloads. A payload too short for a signal gives a bad (NaN) sample of that signal,
-        never zero padding.
+        never zero padding. Each message's signals are decoded over all its frames at once
+        (:func:`fdikit.io.decode.decode_message`, equal to cantools' per-frame decoding).
     dbc : path-like or cantools Database
     signals : sequence of str
         ``"MESSAGE.SIGNAL"`` names.
@@ -487,6 +489,7 @@ def frames_to_signals(
         raise DataError(f"{where} holds no CAN frames")
     if ts.shape != ids.shape or len(data) != ts.size:
         raise DataError(f"{where}: {ts.size} time stamps, {ids.size} ids and {len(data)} payloads")
+    payloads = FramePayloads.from_bytes(data)
 
     def _at(k: int) -> str:
         return f"frame {k}" + (f" (line {int(lines[k])})" if lines is not None else "")
@@ -514,7 +517,7 @@ def frames_to_signals(
             raise DataError(f"{where} has no frame on channel {str(channel)!r}; its channels are "
                             f"{sorted(set(chan.tolist()))}")
         ts, ids, chan = ts[keep], ids[keep], chan[keep]
-        data = [data[k] for k in np.flatnonzero(keep)]
+        payloads = payloads.take(keep)
         lines = None if lines is None else np.asarray(lines)[keep]
     by_msg: dict[int, list[tuple[str, Any, Any]]] = {}
     for full, msg, sig in resolved:
@@ -532,21 +535,8 @@ def frames_to_signals(
             raise DataError(f"{where}: message {msg.name!r} (id 0x{fid:x}) is on several buses "
                             f"{sorted(set(chan[idx].tolist()))}; pass channel= to choose one")
         snames = [w[2].name for w in wanted]
-        cols = np.full((idx.size, len(snames)), np.nan)
-        n_bad = np.zeros(len(snames), int)
-        decode = msg.decode
-        for j, k in enumerate(idx):
-            try:
-                dec = decode(bytes(data[k]), decode_choices=False, scaling=True, allow_truncated=True)
-            except Exception:  # cantools raises several types for payloads it cannot decode
-                n_bad += 1
-                continue
-            for c, s in enumerate(snames):
-                x = dec.get(s)
-                if x is None:
-                    n_bad[c] += 1
-                else:
-                    cols[j, c] = float(x)
+        # all frames of this message at once (numpy bit extraction; multiplexed messages per frame)
+        cols, n_bad = decode_message(msg, snames, payloads.take(idx))
         tm = ts[idx] - t0
         for c, (full, _msg, sig) in enumerate(wanted):
             series[full] = (tm, cols[:, c])
@@ -767,7 +757,7 @@ def read_blf(path, dbc, signals, rate=None, **kw) -> LoadedSignals:
     """
     p = _check_file(path, "BLF file")
     try:
-        ts, ids, data = _read_frames(p)
+        ts, ids, data = _read_frame_table(p)
     except DataError:
         raise
     except Exception as exc:  # zlib.error and friends from a corrupt container

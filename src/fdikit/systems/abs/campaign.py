@@ -274,8 +274,11 @@ def abs_residuals(sig: Signals, generators: Sequence[Any] | None = None) -> Sign
 
 def _simulate_residuals(fault: str, magnitude, runs: int, seed: int, snr_db, batch: int, generators,
                         on_batch=None, first_run: int = 0, noise_hold: float | None = None,
-                        pedal_ramp: float | None = None):
-    """Yield residual Signals batch by batch for one class (magnitude None: drawn per run)."""
+                        pedal_ramp: float | None = None, half: int | None = None):
+    """Yield residual Signals batch by batch for one class (magnitude None: drawn per run).
+
+    ``half``: global index of the first run given the negative minimum size of a symmetric class
+    (default ``first_run + runs // 2``; a chunk of a campaign passes the campaign's own)."""
     from .plant import FAULT_CLASSES, Scenario, simulate
 
     fc = FAULT_CLASSES[fault]
@@ -286,7 +289,7 @@ def _simulate_residuals(fault: str, magnitude, runs: int, seed: int, snr_db, bat
         if magnitude is not None and fc.symmetric:
             # minimum size +-m: first half of the runs +m, second half -m (global run index)
             ids = np.arange(first_run + done, first_run + done + n)
-            neg = ids >= first_run + runs // 2
+            neg = ids >= (first_run + runs // 2 if half is None else half)
             parts = []
             for sign, mask in ((1.0, ~neg), (-1.0, neg)):
                 if mask.any():
@@ -308,9 +311,39 @@ def _simulate_residuals(fault: str, magnitude, runs: int, seed: int, snr_db, bat
         yield r
 
 
+def _chunk_residuals(start: int, stop: int, fault: str, magnitude, total: int, seed: int, snr_db, batch: int,
+                     specs, noise_hold, pedal_ramp):
+    """Residuals of runs ``start .. stop-1`` of a class of ``total`` runs, batch by batch."""
+    gens = residual_generators(specs)
+    return _simulate_residuals(fault, magnitude, stop - start, seed, snr_db, min(batch, stop - start), gens,
+                               first_run=start, noise_hold=noise_hold, pedal_ramp=pedal_ramp,
+                               half=total // 2)
+
+
+def _residual_chunk(start: int, stop: int, fault: str, magnitude, total: int, seed: int, snr_db, batch: int,
+                    specs, noise_hold, pedal_ramp):
+    """One task of a distributed design: ``(t, residual values (stop - start, T, 3), names)``."""
+    rs = list(_chunk_residuals(start, stop, fault, magnitude, total, seed, snr_db, batch, specs, noise_hold,
+                               pedal_ramp))
+    return rs[0].t, np.concatenate([r.values for r in rs]), rs[0].names
+
+
+def _alarm_chunk(start: int, stop: int, fault: str, magnitude, total: int, seed: int, snr_db, batch: int,
+                 bank, noise_hold, pedal_ramp):
+    """One task of a distributed evaluation: ``(fired, first alarm time)`` of runs ``start .. stop-1``."""
+    fs, ts = [], []
+    for r in _chunk_residuals(start, stop, fault, magnitude, total, seed, snr_db, batch, bank.specs,
+                              noise_hold, pedal_ramp):
+        a, b = bank.alarms(r)
+        fs.append(a)
+        ts.append(b)
+    return np.concatenate(fs), np.concatenate(ts)
+
+
 def design_tests(specs: Sequence[TestSpec] | None = None, *, design_runs: int = 2000, snr_db=23.0,
                  seed: int = 0, pfa: float = 0.0, margin: float = 0.1, batch: int = 1000, skip: int = 0,
-                 progress=None, noise_hold: float | None = None, pedal_ramp: float | None = None) -> TestBank:
+                 progress=None, noise_hold: float | None = None, pedal_ramp: float | None = None,
+                 engine=None, chunk_size: int | None = None) -> TestBank:
     """Calibrate mu0/sigma^2 and design every threshold from nominal runs.
 
     Parameters
@@ -332,6 +365,11 @@ def design_tests(specs: Sequence[TestSpec] | None = None, *, design_runs: int = 
     pedal_ramp : float or None
         None (default): the step pedal force of eq. (4). A duration, s: the opt-in ramp profile
         (``Scenario(pedal="ramp", pedal_ramp=...)``).
+    engine : fdikit.evaluate.Engine, optional
+        Simulate the design runs as tasks of ``chunk_size`` runs there (the same residuals, bit
+        for bit: per-run seeds); None: in this process.
+    chunk_size : int, optional
+        Runs per task with an engine (default ``batch``).
 
     Returns
     -------
@@ -346,14 +384,23 @@ def design_tests(specs: Sequence[TestSpec] | None = None, *, design_runs: int = 
     specs = list(paper_tests() if specs is None else specs)
     if design_runs < 2:
         raise DataError(f"need at least 2 nominal design runs, got {design_runs}")
-    gens = residual_generators(specs)
-    chunks = []
     cb = (lambda n: progress(n)) if progress is not None else None
-    for r in _simulate_residuals("F0", None, design_runs, seed + 1_000_003, snr_db, batch, gens, cb,
-                                 noise_hold=noise_hold, pedal_ramp=pedal_ramp):
-        chunks.append(r.values)
-    vals = np.concatenate(chunks)
-    res = Signals(r.t, vals, r.names, check=False)
+    if engine is None:
+        gens = residual_generators(specs)
+        chunks = []
+        for r in _simulate_residuals("F0", None, design_runs, seed + 1_000_003, snr_db, batch, gens, cb,
+                                     noise_hold=noise_hold, pedal_ramp=pedal_ramp):
+            chunks.append(r.values)
+        vals = np.concatenate(chunks)
+        res = Signals(r.t, vals, r.names, check=False)
+    else:
+        from ...evaluate.distributed import run_chunked
+
+        parts = run_chunked(_residual_chunk, design_runs, chunk_size=int(chunk_size or batch), engine=engine,
+                            on_chunk=cb, args=("F0", None, design_runs, seed + 1_000_003, snr_db, batch,
+                                               tuple(specs), noise_hold, pedal_ramp))
+        vals = np.concatenate([p[1] for p in parts])
+        res = Signals(parts[0][0], vals, parts[0][2], check=False)
     flat = vals[:, skip:].reshape(-1, vals.shape[2])
     mu0 = {n: float(flat[:, i].mean()) for i, n in enumerate(res.names)}
     sigma2 = {n: float(flat[:, i].var(ddof=1)) for i, n in enumerate(res.names)}
@@ -367,7 +414,7 @@ def design_tests(specs: Sequence[TestSpec] | None = None, *, design_runs: int = 
             bank.design[s.name] = dict(bank.design[base.name], shared_with=base.name)
             continue
         g = bank.statistic(res, s).values[:, :, 0]
-        d = design_threshold(g, pfa, Z=s.Z, margin=margin)
+        d = design_threshold(g, pfa, Z=s.Z, margin=margin, absolute=False, min_events=0.0)
         bank.thresholds[s.name] = float(d.threshold)
         bank.design[s.name] = {"achieved_pfa": d.achieved_pfa, "runs": d.runs, "Z": d.Z, "pfa": pfa,
                                "max_nominal_critical_value": float(d.critical_values.max())}
@@ -427,7 +474,8 @@ def run_campaign(runs: int = 200, *, nominal_runs: int | None = None, design_run
                  magnitudes: str = "draw", pfa: float = 0.0, margin: float = 0.1, batch: int = 1000,
                  t_detect: float = 7.0, progress: bool = False,
                  bank: TestBank | None = None, noise_hold: float | None = None,
-                 pedal_ramp: float | None = None, tests: str = "paper") -> CampaignResult:
+                 pedal_ramp: float | None = None, tests: str = "paper", engine=None,
+                 chunk_size: int | None = None) -> CampaignResult:
     """Monte Carlo campaign over the fault universe: Pd/Pf, D-matrix, sensitivity, specificity.
 
     Parameters
@@ -468,6 +516,13 @@ def run_campaign(runs: int = 200, *, nominal_runs: int | None = None, design_run
     tests : {"paper", "extended"}
         The test set designed when no ``bank`` is given (:func:`test_set`): the paper's five
         GLRT tests, or those plus the directional test ``G_D_Iw`` of :func:`extended_tests`.
+    engine : fdikit.evaluate.Engine, optional
+        Run the design and every class in chunks of ``chunk_size`` runs as tasks there
+        (local processes or Dask, :func:`fdikit.evaluate.run_chunked`). Per-run seeds make the
+        result bitwise the same as without an engine, for any number of workers and any chunk
+        size, and when a worker dies and its chunk is rerun (only the wall time differs).
+    chunk_size : int, optional
+        Runs per task with an engine (default ``batch``).
 
     Returns
     -------
@@ -506,9 +561,20 @@ def run_campaign(runs: int = 200, *, nominal_runs: int | None = None, design_run
         if bank is None:
             bank = design_tests(test_set(tests, W, gate=gate), design_runs=design_runs, snr_db=snr_db,
                                 seed=seed, pfa=pfa, margin=margin, batch=batch, progress=adv,
-                                noise_hold=noise_hold, pedal_ramp=pedal_ramp)
+                                noise_hold=noise_hold, pedal_ramp=pedal_ramp, engine=engine,
+                                chunk_size=chunk_size)
         gens = residual_generators(bank.specs)
         for ci, c in enumerate(FAULT_CLASSES):
+            if engine is not None:
+                from ...evaluate.distributed import run_chunked
+
+                parts = run_chunked(_alarm_chunk, counts[c], chunk_size=int(chunk_size or batch),
+                                    engine=engine, on_chunk=adv,
+                                    args=(c, mags[c], counts[c], seed + 7919 * ci, snr_db, batch, bank,
+                                          noise_hold, pedal_ramp))
+                fired[c] = np.concatenate([p[0] for p in parts])
+                first[c] = np.concatenate([p[1] for p in parts])
+                continue
             fs, ts = [], []
             for r in _simulate_residuals(c, mags[c], counts[c], seed + 7919 * ci, snr_db, batch, gens, adv,
                                          noise_hold=noise_hold, pedal_ramp=pedal_ramp):
