@@ -146,3 +146,45 @@ def test_default_pipeline_is_scaled_and_cross_validated_for_any_classes():
     assert iso.error(Xte, zte) < 0.05
     assert SVMIsolator(paper_pipeline()).fit(Xtr, ztr).error(Xte, zte) > 0.3
     del rng
+
+
+# ---------------------------------------------------------------------------------------------- issue 15
+@pytest.mark.parametrize("n_classes,n_channels", [(3, 1), (4, 3), (6, 5)])
+def test_multiclass_export_equals_sklearn_predictions(n_classes, n_channels):
+    # issue 15: "export() handles 2 classes only"
+    rng = np.random.default_rng(n_classes)
+    T = 8
+    X = np.concatenate([rng.normal(0.6 * k, 1.0, (30, T, n_channels)) for k in range(n_classes)])
+    lab = np.repeat([f"m{k}" for k in range(n_classes)], 30)
+    iso = SVMIsolator().fit(X, lab)                       # default: scaled, cross-validated RBF SVC
+    data = iso.export()
+    assert data["version"] == 2 and len(data["intercept"]) == n_classes * (n_classes - 1) // 2
+    dec = SVMDecision(json_roundtrip(data))
+    Xt = rng.normal(0.5 * n_classes / 2, 1.5, (400, T, n_channels))
+    assert (dec.predict(Xt) == iso.predict(Xt)).all()
+
+
+def test_multiclass_ovo_values_match_sklearn_ovo():
+    from sklearn.svm import SVC
+
+    rng = np.random.default_rng(3)
+    X = np.vstack([rng.normal(k, 1.0, (25, 2)) for k in range(4)])
+    lab = np.repeat(list("abcd"), 25)
+    iso = SVMIsolator(SVC(kernel="rbf", gamma=0.7, decision_function_shape="ovo")).fit(X, lab)
+    Xt = rng.normal(1.5, 2.0, (300, 2))
+    dec = SVMDecision(iso.export())
+    assert np.allclose(dec.decision_function(Xt), iso.estimator_.decision_function(Xt), atol=1e-10)
+    assert (dec.predict(Xt) == iso.predict(Xt)).all()
+
+
+def test_too_few_samples_per_class_for_the_folds_says_so_with_the_counts():
+    # issue 15: "fails inside scikit-learn's cross-validation with the real cause buried in the text"
+    rng = np.random.default_rng(0)
+    X = rng.normal(size=(23, 3))
+    lab = np.array(["a"] * 20 + ["b"] * 3)
+    with pytest.raises(DataError, match=r"5-fold.*\{'b': 3\}.*'a': 20"):
+        SVMIsolator().fit(X, lab)
+
+
+def json_roundtrip(d):
+    return json.loads(json.dumps(d))

@@ -19,7 +19,7 @@ from .errors import FdikitError
 __all__ = ["build_parser", "main", "print_json"]
 
 #: Modules under fdikit.commands that register subcommands, in help order.
-COMMAND_MODULES = ("demo", "reconstruct", "abs", "car", "monitor", "report")
+COMMAND_MODULES = ("demo", "reconstruct", "abs", "car", "monitor", "report", "fleet")
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -5,14 +5,19 @@ Generic machinery for any test design: build or learn a :class:`DMatrix`, find t
 cost :class:`DiagnosticTree` with :func:`ao_star` (checked against :func:`exhaustive`), and emit the
 tree as IF-THEN-ELSE logic in Python or C (:func:`to_python`, :func:`to_c`, :func:`to_listing`),
 as in luo-et-al, Section VII; decide from binary outcomes by maximum likelihood
-(:func:`diagnose_ml`) or down a tree (:func:`diagnose_tree`). :class:`SVMIsolator` (scikit-learn)
+(:func:`diagnose_ml`, :meth:`DMatrix.diagnose` with ambiguity sets) or down a tree
+(:func:`diagnose_tree`); isolate by a fault signature matrix of structured residuals
+(:class:`SignatureIsolator`). AO* takes a node and time budget and then falls back to a greedy
+completion with its optimality gap reported. :class:`SVMIsolator` (scikit-learn)
 separates faults that the residual tests cannot (luo-et-al, Section VI).
 """
 
+from .classify import WindowedIsolator, moving_average
 from .codegen import compile_python, to_c, to_listing, to_python
-from .decide import diagnose_ml, diagnose_tree
+from .decide import Diagnosis, diagnose_likelihood, diagnose_ml, diagnose_tree
 from .dmatrix import DMatrix, wilson_interval
 from .sequencing import DiagnosticTree, TreeNode, ao_star, exhaustive, huffman_cost
+from .signature import SignatureDecision, SignatureIsolator
 
 _SVM_NAMES = ("SVMDecision", "SVMIsolator", "WindowFeatures", "concat_measurements", "cv_pipeline",
               "rbf_gamma")
@@ -26,6 +31,30 @@ def __getattr__(name: str):
         return getattr(svm, name)
     raise AttributeError(f"module 'fdikit.isolate' has no attribute {name!r}")
 
-__all__ = ["DMatrix", "DiagnosticTree", "SVMDecision", "SVMIsolator", "TreeNode", "WindowFeatures",
-           "ao_star", "compile_python", "concat_measurements", "cv_pipeline", "diagnose_ml", "diagnose_tree",
-           "exhaustive", "huffman_cost", "rbf_gamma", "to_c", "to_listing", "to_python", "wilson_interval"]
+__all__ = [
+    "DMatrix",
+    "Diagnosis",
+    "DiagnosticTree",
+    "SVMDecision",
+    "SVMIsolator",
+    "SignatureDecision",
+    "SignatureIsolator",
+    "TreeNode",
+    "WindowFeatures",
+    "WindowedIsolator",
+    "ao_star",
+    "compile_python",
+    "concat_measurements",
+    "cv_pipeline",
+    "diagnose_likelihood",
+    "diagnose_ml",
+    "diagnose_tree",
+    "exhaustive",
+    "huffman_cost",
+    "moving_average",
+    "rbf_gamma",
+    "to_c",
+    "to_listing",
+    "to_python",
+    "wilson_interval",
+]

@@ -4,12 +4,13 @@ walking a diagnostic tree (luo-et-al, Section VII)."""
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
 from ..errors import DataError
 
-__all__ = ["diagnose_ml", "diagnose_tree"]
+__all__ = ["Diagnosis", "diagnose_likelihood", "diagnose_ml", "diagnose_tree"]
 
 
 def diagnose_ml(fired: np.ndarray, fail_prob: np.ndarray, classes: Sequence[str], *,
@@ -106,3 +107,102 @@ def diagnose_tree(fired: np.ndarray, tree, tests: Sequence[str]) -> list[tuple[s
             cache[key] = tree.diagnose(dict(zip(tests, row.tolist())))
         out.append(cache[key])
     return out
+
+
+@dataclass
+class Diagnosis:
+    """Maximum-likelihood (or maximum-posterior) diagnoses of many outcome vectors.
+
+    Attributes
+    ----------
+    classes : list of str
+        Candidate classes (the rows of the D-matrix or signature, nominal class included).
+    index : ndarray of int (runs,)
+        Index of the diagnosed class (first of the ambiguity set).
+    loglik : ndarray (runs, n_classes)
+        ``log P(outcomes | class)`` (natural log), plus ``log prior`` when a prior was given.
+    posterior : ndarray (runs, n_classes)
+        Normalised ``exp(loglik)`` (the posterior under the prior, uniform by default).
+    ambiguity : list of tuple of str
+        Per run, every class whose score ties the best within ``tol`` (the ambiguity set; one class
+        when the outcomes isolate it).
+    """
+
+    classes: list[str]
+    index: np.ndarray
+    loglik: np.ndarray
+    posterior: np.ndarray
+    ambiguity: list[tuple[str, ...]]
+
+    @property
+    def best(self) -> list[str]:
+        """The diagnosed class of every run."""
+        return [self.classes[i] for i in self.index]
+
+    @property
+    def isolated(self) -> np.ndarray:
+        """True where the ambiguity set has one class, (runs,)."""
+        return np.array([len(a) == 1 for a in self.ambiguity], bool)
+
+    def __len__(self) -> int:
+        return len(self.index)
+
+
+def diagnose_likelihood(fired: np.ndarray, fail_prob: np.ndarray, classes: Sequence[str], *,
+                        prior=None, tol: float = 1e-9, floor: float = 1e-6) -> Diagnosis:
+    """Maximum likelihood (or maximum posterior with ``prior``) over every class, with ambiguity sets.
+
+    ``log P(o | i) = sum_j o_j log q_ij + (1 - o_j) log(1 - q_ij)`` with ``q_ij`` the probability that
+    test ``j`` fires under class ``i`` (clipped to ``[floor, 1 - floor]``; tests conditionally
+    independent given the class). Unlike :func:`diagnose_ml` no class is special: the nominal class
+    competes on its false-alarm probabilities like any other.
+
+    Parameters
+    ----------
+    fired : bool array (runs, n_tests) or (n_tests,)
+    fail_prob : array (n_classes, n_tests)
+    classes : sequence of str
+    prior : array_like (n_classes,), optional
+        Class probabilities (any positive scale); default uniform.
+    tol : float
+        Classes whose score is within ``tol`` of the best form the ambiguity set.
+    floor : float
+        Clip of the probabilities (a perfect test that contradicts a class gives ``log(floor)``).
+
+    Returns
+    -------
+    Diagnosis
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> q = np.array([[0.01, 0.01], [0.99, 0.01], [0.99, 0.01]])
+    >>> d = diagnose_likelihood(np.array([[0, 0], [1, 0]], bool), q, ["F0", "A", "B"])
+    >>> d.best, d.ambiguity
+    (['F0', 'A'], [('F0',), ('A', 'B')])
+    """
+    o = np.asarray(fired, float)
+    if o.ndim == 1:
+        o = o[None]
+    p = np.clip(np.asarray(fail_prob, float), floor, 1 - floor)
+    classes = list(classes)
+    if o.ndim != 2 or p.ndim != 2 or o.shape[1] != p.shape[1] or p.shape[0] != len(classes):
+        raise DataError(f"outcomes {o.shape} and reliabilities {p.shape} do not match {len(classes)} classes")
+    bad = ~np.isfinite(o) | ((o != 0) & (o != 1))
+    if np.any(bad):
+        r, j = map(int, np.argwhere(bad)[0])
+        raise DataError(f"outcome of run {r}, test {j} is {o[r, j]!r}; outcomes are 0/1 (True = fired)")
+    ll = o @ np.log(p).T + (1 - o) @ np.log1p(-p).T
+    if prior is not None:
+        pr = np.asarray(prior, float).ravel()
+        if pr.shape != (len(classes),) or np.any(~np.isfinite(pr)) or np.any(pr < 0) or pr.sum() <= 0:
+            raise DataError(f"prior must be {len(classes)} non-negative numbers, got {np.shape(prior)}")
+        with np.errstate(divide="ignore"):
+            ll = ll + np.log(pr / pr.sum())
+    top = ll.max(axis=1, keepdims=True)
+    w = np.exp(ll - top)
+    post = w / w.sum(axis=1, keepdims=True)
+    tie = ll >= top - tol
+    idx = np.argmax(tie, axis=1)
+    amb = [tuple(classes[i] for i in np.flatnonzero(row)) for row in tie]
+    return Diagnosis(classes, idx, ll, post, amb)

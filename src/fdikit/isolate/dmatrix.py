@@ -335,6 +335,67 @@ class DMatrix:
         """True when all rows are distinct (every fault can be uniquely isolated, single-fault case)."""
         return not self.ambiguity_groups()
 
+    def diagnose(self, outcomes, *, prior=None, tol: float = 1e-9, floor: float = 1e-6):
+        """Maximum-likelihood diagnosis from test outcomes, every row (the nominal one included) a candidate.
+
+        Each test fires under fault ``i`` with probability ``Pd_ij`` where ``d_ij = 1`` and ``Pf_ij``
+        where ``d_ij = 0`` (:meth:`fail_probability`); tests are conditionally independent given the
+        fault. The diagnosis maximises the likelihood (or the posterior with ``prior``), and returns for
+        every outcome vector its ambiguity set: all rows whose score ties the best (identical rows always
+        tie).
+
+        Parameters
+        ----------
+        outcomes : array_like of bool (runs, n_t) or (n_t,), or mapping test -> bool / (runs,)
+            True = the test fired (NG). A mapping must give every test.
+        prior : array_like (n_f,) or mapping fault -> probability, optional
+            Prior probabilities of the rows (default uniform: maximum likelihood).
+        tol : float
+            Score tolerance of the ambiguity sets (natural-log units).
+        floor : float
+            Probabilities are clipped to ``[floor, 1 - floor]`` (a perfect D-matrix then counts each
+            contradicted test as a factor ``floor``: the nearest signature wins).
+
+        Returns
+        -------
+        Diagnosis
+            ``best`` (names), ``index``, ``loglik`` and ``posterior`` (runs, n_f), ``ambiguity``.
+
+        Examples
+        --------
+        >>> dm = DMatrix(["F0", "F1", "F2", "F3"], ["t1", "t2"], [[0, 0], [1, 0], [1, 1], [1, 1]],
+        ...              pd=0.95, pf=0.02)
+        >>> d = dm.diagnose([[0, 0], [1, 0], [1, 1]])
+        >>> d.best, d.ambiguity
+        (['F0', 'F1', 'F2'], [('F0',), ('F1',), ('F2', 'F3')])
+        """
+        from .decide import diagnose_likelihood
+
+        if isinstance(outcomes, Mapping):
+            unknown = [k for k in outcomes if k not in self.tests]
+            missing = [t for t in self.tests if t not in outcomes]
+            if unknown or missing:
+                raise DataError(f"outcomes name unknown tests {unknown} / miss tests {missing}; tests are "
+                                f"{self.tests}")
+            o = np.column_stack([np.atleast_1d(np.asarray(outcomes[t])) for t in self.tests])
+        else:
+            o = np.asarray(outcomes)
+            if o.ndim == 1:
+                o = o[None]
+            if o.ndim != 2 or o.shape[1] != len(self.tests):
+                raise DataError(f"outcomes have shape {np.shape(outcomes)}; expected "
+                                f"(runs, {len(self.tests)}) for tests {self.tests}")
+        pr = None
+        if prior is not None:
+            if isinstance(prior, Mapping):
+                bad = [k for k in prior if k not in self.faults]
+                if bad:
+                    raise DataError(f"prior names unknown faults {bad}; faults are {self.faults}")
+                pr = np.array([float(prior.get(f, 0.0)) for f in self.faults])
+            else:
+                pr = prior
+        return diagnose_likelihood(o, self.fail_probability(), self.faults, prior=pr, tol=tol, floor=floor)
+
     def undetectable(self, nominal: str | None = None) -> list[str]:
         """Faults (other than ``nominal``) whose row is all zero: no test detects them."""
         return [f for f, r in zip(self.faults, self.d) if not r.any() and f != nominal]

@@ -526,9 +526,45 @@ class _OrNode:
         self.stop = None
 
 
-def _aostar_loop(root: _OrNode, expand: Callable[[_OrNode], None], revise: Callable[[_OrNode], bool]) -> int:
+class _OutOfBudget(Exception):
+    """Raised inside the search when the node or time budget is spent."""
+
+
+class _Budget:
+    """Node and wall-time budget of one search, with a progress callback."""
+
+    def __init__(self, max_nodes: int | None, time_limit: float | None, progress: Callable | None):
+        self.max_nodes, self.time_limit, self.progress = max_nodes, time_limit, progress
+        self.t0 = time.perf_counter()
+        self.nodes = 0
+        self.expansions = 0
+        self.exceeded: str | None = None
+
+    def node(self) -> None:
+        self.nodes += 1
+        if self.max_nodes is not None and self.nodes > self.max_nodes:
+            self.exceeded = f"node budget {self.max_nodes}"
+            raise _OutOfBudget
+        if self.time_limit is not None and self.nodes % 64 == 0 and self.elapsed() > self.time_limit:
+            self.exceeded = f"time budget {self.time_limit:g} s"
+            raise _OutOfBudget
+
+    def elapsed(self) -> float:
+        return time.perf_counter() - self.t0
+
+    def report(self, root: _OrNode, done: bool = False) -> None:
+        if self.progress is not None:
+            self.progress({"nodes": self.nodes, "expanded": self.expansions, "seconds": self.elapsed(),
+                           "lower_bound": float(root.f), "done": done})
+
+
+def _aostar_loop(root: _OrNode, expand: Callable[[_OrNode], None], revise: Callable[[_OrNode], bool],
+                 budget: _Budget | None = None) -> int:
     """Generic AO*: repeatedly expand the unexpanded tips of the marked partial solution graph and
-    revise costs bottom-up (children before parents) until the root is solved. Returns expansions."""
+    revise costs bottom-up (children before parents) until the root is solved. Returns expansions.
+
+    With a ``budget`` the search stops when it is spent (:class:`_OutOfBudget` propagates after the
+    costs of the expanded tips have been revised, so every ``f`` stays a lower bound)."""
     expansions = 0
     while not root.solved:
         tips, stack, seen = [], [root], set()
@@ -544,9 +580,16 @@ def _aostar_loop(root: _OrNode, expand: Callable[[_OrNode], None], revise: Calla
         if not tips:   # cannot happen with a consistent graph; guard against an infinite loop
             raise RuntimeError("AO*: the marked solution graph has no tip but the root is unsolved")
         heap, queued = [], set()
+        stop = False
         for n in tips:
-            expand(n)
+            try:
+                expand(n)
+            except _OutOfBudget:
+                stop = True
+                break
             expansions += 1
+            if budget is not None:
+                budget.expansions = expansions
             heapq.heappush(heap, (n.level, id(n), n))
             queued.add(id(n))
         while heap:
@@ -557,10 +600,23 @@ def _aostar_loop(root: _OrNode, expand: Callable[[_OrNode], None], revise: Calla
                     if id(par) not in queued:
                         heapq.heappush(heap, (par.level, id(par), par))
                         queued.add(id(par))
+        if budget is not None and budget.progress is not None and expansions % 256 < len(tips):
+            budget.report(root)
+        if stop:
+            raise _OutOfBudget
     return expansions
 
 
-def _ao_perfect(dm, p, c, heuristic):
+def _split_score(pf: float, pp: float, cost: float) -> float:
+    """Information (bits) of a binary split per unit cost (the greedy rule)."""
+    tot = pf + pp
+    if tot <= 0 or pf <= 0 or pp <= 0:
+        return 0.0
+    a, b = pf / tot, pp / tot
+    return -(a * np.log2(a) + b * np.log2(b)) / max(cost, 1e-12)
+
+
+def _ao_perfect(dm, p, c, heuristic, budget=None):
     P = _Perfect(dm, p, c)
     nodes: dict[int, _OrNode] = {}
 
@@ -581,6 +637,8 @@ def _ao_perfect(dm, p, c, heuristic):
     def get(x):
         n = nodes.get(x)
         if n is None:
+            if budget is not None:
+                budget.node()
             px = P.prob(x)
             h, terminal = h_of(x, px)
             n = _OrNode(x, px, h, bin(x).count("1"))
@@ -611,13 +669,52 @@ def _ao_perfect(dm, p, c, heuristic):
         n.best, n.f, n.solved = best, f, solved
         return changed
 
+    def greedy(x):
+        split = P.splitting(x)
+        if not split:
+            return None
+        px = P.prob(x)
+        scores = [_split_score(P.prob(x & P.fail[j]), px - P.prob(x & P.fail[j]), c[j]) for j in split]
+        return split[int(np.argmax(scores))]
+
     t0 = time.perf_counter()
     full = (1 << P.nf) - 1
     root = get(full)
-    expansions = _aostar_loop(root, expand, revise)
-    tree_root = P.node(full, lambda x: nodes[x].best)
-    return root.f, tree_root, {"nodes": len(nodes), "expanded": expansions,
-                               "wall_seconds": time.perf_counter() - t0}
+    try:
+        expansions = _aostar_loop(root, expand, revise, budget)
+        tree_root = P.node(full, lambda x: nodes[x].best)
+        return root.f, tree_root, {"nodes": len(nodes), "expanded": expansions,
+                                   "wall_seconds": time.perf_counter() - t0}
+    except _OutOfBudget:
+        pass
+    # budget spent: the marked choices where a node is solved, the greedy rule elsewhere
+    def policy(x):
+        n = nodes.get(x)
+        if n is not None and n.solved:
+            return n.best
+        if n is not None and n.expanded and n.best is not None:
+            return n.best
+        return greedy(x)
+
+    return _budget_result(dm, p, c, "perfect", None, root, nodes, budget, t0,
+                          [P.node(full, policy), P.node(full, greedy)])
+
+
+def _budget_result(dm, p, c, mode, M, root, nodes, budget, t0, candidates):
+    """Best complete tree among the candidates once the budget is spent, with the optimality gap:
+    the search's root value is a lower bound of the optimum (admissible heuristics), the tree's own
+    evaluated cost an upper bound."""
+    best_J, best_root = np.inf, None
+    for cand in candidates:
+        J = DiagnosticTree(cand, dm, p, c, mode, M, float("nan")).evaluate()["objective"]
+        if J < best_J - 1e-12 * max(1.0, abs(best_J) if np.isfinite(best_J) else 1.0):
+            best_J, best_root = J, cand
+    lower = min(float(root.f), best_J)
+    gap = best_J - lower
+    stats = {"nodes": len(nodes), "expanded": budget.expansions, "wall_seconds": time.perf_counter() - t0,
+             "budget_exceeded": budget.exceeded, "fallback": "greedy", "lower_bound": lower,
+             "gap": gap, "relative_gap": gap / best_J if best_J > 0 else 0.0, "optimal": gap <= 1e-12}
+    return best_J, best_root, stats
 
 
 def _exhaustive_perfect(dm, p, c):
@@ -700,7 +797,7 @@ class _Unreliable:
         return n
 
 
-def _ao_unreliable(dm, p, c, M, heuristic):
+def _ao_unreliable(dm, p, c, M, heuristic, budget=None, bayes_max_tests=14):
     U = _Unreliable(dm, p, c, M)
     nodes: dict[tuple[int, int], _OrNode] = {}
     beliefs: dict[tuple[int, int], np.ndarray] = {}
@@ -714,6 +811,8 @@ def _ao_unreliable(dm, p, c, M, heuristic):
     def get(key, b):
         n = nodes.get(key)
         if n is None:
+            if budget is not None:
+                budget.node()
             pb = float(b.sum())
             stop, _ = U.stop(b)
             tests = informative(key, b)
@@ -724,7 +823,7 @@ def _ao_unreliable(dm, p, c, M, heuristic):
             else:   # stop now, or pay at least the cheapest remaining informative test (+ Bayes error)
                 h = min(c[j] for j in tests) * pb
                 unused = [j for j in range(U.nt) if not key[0] >> j & 1]
-                if heuristic == "bayes" and len(unused) <= 14:
+                if heuristic == "bayes" and len(unused) <= bayes_max_tests:
                     h += M * U.bayes_error_all(b, unused)
                 h = min(stop, h)
             n = _OrNode(key, pb, h, -bin(key[0]).count("1"))   # more tests applied = deeper = first
@@ -761,12 +860,60 @@ def _ao_unreliable(dm, p, c, M, heuristic):
         n.best, n.f, n.solved = best, f, solved
         return changed
 
+    greedy_memo: dict[tuple[int, int], int | None] = {}
+
+    def greedy_from(key, b):
+        """One-step look-ahead: the test whose outcome lowers (test cost + stop cost) most, or stop."""
+        if key in greedy_memo:
+            return greedy_memo[key]
+        stop, _ = U.stop(b)
+        best, val = None, stop
+        if stop > 0.0:
+            for j in informative(key, b):
+                (_, bp), (_, bf) = U.children(key, b, j)
+                v = c[j] * float(b.sum()) + U.stop(bp)[0] + U.stop(bf)[0]
+                if v < val - 1e-12 * max(1.0, abs(val)):
+                    best, val = j, v
+        greedy_memo[key] = best
+        return best
+
     t0 = time.perf_counter()
-    root = get((0, 0), p.astype(float))
-    expansions = _aostar_loop(root, expand, revise)
-    tree_root = U.build((0, 0), p.astype(float), lambda k: nodes[k].best)
-    return root.f, tree_root, {"nodes": len(nodes), "expanded": expansions,
-                               "wall_seconds": time.perf_counter() - t0}
+    b0 = p.astype(float)
+    root = get((0, 0), b0)
+    try:
+        expansions = _aostar_loop(root, expand, revise, budget)
+        tree_root = U.build((0, 0), b0, lambda k: nodes[k].best)
+        return root.f, tree_root, {"nodes": len(nodes), "expanded": expansions,
+                                   "wall_seconds": time.perf_counter() - t0}
+    except _OutOfBudget:
+        pass
+
+    def build_with(choice):
+        def walk(key, b):
+            j = choice(key, b)
+            if j is None:
+                _, g = U.stop(b)
+                pb = float(b.sum())
+                names = tuple(dm.faults[i] for i in range(U.nf) if b[i] > 0)
+                post = {dm.faults[i]: float(b[i] / pb) for i in range(U.nf) if b[i] > 0} if pb > 0 else {}
+                return TreeNode(None, names, pb, post, group=tuple(dm.faults[i] for i in g) if pb > 0 else ())
+            pb = float(b.sum())
+            names = tuple(dm.faults[i] for i in range(U.nf) if b[i] > 0)
+            post = {dm.faults[i]: float(b[i] / pb) for i in range(U.nf) if b[i] > 0} if pb > 0 else {}
+            n = TreeNode(dm.tests[j], names, pb, post)
+            (kp, bp), (kf, bf) = U.children(key, b, j)
+            n.passed, n.failed = walk(kp, bp), walk(kf, bf)
+            return n
+        return walk((0, 0), b0)
+
+    def policy(key, b):
+        n = nodes.get(key)
+        if n is not None and n.expanded and (n.solved or n.best is not None):
+            return n.best
+        return greedy_from(key, b)
+
+    return _budget_result(dm, p, c, "unreliable", M, root, nodes, budget, t0,
+                          [build_with(policy), build_with(greedy_from)])
 
 
 def _exhaustive_unreliable(dm, p, c, M):
@@ -797,7 +944,9 @@ def _exhaustive_unreliable(dm, p, c, M):
 
 # ---------------------------------------------------------------------------------------------- public
 def ao_star(dm: DMatrix, prior=None, cost=None, *, tests_model: str = "auto",
-            misdiagnosis_cost: float | None = None, heuristic: str = "auto") -> DiagnosticTree:
+            misdiagnosis_cost: float | None = None, heuristic: str = "auto",
+            max_nodes: int | None = 200_000, time_limit: float | None = 10.0,
+            progress: Callable[[dict], None] | None = None, bayes_max_tests: int = 14) -> DiagnosticTree:
     """Optimal diagnostic tree by AO* search on the AND/OR graph (Pattipati & Alexandridis 1990).
 
     Parameters
@@ -818,11 +967,28 @@ def ao_star(dm: DMatrix, prior=None, cost=None, *, tests_model: str = "auto",
         Admissible lower bound used by the search (module docstring): ``"huffman"``, ``"entropy"``,
         ``"mincost"``, ``"zero"`` for perfect tests; ``"bayes"``, ``"mincost"``, ``"zero"`` for
         unreliable tests. ``"auto"``: ``"huffman"`` (perfect) or ``"bayes"`` (unreliable).
+    max_nodes : int or None
+        Budget of OR nodes the search may generate (memory: a few hundred bytes each plus a belief
+        vector for unreliable tests). ``None``: no limit.
+    time_limit : float or None
+        Budget of wall-clock seconds. ``None``: no limit. When either budget is spent the search stops
+        and the tree is completed by the greedy rule (perfect tests: the test with the most information
+        per unit cost; unreliable tests: one-step look-ahead on test plus misdiagnosis cost), the better
+        of that completion and the pure greedy tree is returned, and ``stats`` reports the
+        ``lower_bound`` (the search's root value; admissible heuristics make it a bound on the
+        optimum), the ``gap`` between the tree's evaluated cost and that bound, ``relative_gap`` and
+        ``budget_exceeded``. Within budget the result is the exact optimum, as without a budget.
+    progress : callable, optional
+        Called now and then with ``{"nodes", "expanded", "seconds", "lower_bound", "done"}``.
+    bayes_max_tests : int
+        The ``"bayes"`` heuristic enumerates the ``2^r`` outcomes of the ``r`` unused tests when
+        ``r <= bayes_max_tests`` (default 14, as before); its cost per node grows as ``2^r``.
 
     Returns
     -------
     DiagnosticTree
-        With ``expected_cost`` the optimal expected cost and ``stats`` (nodes, expansions, time).
+        With ``expected_cost`` the optimal expected cost (or, over budget, the cost of the returned
+        tree) and ``stats`` (nodes, expansions, time; ``gap`` and ``lower_bound``; ``optimal``).
 
     Examples
     --------
@@ -839,12 +1005,23 @@ def ao_star(dm: DMatrix, prior=None, cost=None, *, tests_model: str = "auto",
     if heuristic not in _HEURISTICS[mode]:
         raise DataError(f"heuristic for {mode} tests must be 'auto' or one of {_HEURISTICS[mode]}, "
                         f"got {heuristic!r}")
+    for v, what in ((max_nodes, "max_nodes"), (time_limit, "time_limit")):
+        if v is not None and not (np.isfinite(v) and v > 0):
+            raise DataError(f"{what} must be a positive number or None, got {v}")
+    budget = _Budget(None if max_nodes is None else int(max_nodes), time_limit, progress)
     if mode == "perfect":
-        J, root, stats = _ao_perfect(dm, p, c, heuristic)
+        J, root, stats = _ao_perfect(dm, p, c, heuristic, budget)
     else:
-        J, root, stats = _ao_unreliable(dm, p, c, M, heuristic)
-    stats.update(method="ao*", heuristic=heuristic)
-    return DiagnosticTree(root, dm, p, c, mode, M, float(J), stats)
+        J, root, stats = _ao_unreliable(dm, p, c, M, heuristic, budget, int(bayes_max_tests))
+    stats.setdefault("budget_exceeded", None)
+    if stats["budget_exceeded"] is None:
+        stats.update(lower_bound=float(J), gap=0.0, relative_gap=0.0, optimal=True)
+    stats.update(method="ao*" if stats["budget_exceeded"] is None else "ao*+greedy", heuristic=heuristic)
+    tree = DiagnosticTree(root, dm, p, c, mode, M, float(J), stats)
+    if progress is not None:
+        progress({"nodes": stats["nodes"], "expanded": stats["expanded"], "seconds": stats["wall_seconds"],
+                  "lower_bound": stats["lower_bound"], "done": True})
+    return tree
 
 
 def exhaustive(dm: DMatrix, prior=None, cost=None, *, tests_model: str = "auto",

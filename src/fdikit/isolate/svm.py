@@ -186,6 +186,24 @@ def cv_pipeline(
                         cv=StratifiedKFold(int(cv), shuffle=True, random_state=random_state))
 
 
+def _check_folds(est: Any, lab: np.ndarray) -> None:
+    """Refuse, with the counts, a stratified cross-validation that has fewer samples of a class than folds."""
+    cv = getattr(est, "cv", None)
+    if not isinstance(est, GridSearchCV) or cv is None:
+        return
+    k = cv if isinstance(cv, int) else getattr(cv, "n_splits", None)
+    if k is None:
+        return
+    classes, counts = np.unique(lab, return_counts=True)
+    few = {c.item() if hasattr(c, "item") else c: int(n) for c, n in zip(classes, counts) if n < k}
+    if few:
+        allc = {c.item() if hasattr(c, "item") else c: int(n) for c, n in zip(classes, counts)}
+        raise DataError(f"the stratified {k}-fold cross-validation of the SVM needs at least {k} samples of "
+                        f"every class; too few: {few} (all counts: {allc}). Give more labelled samples, "
+                        f"fewer folds (SVMIsolator(cv_pipeline(cv={max(2, min(counts))})) when the smallest "
+                        "class has at least 2), or drop the rare classes")
+
+
 class SVMIsolator:
     """An SVM isolation test for any labelled pattern set (luo-et-al, Section VI).
 
@@ -254,8 +272,17 @@ class SVMIsolator:
         X, lab = self._xy(X, labels)
         if np.unique(lab).size < 2:
             raise DataError(f"need at least two classes to train, got {np.unique(lab).tolist()}")
+        est = self._make()
+        _check_folds(est, lab)
         t0 = time.perf_counter()
-        est = self._make().fit(X, lab)
+        try:
+            est = est.fit(X, lab)
+        except ValueError as exc:
+            # scikit-learn buries the cause in a long text (often per fold): give its last line with context
+            lines = [ln.strip() for ln in str(exc).strip().splitlines() if ln.strip()]
+            raise DataError(f"scikit-learn could not fit {type(est).__name__} on {X.shape[0]} patterns x "
+                            f"{X.shape[1]} features, {len(np.unique(lab))} classes: "
+                            f"{lines[-1] if lines else exc!r}") from exc
         self.fit_time_ = time.perf_counter() - t0
         self.search_ = est if isinstance(est, GridSearchCV) else None
         self.estimator_ = est.best_estimator_ if isinstance(est, GridSearchCV) else est
@@ -289,7 +316,10 @@ class SVMIsolator:
 
         Holds the feature step (:class:`WindowFeatures` settings), the scaler (mean, scale), the
         RBF ``gamma``, the support vectors, dual coefficients ``alpha_i z_i`` and intercepts
-        ``b`` of eq. (42). Binary problems only.
+        ``b`` of eq. (42). Two classes: one decision function (version 1). More classes: the
+        one-vs-one decision functions of scikit-learn's ``SVC`` (version 2: ``n_support`` per class,
+        ``dual_coef`` (n_classes - 1, n_SV), one ``intercept`` per pair in the order (0, 1), (0, 2),
+        ..., (1, 2), ...), which :class:`SVMDecision` evaluates by voting.
         """
         self._fitted()
         est = self.estimator_
@@ -307,22 +337,29 @@ class SVMIsolator:
         svc = steps[-1][1]
         if not isinstance(svc, SVC) or svc.kernel != "rbf":
             raise DataError("export needs an RBF SVC as the last step")
-        if len(svc.classes_) != 2:
-            raise DataError(f"export handles two classes, got {len(svc.classes_)}")
-        out.update({
-            "classes": [c.item() if hasattr(c, "item") else c for c in svc.classes_],
-            "gamma": float(svc._gamma),
-            "support_vectors": svc.support_vectors_.tolist(),
-            "dual_coef": svc.dual_coef_[0].tolist(),
-            "intercept": float(svc.intercept_[0]),
-        })
+        classes = [c.item() if hasattr(c, "item") else c for c in svc.classes_]
+        if len(classes) == 2:
+            out.update({"classes": classes, "gamma": float(svc._gamma),
+                        "support_vectors": svc.support_vectors_.tolist(),
+                        "dual_coef": svc.dual_coef_[0].tolist(), "intercept": float(svc.intercept_[0])})
+            return out
+        if getattr(svc, "break_ties", False):
+            raise DataError("export of a multiclass SVC with break_ties=True is not supported (voting only)")
+        out.update({"version": 2, "classes": classes, "gamma": float(svc._gamma),
+                    "support_vectors": svc.support_vectors_.tolist(),
+                    "n_support": [int(k) for k in svc.n_support_],
+                    "dual_coef": svc.dual_coef_.tolist(), "intercept": svc.intercept_.tolist()})
         return out
 
 
 class SVMDecision:
     """Numpy evaluation of an exported SVM (eq. (42)): no scikit-learn, no pickle.
 
-    ``f(y) = sum_i alpha_i z_i K(y, y_i) + b``; the pattern is of ``classes[1]`` when ``f > 0``.
+    Two classes: ``f(y) = sum_i alpha_i z_i K(y, y_i) + b``; the pattern is of ``classes[1]`` when
+    ``f > 0``. More classes: one such function per pair of classes ``(a, b)``, ``a < b``, over the
+    support vectors of the two classes (libsvm's one-vs-one form, as scikit-learn's ``SVC``); ``a``
+    gets the vote when ``f_ab > 0``, else ``b``; the class with the most votes wins, the first one on
+    a tie (as libsvm).
 
     Examples
     --------
@@ -340,10 +377,22 @@ class SVMDecision:
             raise DataError("not an exported fdikit SVM (kind != 'fdikit.svm')")
         self.data = dict(data)
         self.sv = np.asarray(data["support_vectors"], float)
-        self.coef = np.asarray(data["dual_coef"], float)
-        self.b = float(data["intercept"])
         self.gamma = float(data["gamma"])
         self.classes = list(data["classes"])
+        self.multiclass = "n_support" in data
+        if self.multiclass:
+            self.n_support = np.asarray(data["n_support"], int)
+            self.coef = np.asarray(data["dual_coef"], float).reshape(len(self.classes) - 1, -1)
+            self.b = np.asarray(data["intercept"], float).ravel()
+            k = len(self.classes)
+            if self.n_support.size != k or self.n_support.sum() != self.sv.shape[0] or \
+                    self.b.size != k * (k - 1) // 2 or self.coef.shape[1] != self.sv.shape[0]:
+                raise DataError(f"inconsistent multiclass SVM export: {k} classes, n_support "
+                                f"{self.n_support.tolist()}, {self.sv.shape[0]} support vectors, "
+                                f"dual_coef {self.coef.shape}, {self.b.size} intercepts")
+        else:
+            self.coef = np.asarray(data["dual_coef"], float)
+            self.b = float(data["intercept"])
 
     def to_dict(self) -> dict[str, Any]:
         """The exported SVM (plain data; support vectors become an NPZ array in an artifact)."""
@@ -369,13 +418,41 @@ class SVMDecision:
             raise DataError(f"patterns give {X.shape[1]} features, the SVM was trained on {self.sv.shape[1]}")
         return X
 
-    def decision_function(self, X: Any) -> np.ndarray:
-        """``f(y)`` of eq. (42) before the sign, (n,)."""
+    def _kernel(self, X: Any) -> np.ndarray:
         Z = self.features(X)
         d2 = (np.sum(Z**2, 1)[:, None] + np.sum(self.sv**2, 1)[None, :] - 2.0 * Z @ self.sv.T)
-        return np.exp(-self.gamma * np.maximum(d2, 0.0)) @ self.coef + self.b  # luo-et-al eq. (42)
+        return np.exp(-self.gamma * np.maximum(d2, 0.0))
+
+    def decision_function(self, X: Any) -> np.ndarray:
+        """``f(y)`` of eq. (42) before the sign: (n,) for two classes; (n, n_pairs) one-vs-one values
+        (pairs (0, 1), (0, 2), ..., positive = the first class of the pair) for more."""
+        K = self._kernel(X)
+        if not self.multiclass:
+            return K @ self.coef + self.b  # luo-et-al eq. (42)
+        k = len(self.classes)
+        start = np.concatenate([[0], np.cumsum(self.n_support)])
+        out = np.empty((K.shape[0], k * (k - 1) // 2))
+        p = 0
+        for a in range(k):
+            for b in range(a + 1, k):
+                sa, sb = slice(start[a], start[a + 1]), slice(start[b], start[b + 1])
+                # libsvm: coefficients of class a's SVs in row b - 1, of class b's SVs in row a
+                out[:, p] = K[:, sa] @ self.coef[b - 1, sa] + K[:, sb] @ self.coef[a, sb] + self.b[p]
+                p += 1
+        return out
 
     def predict(self, X: Any) -> np.ndarray:
         d = self.decision_function(X)
-        c0, c1 = np.array(self.classes[0], dtype=object), np.array(self.classes[1], dtype=object)
-        return np.where(d > 0, c1, c0)
+        if not self.multiclass:
+            c0, c1 = np.array(self.classes[0], dtype=object), np.array(self.classes[1], dtype=object)
+            return np.where(d > 0, c1, c0)
+        k = len(self.classes)
+        votes = np.zeros((d.shape[0], k), int)
+        p = 0
+        for a in range(k):
+            for b in range(a + 1, k):
+                win = d[:, p] > 0
+                votes[:, a] += win
+                votes[:, b] += ~win
+                p += 1
+        return np.array(self.classes, dtype=object)[np.argmax(votes, axis=1)]

@@ -6,6 +6,15 @@ checked exactly: :func:`internal_form` composes any design with a model and retu
 from every input group (controls, disturbances, faults, noise) to the residual.
 """
 
+from .bank import (
+    BankResidual,
+    FaultSignature,
+    IsolabilityReport,
+    ResidualBank,
+    SensitivityWarning,
+    check_sensitivity,
+    design_residual_bank,
+)
 from .fdf import (
     FaultDetectionFilter,
     FilterDesign,
@@ -34,36 +43,51 @@ from .parity import (
 from .scheduled import ScheduledFilter
 from .sensitivity import ParameterSensitivity
 from .smo import (
+    NOT_SLIDING,
+    SATURATED,
+    SLIDING,
     SlidingModeReconstructor,
     SMOConditions,
     check_conditions,
     design_reconstructor,
     hinf_norm,
     integrate_observers,
+    noise_response,
     simulate_plant,
+    sliding_episodes,
 )
 from .transforms import band_limited, delayed_feedthrough, whiten_design
 
 __all__ = [
+    "NOT_SLIDING",
+    "SATURATED",
+    "SLIDING",
+    "BankResidual",
     "CausalDerivative",
     "CausalLowPass",
     "FaultDetectionFilter",
+    "FaultSignature",
     "FilterDesign",
+    "IsolabilityReport",
     "ObserverDesign",
     "ObserverResidual",
     "ParameterSensitivity",
+    "ResidualBank",
     "SMOConditions",
     "ScheduledFilter",
+    "SensitivityWarning",
     "SlidingModeReconstructor",
     "band_limited",
     "butter_sos",
     "causal_spline_derivative",
     "check_conditions",
+    "check_sensitivity",
     "delayed_feedthrough",
     "design_filter_set",
     "design_observer_residual",
     "design_optimal_fdf",
     "design_reconstructor",
+    "design_residual_bank",
     "design_uio",
     "fault_detection_filter",
     "fault_direction_split",
@@ -72,9 +96,11 @@ __all__ = [
     "integrate_observers",
     "internal_form",
     "lowpass",
+    "noise_response",
     "reduce_filter",
     "residual_covariance",
     "simulate_plant",
+    "sliding_episodes",
     "spline_derivative",
     "spline_derivative_weights",
     "spline_lam",
