@@ -63,7 +63,7 @@ def test_readme_box_identifiers_are_exported_where_the_readme_says():
         if not mods:
             continue
         for tok in re.findall(r"`([A-Za-z_]\w*)(?:\([^`]*\))?`", b):
-            if tok.startswith("fdikit") or tok in METHODS or tok.islower() and len(tok) <= 2:
+            if tok.startswith("fdikit") or tok in METHODS or (tok.islower() and len(tok) <= 2):
                 continue
             if any(tok in getattr(m, "__all__", ()) for m in mods):
                 checked += 1

@@ -168,9 +168,23 @@ def load_config(path: str | Path) -> MonitorConfig:
             if "artifact" not in it:
                 raise DataError(f"config: [[{sec}]] number {i + 1} needs an 'artifact' name")
         stages[sec] = [it["artifact"] for it in items]
+    declarative = "plant" in raw.get("design", {})
+    if declarative:
+        from .declarative import DESIGN_KEYS, GENERATORS, PROCESSORS, decision_for
+
+        for key in DESIGN_KEYS:
+            if key in raw["design"] and not isinstance(raw["design"][key], dict):
+                raise DataError(f"config: [design.{key}] must be a table")
+        if raw["design"].get("recipe"):
+            raise DataError("config: [design] declares a plant and a recipe; give one of them")
+        if not stages["generators"] and not stages["processors"]:
+            stages["generators"], stages["processors"] = list(GENERATORS), list(PROCESSORS)
     if not stages["generators"]:
-        raise DataError("config: at least one [[generators]] entry is needed")
+        raise DataError("config: at least one [[generators]] entry is needed (or a declarative "
+                        "[design.plant], which makes them)")
     dec = raw.get("decision")
+    if dec is None and declarative:
+        dec = decision_for(raw["design"])
     if dec is not None and "channels" not in dec:
         raise DataError("config: [decision] needs 'channels'")
     log = dict(raw.get("log", {}))
@@ -218,16 +232,34 @@ def _import_recipe(cfg: MonitorConfig, recipe: str):
 def run_design(cfg: MonitorConfig) -> dict[str, Path]:
     """Run the config's design recipe and save every design it returns as an artifact."""
     recipe = cfg.design.get("recipe")
-    if not recipe:
-        raise DataError(f"{cfg.path}: [design].recipe is not set (e.g. 'package.module:function')")
-    func = _import_recipe(cfg, recipe)
-    designs = func(dict(cfg.design.get("params", {})))
+    report = None
+    if not recipe and "plant" in cfg.design:
+        from .declarative import design_monitor
+
+        designs = design_monitor(cfg.design, cfg.path.parent)
+        report = designs.pop("_report")
+    else:
+        if not recipe:
+            raise DataError(f"{cfg.path}: [design].recipe is not set (e.g. 'package.module:function'), "
+                            "and there is no declarative [design.plant]")
+        func = _import_recipe(cfg, recipe)
+        designs = func(dict(cfg.design.get("params", {})))
     if not isinstance(designs, dict) or not designs:
         raise DataError(f"design recipe {recipe!r} must return a non-empty dict name -> design")
     cfg.artifacts.mkdir(parents=True, exist_ok=True)
     units = {c.name: c.unit for c in cfg.channels if c.unit}
-    return {name: save_artifact(cfg.artifacts / name, obj, units=units, meta={"config": cfg.name})
-            for name, obj in designs.items()}
+    out = {name: save_artifact(cfg.artifacts / name, obj, units=units, meta={"config": cfg.name})
+           for name, obj in designs.items()}
+    if report is not None:
+        import json
+
+        from ..base.state import _atomic_write
+
+        path = cfg.artifacts / "design_report.json"
+        text = json.dumps(report, indent=1, default=str)
+        _atomic_write(path, lambda fh: fh.write(text.encode()))
+        out["design_report"] = path
+    return out
 
 
 def _runtime(obj: Any) -> Any:

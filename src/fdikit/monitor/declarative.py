@@ -64,8 +64,9 @@ from ..errors import DataError, ModelError
 from ..model import LinearFaultModel, linearize
 from ..signals import Signals
 
-__all__ = ["DESIGN_KEYS", "AlarmTarget", "alarm_from_config", "estimate_noise", "import_object",
-           "noise_from_config", "plant_from_config"]
+__all__ = ["DESIGN_KEYS", "GENERATORS", "PROCESSORS", "AlarmTarget", "alarm_from_config", "decision_for",
+           "design_monitor", "estimate_noise", "import_object", "noise_from_config", "plant_from_config",
+           "sample_time"]
 
 #: Keys of the declarative ``[design]`` sub-tables and their types.
 DESIGN_KEYS: dict[str, dict[str, type | tuple[type, ...]]] = {
@@ -417,3 +418,148 @@ def alarm_from_config(design: Mapping[str, Any], *, where: str = "design") -> Al
     run_length = None if "run_length" not in spec else float(spec["run_length"])
     return AlarmTarget(float(spec.get("pfa", 1e-3)), str(spec.get("per", "hour")), run_length,
                        int(spec.get("hold", 5)))
+
+
+# ------------------------------------------------------------------------------ the whole monitor
+#: Artifact names of a declarative design, in the order the monitor runs them.
+GENERATORS = ["bank"]
+PROCESSORS = ["features", "hold", "isolate"]
+
+
+def sample_time(design: Mapping[str, Any], model: LinearFaultModel, *, where: str = "design") -> float:
+    """The monitor's sample time: ``[design].sample_time``, or the discrete plant's ``dt``."""
+    dt = design.get("sample_time")
+    if dt is None:
+        if model.dt is None:
+            raise DataError(f"config: [{where}].sample_time (s) is needed for a continuous-time plant")
+        return float(model.dt)
+    dt = float(dt)
+    if not (dt > 0 and math.isfinite(dt)):
+        raise DataError(f"config: [{where}].sample_time must be a positive number of seconds, got {dt}")
+    if model.dt is not None and abs(model.dt - dt) > 1e-9 * dt:
+        raise DataError(f"config: [{where}].sample_time = {dt} s but the plant is discrete with "
+                        f"dt = {model.dt} s")
+    return dt
+
+
+def design_monitor(design: Mapping[str, Any], base_dir: str | Path = ".", *, where: str = "design",
+                   nominal_hours: float | None = None, seed: int = 0) -> dict[str, Any]:
+    """Design the whole monitor of a declarative ``[design]`` table: residual bank, features,
+    thresholds for the false-alarm target, and isolation by the fault signature.
+
+    1. The plant, faults, disturbances and noise of the config (:func:`plant_from_config`,
+       :func:`noise_from_config`).
+    2. A residual bank (:func:`fdikit.residuals.design_residual_bank`): structured residuals, each
+       decoupled from the disturbances and from the faults ``[design.structure]`` names for it (or
+       the default scheme), observer weights from the noise, the design-time sensitivity check
+       (a weak residual/fault pair is a :class:`~fdikit.residuals.SensitivityWarning` naming both).
+    3. Features: the norm of each residual's channels, whitened by their nominal covariance
+       (``|r|`` is then a chi statistic of the residual's dimension).
+    4. Thresholds (:func:`fdikit.detect.design_threshold`) for ``[design.alarm]`` (per sample, run
+       or hour, hold ``Z``; family-wise over the residuals) from simulated nominal operation: the
+       residuals are decoupled from the known inputs, so the plant is simulated with its noise only
+       (``nominal_hours`` of it, default 0.05 h in 20 runs). Where those data cannot show a rate as
+       small as the target (slow residuals are strongly autocorrelated), the threshold is the
+       Gaussian bound instead: each feature is the norm of a whitened Gaussian residual of
+       dimension ``k``, chi-distributed, and its ``1 - p`` quantile (``p`` the per-sample target,
+       Bonferroni over the residuals) bounds the samples over the threshold, hence the alarms.
+       The report says which method set each threshold and why.
+    5. Isolation: :class:`fdikit.isolate.SignatureDecision` on the alarms with the bank's signature.
+
+    Returns
+    -------
+    dict
+        The artifacts ``bank`` (FilterDesign), ``features`` (FeatureNorms), ``hold`` (Hold) and
+        ``isolate`` (SignatureDecision), and ``report`` (a plain dict: signature, isolability,
+        weak pairs, threshold design) under the key ``"_report"``.
+    """
+    import warnings
+
+    from ..detect import FeatureNorms, Hold, design_threshold
+    from ..faults import Noise, Scenario
+    from ..isolate import SignatureDecision
+    from ..residuals import FaultDetectionFilter, FilterDesign, design_residual_bank
+    from ..sim import simulate
+
+    model = plant_from_config(design, base_dir, where=where)
+    noise = noise_from_config(design, model, base_dir, where=where)
+    alarm = alarm_from_config(design, where=where)
+    dt = sample_time(design, model, where=where)
+    structure = design.get("structure") or None
+    R = np.array([noise["measurement"][y] for y in model.outputs])
+    Q = np.asarray(noise["process"], float)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        bank = design_residual_bank(model, dt, structure, noise={"process": Q, "measurement": R})
+    weak = [str(w.message) for w in caught]
+    for w in caught:
+        warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    raw = bank.design
+    groups = {name: bank.channels(name) for name in bank.residual_names}
+    # nominal operation: noise only (the residuals are decoupled from the known inputs)
+    md = model.discretize(dt) if model.dt is None else model
+    hours = 0.05 if nominal_hours is None else float(nominal_hours)
+    runs = 20
+    duration = hours * 3600.0 / runs
+    sc = Scenario(duration=duration, dt=dt, noise=Noise(measurement=R, process=Q))
+    sim = simulate(md.without_faults(), sc, runs=runs, seed=seed, keep=("y", "u"))
+    data = sim.u.concat_channels(sim.y) if sim.u.n_channels else sim.y
+    gen = FaultDetectionFilter(raw)
+    r = gen.run(data)
+    warm = min(r.n_samples // 2, round(10.0 / dt) if dt < 1 else 10)
+    vals = r.values[:, warm:]
+    # whiten each residual's channels by their nominal covariance
+    W = np.zeros((len(raw.residual_names), len(raw.residual_names)))
+    for name, chans in groups.items():
+        idx = [raw.residual_names.index(c) for c in chans]
+        S = np.atleast_2d(np.cov(vals[:, :, idx].reshape(-1, len(idx)).T))
+        w, V = np.linalg.eigh(0.5 * (S + S.T))
+        if w.max() <= 0:
+            raise DataError(f"residual {name!r} carries no noise in the nominal simulation")
+        keep = w > 1e-9 * w.max()
+        W[np.ix_(idx, idx)] = (V[:, keep] / np.sqrt(w[keep])) @ V[:, keep].T
+    white = FilterDesign(raw.A, raw.Bu, raw.By, W @ raw.C, W @ raw.Du, W @ raw.Dy, raw.dt, list(raw.u_names),
+                         list(raw.y_names), list(raw.residual_names),
+                         {**raw.info, "whitening": W, "groups": groups})
+    feats = FeatureNorms(groups, dt, 0.0)
+    f_nom = feats.run(FaultDetectionFilter(white).run(data))
+    f_nom = Signals(f_nom.t[warm:], f_nom.values[:, warm:], f_nom.names, check=False)
+    per = {"sample": "sample", "run": float(alarm.run_length or 0.0), "hour": "hour"}[alarm.per]
+    try:
+        td = dict(design_threshold(f_nom, alarm.pfa, per=per, Z=alarm.hold, dt=dt, family_wise=True))
+        thr = np.atleast_1d(np.asarray(td["threshold"], float))
+    except DataError as exc:
+        # The nominal data cannot show a rate that small (the residuals of slow filters are strongly
+        # autocorrelated: few effective samples). The features are norms of whitened Gaussian
+        # residuals, so each is chi-distributed with the residual's dimension k: a threshold at the
+        # chi quantile of the per-sample probability bounds the fraction of samples over it, and
+        # an alarm needs ``hold`` of them, so the alarm onsets per unit time are bounded too
+        # (conservative; Bonferroni over the residuals).
+        from scipy.stats import chi2
+
+        p_each = alarm.per_sample(dt) / len(groups)
+        dims = []
+        for g in feats.output_names:
+            ix = [raw.residual_names.index(c) for c in groups[g]]
+            dims.append(int(np.linalg.matrix_rank(W[np.ix_(ix, ix)])))
+        thr = np.array([np.sqrt(chi2.isf(p_each, k)) for k in dims])
+        td = {"method": "gaussian chi bound", "reason": str(exc), "per_sample_each": p_each, "dims": dims}
+    hold = Hold(feats.output_names, thr if thr.size > 1 else float(thr[0]), Z=alarm.hold, absolute=True)
+    sig = bank.signature
+    iso = SignatureDecision(np.asarray(sig.matrix, int), list(sig.faults), hold.output_names)
+    report = {"faults": list(sig.faults), "residuals": list(bank.residual_names),
+              "signature": np.asarray(sig.matrix, int).tolist(), "isolability": str(bank.isolability()),
+              "weak": weak, "sample_time": dt, "nominal_hours_simulated": runs * duration / 3600.0,
+              "alarm": {"pfa": alarm.pfa, "per": alarm.per, "hold": alarm.hold},
+              "thresholds": dict(zip(feats.output_names, thr.tolist() if thr.size > 1 else
+                                     [float(thr[0])] * len(feats.output_names))),
+              "threshold_design": {k: v for k, v in td.items() if k != "threshold"
+                                   and not isinstance(v, np.ndarray)}}
+    return {"bank": white, "features": feats, "hold": hold, "isolate": iso, "_report": report}
+
+
+def decision_for(design: Mapping[str, Any]) -> dict[str, Any]:
+    """The ``[decision]`` table a declarative design implies: one announcement per isolated fault."""
+    faults = list(_check(design.get("faults", {}), DESIGN_KEYS["faults"], "design.faults").get("names", []))
+    chans = [f"fault:{f}" for f in faults]
+    return {"channels": chans, "level": 0.75, "names": dict(zip(chans, faults))}
