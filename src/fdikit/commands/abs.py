@@ -5,7 +5,9 @@ Actions (sub-subcommands):
 * ``fdikit abs simulate --fault F3 --magnitude -0.05 [--runs N] [--json] [--plot FILE]``:
   simulate braking stops with one fault class and print a summary (stopping time and
   distance, when the ABS engaged, mean slip while it is active, number of samples);
-  ``--plot`` writes a figure like the paper's Fig. 3 for the first run.
+  ``--plot`` writes a figure like the paper's Fig. 3 for the first run;
+* ``fdikit abs figure N --plot FILE``: the paper's Figs. 3, 7-10, 15 and 16
+  (:mod:`fdikit.commands.abs_figures`).
 
 Later actions (``campaign``, ...) register themselves on the same ``abs`` parser.
 """
@@ -77,9 +79,11 @@ def register(subparsers) -> argparse.ArgumentParser:
     s.set_defaults(func=_simulate)
     from .abs_campaign import add_campaign_parser
     from .abs_detectability import add_detectability_parser
+    from .abs_figures import add_figure_parser
 
     add_campaign_parser(actions)
     add_detectability_parser(actions)
+    add_figure_parser(actions)
     return actions
 
 
@@ -89,6 +93,10 @@ def _simulate(args) -> int:
 
     if args.runs < 1:
         raise DataError(f"--runs must be >= 1, got {args.runs}")
+    if args.plot:
+        from .car_monitor import _check_outputs
+
+        _check_outputs(args)
     sc = Scenario(fault=args.fault, magnitude=args.magnitude, snr_db=args.snr, meas_var=args.meas_var,
                   v0=args.v0, t_brake=args.t_brake, t_end=args.t_end, noise_hold=args.noise_hold,
                   pedal="step" if args.pedal_ramp is None else "ramp", pedal_ramp=args.pedal_ramp)
@@ -106,35 +114,7 @@ def _simulate(args) -> int:
 
 
 def _plot(res, path: str) -> None:
-    import matplotlib
+    """luo-et-al Fig. 3 for the first run (units on every axis, brake / ABS / stop marked)."""
+    from .abs_figures import abs_stop_figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    import numpy as np
-
-    from ..systems.abs.plant import slip
-
-    x = res.x.values[0]
-    t = res.x.t
-    R_w = float(np.broadcast_to(res.params["R_w"], (res.y.runs,))[0])
-    fig, ax = plt.subplots(4, 1, figsize=(7, 9), sharex=True)
-    ax[0].plot(t, x[:, 1] * R_w, label="vehicle speed")
-    ax[0].plot(t, x[:, 0] * R_w, label="wheel speed")
-    ax[0].set_ylabel("m/s")
-    ax[0].legend()
-    ax[1].plot(t, slip(x[:, 0], x[:, 1]))
-    ax[1].axhline(0.2, color="k", lw=0.8, ls="--")
-    ax[1].set_ylabel("slip")
-    ax[1].set_ylim(-0.05, 1.05)
-    ax[2].plot(t, x[:, 2])
-    ax[2].set_ylabel("brake torque (N·m)")
-    ax[3].plot(t, x[:, 4], label="wheel cylinder P_s")
-    ax[3].plot(t, x[:, 5], label="master cylinder P_m")
-    ax[3].set_ylabel("MPa")
-    ax[3].set_xlabel("time (s)")
-    ax[3].legend()
-    sc = res.scenario
-    ax[0].set_title(f"ABS stop, fault {sc.fault} (magnitude {res.magnitudes[0]:+.3f})")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    abs_stop_figure(res, path)

@@ -109,6 +109,7 @@ def add_campaign_parser(abs_subparsers) -> argparse.ArgumentParser:
     p.add_argument("--chunk-size", type=int, default=None,
                    help="runs per task with --workers or --scheduler (default 250)")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of the text report")
+    p.add_argument("--report", metavar="FILE.html", help="write a self-contained HTML report of the campaign")
     p.set_defaults(func=_campaign)
     return p
 
@@ -119,6 +120,10 @@ def _campaign(args) -> int:
     from ..systems.abs.campaign import run_campaign
     from ._output import print_json
 
+    if args.report:
+        from ..report import check_output_path
+
+        check_output_path(args.report)
     if args.runs < 1:
         raise DataError(f"--runs must be >= 1, got {args.runs}")
     if args.pedal_ramp is not None and not args.pedal_ramp > 0:
@@ -160,9 +165,18 @@ def _campaign(args) -> int:
         if args.svm_per_size < 1 or args.estimate_runs < 0:
             raise DataError(f"--svm-per-size must be >= 1 and --estimate-runs >= 0, got {args.svm_per_size}, "
                             f"{args.estimate_runs}")
-        out["complete"] = complete_campaign(args.runs, nominal_runs=args.nominal_runs, bank=res.bank,
-                                            snr_db=args.snr, seed=args.seed, magnitudes=args.magnitudes,
-                                            svm_per_size=args.svm_per_size, estimate_runs=args.estimate_runs)
+        from ..report.progress import progress_steps, progress_wanted
+
+        with progress_steps(progress_wanted(args.json), 1, "complete diagnoser") as steps:
+            steps.step("SVM training, tree, diagnosis and size estimation")
+            out["complete"] = complete_campaign(args.runs, nominal_runs=args.nominal_runs, bank=res.bank,
+                                                snr_db=args.snr, seed=args.seed, magnitudes=args.magnitudes,
+                                                svm_per_size=args.svm_per_size,
+                                                estimate_runs=args.estimate_runs)
+    if args.report:
+        from ..report import campaign_report
+
+        out["report"] = str(campaign_report(out, args.report, source="fdikit abs campaign"))
     if args.json:
         print_json(out)
         return 0

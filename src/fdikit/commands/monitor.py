@@ -39,8 +39,12 @@ def _design(args) -> int:
     from ..monitor.config import load_config, run_design
 
     t0 = time.perf_counter()
+    from ..report.progress import progress_steps, progress_wanted
+
     cfg = load_config(args.config)
-    paths = run_design(cfg)
+    with progress_steps(progress_wanted(args.json), 1, "fdikit design") as steps:
+        steps.step(f"recipe {cfg.design.get('recipe') or 'declarative [design]'}")
+        paths = run_design(cfg)
     out = {"config": str(cfg.path), "artifacts": {k: str(v) for k, v in paths.items()},
            "wall_seconds": round(time.perf_counter() - t0, 3)}
     if args.json:
@@ -91,6 +95,18 @@ def _batch(args, cfg) -> int:
                            for i, n in enumerate(res.statistics.names)},
         "wall_seconds": round(time.perf_counter() - t0, 3),
     }
+    if args.report or args.plot:
+        from ..report import monitor_report, monitor_thresholds
+
+        if args.report:
+            summary["report"] = str(monitor_report(args.report, signals=sig, result=res, monitor=mon,
+                                                   config=cfg, log=args.log,
+                                                   signal_valid=getattr(log, "valid", None)))
+        if args.plot:
+            from ..report.figures import monitor_figure
+
+            summary["plot"] = monitor_figure(sig, res, args.plot, thresholds=monitor_thresholds(mon),
+                                             level=mon.decision.level if mon.decision else None)
     if args.json:
         print_json(summary)
     else:
@@ -370,6 +386,12 @@ def _monitor(args) -> int:
     from ..monitor.config import load_config
 
     cfg = load_config(args.config)
+    from ..report import check_output_path
+
+    outputs = ((args.report, (".html", ".htm")), (args.plot, ()), (args.events, ()), (args.stats, ()))
+    for out, kinds in outputs:
+        if out:
+            check_output_path(out, kinds)
     if args.follow:
         if args.json:
             raise DataError("--follow prints one JSON line per announcement; it does not take --json")
@@ -438,4 +460,7 @@ def register(sub) -> None:
                    "skipped (replay the input from its start, or let a live stream go on)")
     p.add_argument("--json", action="store_true",
                    help="print one JSON summary object (batch mode only; not with --follow)")
+    p.add_argument("--report", metavar="FILE.html", help="write a self-contained HTML report of the run")
+    p.add_argument("--plot", metavar="FILE", help="write a figure of the signals, residuals and statistics "
+                   "(format from the extension, e.g. .png)")
     p.set_defaults(func=_monitor)

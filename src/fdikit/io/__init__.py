@@ -40,6 +40,7 @@ from .formats import (
     series_to_grid,
 )
 from .stream import FrameGridder, parse_candump_line
+from .write import write_csv, write_parquet
 
 __all__ = [
     "FORMATS",
@@ -69,4 +70,6 @@ __all__ = [
     "series_to_grid",
     "set_signal",
     "write_blf_table",
+    "write_csv",
+    "write_parquet",
 ]

@@ -409,7 +409,7 @@ def decode_message(msg, snames: Sequence[str], payloads: Sequence[bytes] | Frame
     ... ''', database_format="dbc")
     >>> v, bad = decode_message(db.messages[0], ["SPEED"], [bytes([0, 0, 0, 0, 0, 3, 232, 0]), b"\\x00"])
     >>> v[:, 0].tolist(), bad.tolist()
-    [[10.0, nan], [1]]
+    ([10.0, nan], [1])
     """
     pay = FramePayloads.from_bytes(payloads)
     if msg.is_multiplexed() or getattr(msg, "is_container", False) or not msg.length:

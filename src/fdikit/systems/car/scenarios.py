@@ -75,16 +75,19 @@ def _first(mask: np.ndarray) -> int | None:
     return int(i[0]) if i.size else None
 
 
-def run_scenario(name: str, *, seed: int = 1) -> dict[str, Any]:
+def run_scenario(name: str, *, seed: int = 1, progress: bool = False) -> dict[str, Any]:
     """Run a named scenario.
+
+    ``progress`` shows its steps (design and calibration, simulation, monitor) on standard
+    error; the numbers do not depend on it.
 
     Returns
     -------
     dict
         ``summary`` (JSON-able: detection time and delay, isolated fault, peak probability of
         every fault, false announcements, for intermittent faults the per-window times) and
-        ``signals`` (``t``, ``features`` Signals, ``probabilities`` Signals, ``inputs``) for
-        plotting.
+        ``signals`` (``t``, ``features`` Signals, ``probabilities`` Signals, ``inputs``,
+        ``measurements``, ``events``: the monitor's announcements) for plotting and reports.
 
     Examples
     --------
@@ -94,18 +97,24 @@ def run_scenario(name: str, *, seed: int = 1) -> dict[str, Any]:
     """
     if name not in SCENARIOS:
         raise DataError(f"unknown scenario {name!r}; scenarios: {sorted(SCENARIOS)}")
+    from ...report.progress import progress_steps
+
     sc = SCENARIOS[name]
     t0 = time.perf_counter()
-    mon = calibrate_monitor(sc.block, sc.speed, fast_accelerometer=sc.fast_accelerometer, q=sc.q)
-    t_cal = time.perf_counter() - t0
-    if sc.windows:
-        fault = Intermittent(sc.target, sc.magnitude, windows=list(sc.windows), start=sc.onset)
-    else:
-        fault = Bias(sc.target, sc.magnitude, start=sc.onset)
-    res = simulate_drive(sc.kind, sc.speed, duration=sc.duration, faults=[fault], seed=seed, dt=2.5e-3,
-                         noise=sensor_noise())
-    sig = car_signals(res)
-    out = mon.run(sig)
+    with progress_steps(progress, 3, f"car scenario {name}") as steps:
+        steps.step(f"design and calibrate the {sc.block} monitor at {sc.speed:g} m/s")
+        mon = calibrate_monitor(sc.block, sc.speed, fast_accelerometer=sc.fast_accelerometer, q=sc.q)
+        t_cal = time.perf_counter() - t0
+        if sc.windows:
+            fault = Intermittent(sc.target, sc.magnitude, windows=list(sc.windows), start=sc.onset)
+        else:
+            fault = Bias(sc.target, sc.magnitude, start=sc.onset)
+        steps.step(f"simulate {sc.duration:g} s of driving with the fault")
+        res = simulate_drive(sc.kind, sc.speed, duration=sc.duration, faults=[fault], seed=seed, dt=2.5e-3,
+                             noise=sensor_noise())
+        sig = car_signals(res)
+        steps.step("run the monitor")
+        out = mon.run(sig)
     t = sig.t
     P = out.statistics
     probs = {f: P[f"P:{f}"][0] for f in mon.faults}
@@ -142,41 +151,76 @@ def run_scenario(name: str, *, seed: int = 1) -> dict[str, Any]:
                         "fall_delay_s": None if k2 is None else round(float(t[k2] - off), 3)})
         summary["windows"] = per
     return {"summary": summary, "t": t, "features": feats,
-            "probabilities": P.select([f"P:{f}" for f in mon.faults]), "inputs": res.u, "measurements": res.y}
+            "probabilities": P.select([f"P:{f}" for f in mon.faults]), "inputs": res.u, "measurements": res.y,
+            "events": list(out.events)}
 
 
-def plot_scenario(out: dict[str, Any], path: str) -> str:
-    """Figure of a scenario: residual norms (left), probabilities (middle), commands (right), as
-    paper Figs. 4-7. Saved to ``path`` (any matplotlib format)."""
-    import matplotlib
+#: Measurements shown beside the commands, per monitor block (paper Figs. 5-7, third column).
+_SHOWN = {"longitudinal": ("w_engine", "a_x"), "lateral": ("yaw_rate", "w_front_diff")}
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+
+def plot_scenario(out: dict[str, Any], path: str | None = None):
+    """Figure of a scenario as paper Figs. 4-7: residual norms (left), probabilities (middle),
+    commands and measurements (right).
+
+    Each residual norm has its own panel, divided by its largest fault-free value (99th
+    percentile before the onset), so 1 is "as large as it gets without the fault" and no
+    residual swamps another. The fault's onset (and, for an intermittent fault, its windows) is
+    shaded, the monitor's announcements are marked (dotted red lines) and the announcement
+    level is drawn on the probabilities. The brake panel shows the brake *command*, which is
+    what the monitor reads (0 on the curve: the automated driver does not brake), and the
+    *measured* brake pressure, which shows what the driver's foot did (the actuator fault).
+
+    Saved to ``path`` (any matplotlib format) when given; returns the path, or the figure when
+    ``path`` is None.
+    """
+
+    from ...report.figures import normalise, panel_figure, save
 
     s = out["summary"]
     t = out["t"]
-    fig, ax = plt.subplots(1, 3, figsize=(15, 4.2))
+    onset = s["injected"]["onset_s"]
+    before = t < onset
+    sc = SCENARIOS.get(s["name"])
     F = out["features"]
+    res_panels = []
     for j, n in enumerate(F.names):
-        ax[0].plot(t, F.values[0, :, j], lw=0.8, label=n.strip("|"))
-    ax[0].set(title="residual norms", xlabel="t (s)")
-    ax[0].legend(fontsize=6)
+        y, scale = normalise(F.values[0, :, j], before)
+        res_panels.append({"title": f"{n} (x {scale:.3g})", "ylabel": "norm / fault-free", "unit": "–",
+                           "traces": [(n.strip("|"), y)], "legend": False})
     P = out["probabilities"]
-    for j, n in enumerate(P.names):
-        ax[1].plot(t, P.values[0, :, j], lw=1.0, label=n)
-    ax[1].axvline(s["injected"]["onset_s"], color="k", ls=":")
-    ax[1].set(title="posterior probabilities (MHSSPT)", xlabel="t (s)", ylim=(-0.05, 1.05))
-    ax[1].legend(fontsize=6)
-    U = out["inputs"]
-    for n in U.names:
-        ax[2].plot(t, U[n][0], lw=0.8, label=n)
-    ax[2].set(title="commands", xlabel="t (s)")
-    ax[2].legend(fontsize=7)
-    fig.suptitle(s["description"])
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    level = s.get("announcement_level", 0.5)
+    faulty = f"P:{s['fault']}"
+    others = [n for n in P.names if n != faulty]
+    prob_panels = [{"title": f"probability of the injected fault ({s['fault']})", "ylabel": "probability",
+                    "unit": "–", "ylim": (-0.05, 1.05), "thresholds": [("announce", level)],
+                    "traces": [(faulty, P[faulty][0])]},
+                   {"title": "probabilities of the other faults", "ylabel": "probability", "unit": "–",
+                    "ylim": (-0.05, 1.05), "thresholds": [("announce", level)],
+                    "traces": [(n, P[n][0]) for n in others]}]
+    U, Y = out["inputs"], out["measurements"]
+    cmd_panels = [{"title": "throttle command", "ylabel": "throttle", "unit": U.units[U.index("throttle")[0]],
+                   "traces": [("throttle command", U["throttle"][0])], "legend": False}]
+    brake = [("brake command (monitor input)", U["brake"][0], {"lw": 1.4})]
+    if "brake_meas" in Y:
+        brake.append(("brake pressure measured", Y["brake_meas"][0], {"lw": 0.8}))
+    cmd_panels.append({"title": "brake: command vs measured pressure", "ylabel": "brake pressure",
+                       "unit": U.units[U.index("brake")[0]], "traces": brake})
+    cmd_panels.append({"title": "steering command", "ylabel": "road-wheel angle",
+                       "unit": U.units[U.index("steer")[0]], "traces": [("steer command", U["steer"][0])],
+                       "legend": False})
+    for m in _SHOWN.get(s.get("block", ""), ()):
+        if m in Y:
+            cmd_panels.append({"title": f"measured {m}", "ylabel": m, "unit": Y.units[Y.index(m)[0]],
+                               "traces": [(m, Y[m][0])], "legend": False})
+    shade = [(a, b, "fault") for a, b in sc.windows] if sc is not None and sc.windows else \
+        [(onset, float(t[-1]), "fault")]
+    events = [(e.t, e.hypothesis) for e in out.get("events", [])]
+    fig = panel_figure(t, [res_panels, prob_panels, cmd_panels], title=s["description"], events=events,
+                       shade=shade, panel_size=(5.0, 1.45))
+    if path is None:
+        return fig
+    return save(fig, path)
 
 
 def nominal_drive(minutes: float = 10.0, *, speeds=(20.0, 24.0), kinds=("straight", "speed_change", "curve"),

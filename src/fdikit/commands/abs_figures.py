@@ -1,0 +1,385 @@
+"""``fdikit abs figure N --plot FILE``: the figures of luo-et-al, one command each.
+
+=======  =============================================================================  ==========
+figure   what                                                                           cost
+=======  =============================================================================  ==========
+3        an ABS stop: speeds, wheel slip, brake torque, pressures (also ``abs simulate``)  < 1 s
+7        GLRT of the observer residual r3 (G_O1): nominal, R_w -2 % (F2.1), sensor -2 %   a few s
+         (F1.1), with the designed threshold
+8        the same for r4 (G_O2)                                                          a few s
+9        GLRT of r3 with a tau_m fault (F5 +30 %) against nominal                          a few s
+10       histogram of the detection time of G_P1 for F1.2 and F2.2                       ~10 s
+15       contour of the Pd of G_P1 for F1.2 and F2.2 over SNR and GLRT window (gp1_grid)  ~1 min
+16       contour of the Pd of the SVM tests S_Kf and S_Iw over SNR and fault size        ~1 min
+=======  =============================================================================  ==========
+
+Every figure has units on its axes (dimensionless statistics say so: ``(–)``) and marks its
+events (brake applied, ABS engaged, the threshold). Sizes (``--runs``, ``--design-runs``,
+``--per-size``) default to a few minutes at most on 2 cores; the paper's sizes are larger.
+``--json`` prints the numbers behind the figure.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from typing import Any
+
+import numpy as np
+
+from ..errors import DataError
+
+__all__ = ["FIGURES", "abs_stop_figure", "add_figure_parser"]
+
+
+def abs_stop_figure(res, path: str | None = None):
+    """luo-et-al Fig. 3 for the first run of an ABS simulation (``keep_states=True``): speeds,
+    slip, brake torque and pressures, with the brake application, the ABS engagement and the
+    stop marked. Returns the saved path (or the figure when ``path`` is None)."""
+    from ..report.figures import panel_figure, save
+    from ..systems.abs.plant import slip
+
+    x = res.x.values[0]
+    t = res.x.t
+    R_w = float(np.broadcast_to(res.params["R_w"], (res.y.runs,))[0])
+    sc = res.scenario
+    ev = res.events
+    events = [(float(sc.t_brake), "brake applied")]
+    for key, label in (("t_abs_on", "ABS engaged"), ("t_abs_off", "ABS off"), ("t_stop", "stopped")):
+        v = float(np.asarray(ev.get(key, [np.nan]))[0]) if key in ev else np.nan
+        if np.isfinite(v):
+            events.append((v, label))
+    panels = [
+        {
+            "title": "speeds",
+            "ylabel": "speed",
+            "unit": "m/s",
+            "traces": [("vehicle speed", x[:, 1] * R_w), ("wheel speed (x R_w)", x[:, 0] * R_w)],
+        },
+        {
+            "title": "wheel slip",
+            "ylabel": "slip",
+            "unit": "–",
+            "ylim": (-0.05, 1.05),
+            "thresholds": [("desired slip 0.2", 0.2)],
+            "traces": [("slip", slip(x[:, 0], x[:, 1]))],
+            "legend": False,
+        },
+        {
+            "title": "brake torque",
+            "ylabel": "brake torque",
+            "unit": "N·m",
+            "traces": [("T_b", x[:, 2])],
+            "legend": False,
+        },
+        {
+            "title": "pressures",
+            "ylabel": "pressure",
+            "unit": "MPa",
+            "traces": [("wheel cylinder P_s", x[:, 4]), ("master cylinder P_m", x[:, 5])],
+        },
+    ]
+    fig = panel_figure(
+        t,
+        panels,
+        title=f"ABS stop, fault {sc.fault} (magnitude {res.magnitudes[0]:+.3f}) (luo-et-al Fig. 3)",
+        events=events,
+        panel_size=(7.0, 2.0),
+    )
+    return fig if path is None else save(fig, path)
+
+
+# ----------------------------------------------------------------------------------- figures
+def _fig3(args, steps) -> tuple[Any, dict]:
+    from ..systems.abs.plant import Scenario, simulate, summarize
+
+    steps.step("simulate one stop")
+    res = simulate(
+        None, Scenario(fault=args.fault or "F0", snr_db=args.snr), runs=1, seed=args.seed, keep_states=True
+    )
+    return abs_stop_figure(res), summarize(res)
+
+
+def _bank(args, steps):
+    from ..systems.abs.campaign import design_tests, paper_tests
+
+    steps.step(f"design the tests on {args.design_runs} nominal stops")
+    return design_tests(
+        paper_tests(), design_runs=args.design_runs, snr_db=args.snr, seed=args.seed, pfa=0.0, margin=0.1
+    )
+
+
+def _glrt_runs(args, bank, cases, test: str):
+    from ..systems.abs.campaign import abs_residuals
+    from ..systems.abs.plant import Scenario, simulate
+
+    spec = next(s for s in bank.specs if s.name == test)
+    out = []
+    for i, (label, fault, mag) in enumerate(cases):
+        res = simulate(
+            None, Scenario(fault=fault, magnitude=mag, snr_db=args.snr), runs=1, seed=args.seed + 1 + i
+        )
+        st = bank.statistic(abs_residuals(res.y.concat_channels(res.u)), spec)
+        t_on = float(np.asarray(res.events["t_abs_on"])[0])
+        out.append((label, st.t, st.values[0, :, 0], t_on))
+    return spec, out
+
+
+def _glrt_figure(args, steps, residual: str, test: str, cases, fig_no: int):
+    from ..report.figures import panel_figure
+
+    bank = _bank(args, steps)
+    steps.step(f"simulate {len(cases)} stops and run {test}")
+    spec, runs = _glrt_runs(args, bank, cases, test)
+    thr = float(bank.thresholds[test])
+    panels = []
+    data = {"test": test, "residual": residual, "W": spec.W, "Z": spec.Z, "threshold": thr, "runs": {}}
+    for label, t, g, t_on in runs:
+        panels.append(
+            {
+                "title": f"{label}",
+                "ylabel": f"GLRT of {residual}",
+                "unit": "–",
+                "thresholds": [(f"threshold {thr:.3g}", thr)],
+                "traces": [(label, g)],
+                "legend": False,
+                "log": bool(np.nanmax(g) > 50 * thr),
+            }
+        )
+        above = np.flatnonzero(g > thr)
+        data["runs"][label] = {
+            "max": float(np.nanmax(g)),
+            "first_above_threshold_s": float(t[above[0]]) if above.size else None,
+            "abs_engaged_s": t_on,
+        }
+    t = runs[0][1]
+    events = [(0.5, "brake applied")] + ([(runs[0][3], "ABS engaged")] if np.isfinite(runs[0][3]) else [])
+    fig = panel_figure(
+        t,
+        panels,
+        title=f"luo-et-al Fig. {fig_no}: GLRT {test} of residual {residual} (W = {spec.W}, {args.snr} dB)",
+        events=events,
+        panel_size=(7.0, 1.9),
+    )
+    return fig, data
+
+
+def _fig7(args, steps):
+    cases = [
+        ("nominal (F0)", "F0", None),
+        ("R_w -2 % (F2.1)", "F2.1", -0.02),
+        ("wheel-speed sensor -2 % (F1.1)", "F1.1", -0.02),
+    ]
+    return _glrt_figure(args, steps, "r3", "G_O1", cases, 7)
+
+
+def _fig8(args, steps):
+    cases = [
+        ("nominal (F0)", "F0", None),
+        ("R_w -2 % (F2.1)", "F2.1", -0.02),
+        ("wheel-speed sensor -2 % (F1.1)", "F1.1", -0.02),
+    ]
+    return _glrt_figure(args, steps, "r4", "G_O2", cases, 8)
+
+
+def _fig9(args, steps):
+    cases = [("nominal (F0)", "F0", None), ("tau_m +30 % (F5)", "F5", 0.30)]
+    return _glrt_figure(args, steps, "r3", "G_O1", cases, 9)
+
+
+def _fig10(args, steps):
+    from ..report.figures import _plt
+    from ..systems.abs.campaign import abs_residuals
+    from ..systems.abs.plant import Scenario, simulate
+
+    bank = _bank(args, steps)
+    j = bank.names.index("G_P1")
+    times = {}
+    for i, c in enumerate(("F1.2", "F2.2")):
+        steps.step(f"simulate {args.runs} stops of {c}")
+        res = simulate(None, Scenario(fault=c, snr_db=args.snr), runs=args.runs, seed=args.seed + 100 + i)
+        _, first = bank.alarms(abs_residuals(res.y.concat_channels(res.u)))
+        times[c] = first[:, j]
+    plt = _plt()
+    fig, ax = plt.subplots(1, 2, figsize=(10, 3.8), sharey=True, layout="constrained")
+    edges = np.arange(0.0, 12.75, 0.25)
+    data: dict[str, Any] = {
+        "test": "G_P1",
+        "threshold": float(bank.thresholds["G_P1"]),
+        "edges": edges.tolist(),
+    }
+    for a, (c, v) in zip(ax, times.items()):
+        fin = v[np.isfinite(v)]
+        counts, _ = np.histogram(fin, bins=edges)
+        a.bar(edges[:-1], counts, width=0.25, align="edge", color="0.4")
+        a.axvline(0.5, color="tab:red", ls=":", lw=1)
+        a.annotate(
+            "brake applied",
+            (0.5, 1.0),
+            xycoords=("data", "axes fraction"),
+            xytext=(2, -2),
+            textcoords="offset points",
+            fontsize=7,
+            color="tab:red",
+            va="top",
+        )
+        pd7 = float(np.mean(v <= 7.0))
+        a.set_title(f"{c}: Pd within 7 s = {pd7:.3f} ({args.runs} runs)", fontsize=9)
+        a.set_xlabel("detection time (s)")
+        data[c] = {
+            "counts": counts.tolist(),
+            "pd_within_7s": pd7,
+            "detected": int(fin.size),
+            "runs": int(v.size),
+        }
+    ax[0].set_ylabel("runs (count)")
+    fig.suptitle(f"luo-et-al Fig. 10: detection time of G_P1 ({args.snr} dB)", fontsize=10)
+    return fig, data
+
+
+def _contour(ax, x, y, z, xlabel, ylabel, title):
+    cs = ax.contourf(x, y, z, levels=np.linspace(0, 1, 11), cmap="viridis", vmin=0, vmax=1)
+    ax.contour(x, y, z, levels=[0.5, 0.9, 0.99], colors="w", linewidths=0.8)
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.set_title(title, fontsize=9)
+    return cs
+
+
+def _fig15(args, steps):
+    from ..report.figures import _plt
+    from ..systems.abs.campaign import gp1_grid
+
+    snrs, windows = (17.0, 20.0, 23.0), (30, 40, 50)
+    steps.step(f"G_P1 grid: {len(snrs)} SNRs x {len(windows)} windows, {args.runs} runs per class")
+    g = gp1_grid(snrs, windows, runs=args.runs, design_runs=args.design_runs, seed=args.seed, pfa=1e-3)
+    plt = _plt()
+    fig, ax = plt.subplots(1, 2, figsize=(10, 4), layout="constrained")
+    for a, c in zip(ax, ("F1.2", "F2.2")):
+        cs = _contour(
+            a,
+            windows,
+            snrs,
+            np.asarray(g["pd"][c]),
+            "GLRT window W (samples)",
+            "SNR (dB)",
+            f"Pd of G_P1 within 7 s, {c}",
+        )
+    cb = fig.colorbar(cs, ax=list(ax))
+    cb.set_label("detection probability Pd (–)")
+    fig.suptitle(f"luo-et-al Fig. 15 ({args.runs} runs per class and cell)", fontsize=10)
+    return fig, g
+
+
+def _fig16(args, steps):
+    from ..isolate import SVMIsolator
+    from ..report.figures import _plt
+    from ..systems.abs.svm import SIZES, abs_patterns, abs_pipeline
+
+    snrs = (17.0, 20.0, 23.0)
+    mags = sorted({abs(m) for m in SIZES})
+    pd = {"S_Kf": np.zeros((len(snrs), len(mags))), "S_Iw": np.zeros((len(snrs), len(mags)))}
+    for i, snr in enumerate(snrs):
+        steps.step(f"SVM at {snr} dB: {args.per_size * 36} training and as many test patterns")
+        Xtr, ztr, _ = abs_patterns(args.per_size, args.seed + 1, snr_db=snr)
+        Xte, zte, mte = abs_patterns(args.per_size, args.seed + 2, snr_db=snr)
+        pred = SVMIsolator(abs_pipeline("paper")).fit(Xtr, ztr).predict(Xte)
+        for j, m in enumerate(mags):
+            sel = np.isclose(np.abs(mte), m)
+            for test, lab in (("S_Kf", "K_f"), ("S_Iw", "I_w")):
+                k = sel & (zte == lab)
+                pd[test][i, j] = float(np.mean(pred[k] == lab)) if k.any() else np.nan
+    plt = _plt()
+    fig, ax = plt.subplots(1, 2, figsize=(10, 4), layout="constrained")
+    x = [100 * m for m in mags]
+    for a, test in zip(ax, ("S_Kf", "S_Iw")):
+        cs = _contour(a, x, snrs, pd[test], "fault size |change| (%)", "SNR (dB)", f"Pd of {test}")
+    cb = fig.colorbar(cs, ax=list(ax))
+    cb.set_label("detection probability Pd (–)")
+    fig.suptitle(f"luo-et-al Fig. 16 ({args.per_size} patterns per size and fault)", fontsize=10)
+    return fig, {"snr_db": list(snrs), "size_pct": x, "pd": {k: v.tolist() for k, v in pd.items()}}
+
+
+#: figure number -> (function, number of progress steps, one-line description)
+FIGURES = {
+    3: (_fig3, 1, "an ABS stop: speeds, slip, brake torque, pressures"),
+    7: (_fig7, 2, "GLRT of r3 (G_O1): nominal, R_w -2 %, sensor -2 %"),
+    8: (_fig8, 2, "GLRT of r4 (G_O2): nominal, R_w -2 %, sensor -2 %"),
+    9: (_fig9, 2, "GLRT of r3 with a tau_m fault"),
+    10: (_fig10, 3, "histogram of the detection time of G_P1 for F1.2 and F2.2"),
+    15: (_fig15, 1, "Pd of G_P1 over SNR and GLRT window (contour)"),
+    16: (_fig16, 3, "Pd of S_Kf and S_Iw over SNR and fault size (contour)"),
+}
+
+
+def _cmd(args) -> int:
+    from ..report.figures import save
+    from ..report.progress import progress_steps, progress_wanted
+    from ._output import print_json
+    from .car_monitor import _check_outputs
+
+    if args.number not in FIGURES:
+        raise DataError(f"luo-et-al figure {args.number} is not reproduced; figures: {sorted(FIGURES)}")
+    _check_outputs(args)
+    for k in ("runs", "design_runs", "per_size"):
+        if getattr(args, k) < 1:
+            raise DataError(f"--{k.replace('_', '-')} must be >= 1, got {getattr(args, k)}")
+    func, n, what = FIGURES[args.number]
+    t0 = time.perf_counter()
+    with progress_steps(progress_wanted(args.json), n, f"luo-et-al Fig. {args.number}") as steps:
+        fig, data = func(args, steps)
+    out = {
+        "figure": args.number,
+        "what": what,
+        "snr_db": args.snr,
+        "data": data,
+        "plot": save(fig, args.plot),
+        "wall_seconds": round(time.perf_counter() - t0, 2),
+    }
+    if args.json:
+        print_json(out)
+    else:
+        print(f"luo-et-al Fig. {args.number} ({what}): {out['plot']} ({out['wall_seconds']} s)")
+    return 0
+
+
+def add_figure_parser(abs_actions) -> argparse.ArgumentParser:
+    """Add ``figure`` to the ``fdikit abs`` actions."""
+    p = abs_actions.add_parser(
+        "figure",
+        help="reproduce a figure of luo-et-al (3, 7, 8, 9, 10, 15, 16)",
+        description="Reproduce one figure of luo-et-al and write it to an image file:\n"
+        + "\n".join(f"  {k:>2}  {v[2]}" for k, v in FIGURES.items())
+        + "\n--json prints one JSON object with the numbers behind the figure.",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("number", type=int, help=f"figure number: {', '.join(map(str, FIGURES))}")
+    p.add_argument(
+        "--plot",
+        required=True,
+        metavar="FILE",
+        help="image file to write; the format follows the extension, e.g. .png or .pdf",
+    )
+    p.add_argument(
+        "--snr", type=float, default=23.0, help="process-noise SNR, dB (default 23; Figs. 15, 16 sweep it)"
+    )
+    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--fault", default=None, help="fault class of Fig. 3 (default F0)")
+    p.add_argument(
+        "--runs",
+        type=int,
+        default=200,
+        help="stops per fault class for Figs. 10 and 15 (default 200; the paper uses 5000)",
+    )
+    p.add_argument(
+        "--design-runs", type=int, default=300, help="nominal stops for the threshold designs (default 300)"
+    )
+    p.add_argument(
+        "--per-size",
+        type=int,
+        default=5,
+        help="SVM patterns per fault size and fault for Fig. 16 (default 5; the paper uses 20)",
+    )
+    p.add_argument("--json", action="store_true", help="print one JSON object with the figure's numbers")
+    p.set_defaults(func=_cmd)
+    return p
