@@ -201,29 +201,9 @@ def _import_recipe(cfg: MonitorConfig, recipe: str):
     """The recipe function ``module:function``. A module (or package) beside the config file is
     found there first, without PYTHONPATH: ``recipe = "my_recipe:design"`` next to
     ``my_recipe.py``. Recipes written for an older fdikit layout are mapped (:func:`moved`)."""
-    import sys
+    from .declarative import import_object
 
-    mod, sep, fn = moved(recipe).partition(":")
-    if not sep or not mod or not fn:
-        raise DataError(f"{cfg.path}: [design].recipe must be 'module:function', got {recipe!r}")
-    here = cfg.path.parent.resolve()
-    top = mod.split(".")[0]
-    local = (here / f"{top}.py").is_file() or (here / top / "__init__.py").is_file()
-    if local:
-        cached = sys.modules.get(top)
-        if cached is not None and Path(getattr(cached, "__file__", "") or "").resolve().parent not in (
-                here, here / top):
-            raise DataError(f"{cfg.path}: recipe module {top!r} beside the config has the name of an "
-                            f"installed module ({cached.__file__}); rename it")
-        sys.path.insert(0, str(here))
-    try:
-        func = getattr(importlib.import_module(mod), fn)
-    except (ImportError, AttributeError) as exc:
-        where = f" (looked beside the config in {here} too)" if not local else ""
-        raise DataError(f"{cfg.path}: design recipe {recipe!r} cannot be imported ({exc}){where}") from None
-    finally:
-        if local and sys.path and sys.path[0] == str(here):
-            sys.path.pop(0)
+    func = import_object(moved(recipe), cfg.path.parent, where=f"{cfg.path}: design recipe {recipe!r}")
     if not callable(func):
         raise DataError(f"{cfg.path}: design recipe {recipe!r} is not a function")
     return func

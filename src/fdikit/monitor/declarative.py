@@ -105,18 +105,24 @@ def import_object(spec: str, base_dir: str | Path | None = None, *, where: str =
     """
     mod, sep, attr = str(spec).partition(":")
     if not sep or not mod or not attr:
-        raise DataError(f"{where}: {spec!r} must be 'module:attribute'")
+        raise DataError(f"{where}: {spec!r} must be 'module:attribute' (module:function for a recipe)")
     here = None if base_dir is None else Path(base_dir).resolve()
     top = mod.split(".")[0]
     local = here is not None and ((here / f"{top}.py").is_file() or (here / top / "__init__.py").is_file())
     if local:
+        cached = sys.modules.get(top)
+        if cached is not None and Path(getattr(cached, "__file__", "") or "").resolve().parent not in (
+                here, here / top):
+            raise DataError(f"{where}: the module {top!r} beside the config has the name of an installed "
+                            f"module ({cached.__file__}); rename it")
         sys.path.insert(0, str(here))
     try:
         obj: Any = importlib.import_module(mod)
         for part in attr.split("."):
             obj = getattr(obj, part)
     except (ImportError, AttributeError) as exc:
-        raise DataError(f"{where}: {spec!r} cannot be imported ({exc})") from None
+        also = f" (looked beside the config in {here} too)" if here is not None and not local else ""
+        raise DataError(f"{where}: {spec!r} cannot be imported ({exc}){also}") from None
     finally:
         if local and sys.path and sys.path[0] == str(here):
             sys.path.pop(0)
