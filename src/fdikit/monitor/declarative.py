@@ -528,7 +528,8 @@ def design_monitor(design: Mapping[str, Any], base_dir: str | Path = ".", *, whe
                          list(raw.y_names), list(raw.residual_names),
                          {**raw.info, "whitening": W, "groups": groups})
     feats = FeatureNorms(groups, dt, 0.0)
-    f_nom = feats.run(FaultDetectionFilter(white).run(data))
+    # the whitened filter's output is W times the raw one (C, Du, Dy premultiplied): no second run
+    f_nom = feats.run(Signals(r.t, r.values @ W.T, r.names, check=False))
     f_nom = Signals(f_nom.t[warm:], f_nom.values[:, warm:], f_nom.names, check=False)
     per = {"sample": "sample", "run": float(alarm.run_length or 0.0), "hour": "hour"}[alarm.per]
     try:
