@@ -75,6 +75,10 @@ class Signals:
         Channel units (``""`` when unknown).
     check : bool
         Validate finiteness of the values (default True). Time is always validated.
+    t0 : float
+        Absolute time (s) of ``t == 0``: a log read from an absolute clock (UNIX epoch, ROS
+        nanoseconds) is rebased to start at 0 and keeps its origin here, so that an event at
+        ``t`` happened at ``t0 + t``. Default 0 (``t`` is already the log's own clock).
 
     Examples
     --------
@@ -85,7 +89,7 @@ class Signals:
     ((1, 3, 2), (1, 3))
     """
 
-    __slots__ = ("names", "t", "units", "values")
+    __slots__ = ("names", "t", "t0", "units", "values")
 
     def __init__(
         self,
@@ -95,6 +99,7 @@ class Signals:
         units: Sequence[str] | None = None,
         *,
         check: bool = True,
+        t0: float = 0.0,
     ):
         t = check_time(t)
         v = np.asarray(values, dtype=float)
@@ -125,6 +130,12 @@ class Signals:
         self.values = v
         self.names = names
         self.units = units
+        try:
+            self.t0 = float(t0)
+        except (TypeError, ValueError):
+            raise DataError(f"t0 must be a number of seconds, got {t0!r}") from None
+        if not np.isfinite(self.t0):
+            raise DataError(f"t0 must be finite, got {t0!r}")
 
     # ------------------------------------------------------------------ basic properties
     @property
@@ -182,13 +193,14 @@ class Signals:
             names,
             [self.units[i] for i in idx],
             check=False,
+            t0=self.t0,
         )
 
     def run(self, i: int) -> Signals:
         """Run ``i`` alone (still 3-D with ``runs == 1``)."""
         if not -self.runs <= i < self.runs:
             raise DataError(f"run {i} out of range for {self.runs} runs")
-        return Signals(self.t, self.values[i : i + 1], self.names, self.units, check=False)
+        return Signals(self.t, self.values[i : i + 1], self.names, self.units, check=False, t0=self.t0)
 
     def window(self, t0: float | None = None, t1: float | None = None) -> Signals:
         """Samples with ``t0 <= t <= t1``."""
@@ -197,7 +209,7 @@ class Signals:
             m &= self.t >= t0
         if t1 is not None:
             m &= self.t <= t1
-        return Signals(self.t[m], self.values[:, m], self.names, self.units, check=False)
+        return Signals(self.t[m], self.values[:, m], self.names, self.units, check=False, t0=self.t0)
 
     def concat_channels(self, other: Signals) -> Signals:
         """Channels of ``self`` followed by those of ``other`` (same time grid and runs)."""
@@ -211,6 +223,7 @@ class Signals:
             self.names + other.names,
             self.units + other.units,
             check=False,
+            t0=self.t0,
         )
 
     # ------------------------------------------------------------------ pandas edges

@@ -16,7 +16,12 @@
 They return :class:`LogSignals` (or its subclass :class:`LoadedSignals`), a Signals whose values
 may hold NaN where the source had a gap or a bad sample; ``valid`` marks the samples that hold
 data and ``info`` reports per-signal quality (rates, gaps, duplicates, stuck stretches). Gaps
-are never interpolated across (see :mod:`fdikit.io.can`).
+are never interpolated across (see :mod:`fdikit.io.can`); a loaded log says why each invalid
+grid sample is invalid (:meth:`LoadedSignals.invalid_reason`).
+
+Time columns (:mod:`fdikit.io.timebase`): ``time_unit="auto" | "s" | "ms" | "us" | "ns"``; an
+absolute clock (UNIX epoch, ROS nanoseconds) is rebased exactly to start at 0 and its origin kept
+in ``t0`` (s) and ``time_origin`` (:class:`TimeOrigin`, exact).
 """
 
 from .can import LogSignals, SignalInfo, convert_units, resample_to_grid
@@ -40,10 +45,12 @@ from .formats import (
     series_to_grid,
 )
 from .stream import FrameGridder, parse_candump_line
+from .timebase import TIME_UNITS, StreamTimes, TimeOrigin, times_to_seconds
 from .write import write_csv, write_parquet
 
 __all__ = [
     "FORMATS",
+    "TIME_UNITS",
     "FrameGridder",
     "FramePayloads",
     "LoadedSignals",
@@ -51,6 +58,8 @@ __all__ = [
     "SignalInfo",
     "SignalQuality",
     "SourceReport",
+    "StreamTimes",
+    "TimeOrigin",
     "convert_units",
     "decode_message",
     "detect_format",
@@ -69,6 +78,7 @@ __all__ = [
     "resample_to_grid",
     "series_to_grid",
     "set_signal",
+    "times_to_seconds",
     "write_blf_table",
     "write_csv",
     "write_parquet",

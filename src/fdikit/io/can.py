@@ -151,12 +151,19 @@ class LogSignals(Signals):
         longer than the loader's ``max_gap``, or outside that channel's recorded span).
     info : dict of str -> SignalInfo
         Source statistics per channel (rate, count, gaps); empty for derived selections.
+    t0 : float
+        Absolute time (s) of ``t == 0`` (see :class:`~fdikit.Signals`): the first timestamp of
+        a log on an absolute clock, else 0.
+    time_origin : TimeOrigin or None
+        The exact origin (integer ticks, unit) when the time axis was rebased
+        (:mod:`fdikit.io.timebase`); ``None`` for readers that do not rebase.
     """
 
-    __slots__ = ("info", "valid")
+    __slots__ = ("info", "time_origin", "valid")
 
-    def __init__(self, t, values, names, units=None, *, valid=None, info=None):
-        super().__init__(t, values, names, units, check=False)
+    def __init__(self, t, values, names, units=None, *, valid=None, info=None, t0=0.0, time_origin=None):
+        super().__init__(t, values, names, units, check=False, t0=t0)
+        self.time_origin = time_origin
         if valid is None:
             valid = np.isfinite(self.values)
         valid = np.asarray(valid, dtype=bool)
@@ -184,7 +191,8 @@ class LogSignals(Signals):
         idx = self.index(names)
         return LogSignals(self.t, self.values[:, :, idx], names, [self.units[i] for i in idx],
                           valid=self.valid[:, :, idx],
-                          info={n: self.info[n] for n in names if n in self.info})
+                          info={n: self.info[n] for n in names if n in self.info},
+                          t0=self.t0, time_origin=self.time_origin)
 
     def window(self, t0: float | None = None, t1: float | None = None) -> LogSignals:
         m = np.ones(self.t.size, bool)
@@ -193,7 +201,7 @@ class LogSignals(Signals):
         if t1 is not None:
             m &= self.t <= t1
         return LogSignals(self.t[m], self.values[:, m], self.names, self.units, valid=self.valid[:, m],
-                          info=self.info)
+                          info=self.info, t0=self.t0, time_origin=self.time_origin)
 
     def dropna(self) -> Signals:
         """A plain, fully finite :class:`~fdikit.Signals` of the samples where all channels are valid
@@ -201,7 +209,7 @@ class LogSignals(Signals):
         if self.runs != 1:
             raise DataError("dropna needs a single run")
         m = self.all_valid[0]
-        return Signals(self.t[m], self.values[:, m], self.names, self.units)
+        return Signals(self.t[m], self.values[:, m], self.names, self.units, t0=self.t0)
 
     def __repr__(self) -> str:
         inv = int((~self.valid).sum())

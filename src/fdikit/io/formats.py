@@ -61,6 +61,7 @@ from .can import (
     resample_to_grid,
 )
 from .decode import FramePayloads, decode_message
+from .timebase import TimeOrigin, origin_of_float, times_to_seconds
 
 __all__ = [
     "FORMATS",
@@ -90,6 +91,8 @@ FORMATS: dict[str, tuple[str, ...]] = {
     "mdf": (".mf4", ".mdf", ".mf3", ".dat"),
 }
 _FRAME_FORMATS = ("blf", "asc", "candump")
+#: Largest grid a loader builds (samples); a larger one is a time column in the wrong unit.
+MAX_GRID = 50_000_000
 
 
 # ---------------------------------------------------------------------------------- result types
@@ -148,20 +151,51 @@ class SourceReport:
 class LoadedSignals(LogSignals):
     """:class:`~fdikit.io.LogSignals` with a :class:`SourceReport` (``source``).
 
-    ``info`` maps each channel to a :class:`SignalQuality`.
+    ``info`` maps each channel to a :class:`SignalQuality`; ``reasons`` lists, for every run of
+    invalid grid samples, ``(channel, start, stop, reason)`` (samples ``start <= k < stop``; see
+    :meth:`invalid_reason`).
     """
 
-    __slots__ = ("source",)
+    __slots__ = ("reasons", "source")
 
-    def __init__(self, t, values, names, units=None, *, valid=None, info=None, source=None):
-        super().__init__(t, values, names, units, valid=valid, info=info)
+    def __init__(self, t, values, names, units=None, *, valid=None, info=None, source=None, t0=0.0,
+                 time_origin=None, reasons=None):
+        super().__init__(t, values, names, units, valid=valid, info=info, t0=t0, time_origin=time_origin)
         self.source = source
+        self.reasons: list[tuple[str, int, int, str]] = list(reasons or [])
+
+    def invalid_reason(self, k: int) -> str | None:
+        """Why grid sample ``k`` is invalid (every channel's reason, joined), ``None`` when valid.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> s = series_to_grid({"x": (np.r_[0.0, 0.1, 0.2, 1.0, 1.1], np.zeros(5))}, {}, rate=10.0)
+        >>> s.invalid_reason(1) is None
+        True
+        >>> s.invalid_reason(5)
+        'x: gap, no sample from 0.200000 s to 1.000000 s (0.8 s, longer than max_gap = 3 periods of 0.1 s)'
+
+        """
+        if not -self.n_samples <= k < self.n_samples:
+            raise DataError(f"sample {k} out of range for {self.n_samples} samples")
+        k = k % self.n_samples
+        if self.valid[0, k].all():
+            return None
+        why = [r for n, a, b, r in self.reasons if a <= k < b]
+        if not why:  # a selection or window of the loaded signals: the mask still says which
+            why = [f"{self.names[c]}: no valid value" for c in np.flatnonzero(~self.valid[0, k])]
+        return "; ".join(why)
 
     def _keep_source(self, s: LogSignals) -> LoadedSignals:
-        return LoadedSignals(s.t, s.values, s.names, s.units, valid=s.valid, info=s.info, source=self.source)
+        return LoadedSignals(s.t, s.values, s.names, s.units, valid=s.valid, info=s.info, source=self.source,
+                             t0=s.t0, time_origin=s.time_origin)
 
     def select(self, names) -> LoadedSignals:
-        return self._keep_source(super().select(names))
+        out = self._keep_source(super().select(names))
+        keep = set(out.names)
+        out.reasons = [r for r in self.reasons if r[0] in keep]
+        return out
 
     def window(self, t0: float | None = None, t1: float | None = None) -> LoadedSignals:
         return self._keep_source(super().window(t0, t1))
@@ -244,6 +278,8 @@ def series_to_grid(
     counts: Mapping[str, Mapping[str, int]] | None = None,
     source: SourceReport | None = None,
     where: str = "log",
+    t0: float = 0.0,
+    time_origin: TimeOrigin | None = None,
 ) -> LoadedSignals:
     """Put irregularly sampled signals on one uniform grid (the second step of every loader).
 
@@ -274,11 +310,17 @@ def series_to_grid(
     source : SourceReport, optional
     where : str
         What to call the source in error messages.
+    t0, time_origin
+        Absolute origin of the (relative) sample times, stored on the result
+        (:mod:`fdikit.io.timebase`).
 
     Returns
     -------
     LoadedSignals
-        One run, ``T`` samples; ``valid`` is ``False`` exactly where a value is NaN.
+        One run, ``T`` samples; ``valid`` is ``False`` exactly where a value is NaN. A grid
+        sample inside a gap (its neighbouring source samples more than ``max_gap`` periods
+        apart) is NaN and invalid, never held or bridged; :meth:`LoadedSignals.invalid_reasons`
+        says why each invalid sample is invalid.
 
     Examples
     --------
@@ -338,16 +380,19 @@ def series_to_grid(
     else:
         a = min(clean[n][0][0] for n in names)
         b = max(clean[n][0][-1] for n in names)
-    n_grid = int(np.floor((b - a) * rate + 1e-9)) + 1
-    if n_grid > 50_000_000:
-        raise DataError(f"{where}: a grid of {n_grid} samples ({b - a:.6g} s at {rate:g} Hz) is too large; "
-                        "check the time column and the rate")
+    n_float = np.floor((b - a) * rate + 1e-9) + 1
+    if not np.isfinite(n_float) or n_float > MAX_GRID:
+        raise DataError(f"{where}: a grid of {n_float:.6g} samples ({b - a:.6g} s at {rate:g} Hz) is too "
+                        f"large (limit {MAX_GRID}); check the time column's unit (time_unit='ms', 'us' or "
+                        "'ns' for a clock that does not count seconds) and the rate")
+    n_grid = int(n_float)
     grid = a + np.arange(n_grid) / rate
 
     values = np.empty((n_grid, len(names)))
     valid = np.empty((n_grid, len(names)), bool)
     out_units: list[str] = []
     info: dict[str, SignalQuality] = {}
+    reasons: list[tuple[str, int, int, str]] = []
     for c, n in enumerate(names):
         t, v, n_dup, n_conf = clean[n]
         src_unit = str(source_units.get(n, "") or "")
@@ -375,6 +420,8 @@ def series_to_grid(
             vals[edge] = end[edge]
             ok |= edge
         vals[~ok] = np.nan
+        if not ok.all():
+            reasons.extend(_invalid_spans(n, t, fin, grid, ok, method, max_gap, period[n]))
         values[:, c] = vals
         valid[:, c] = ok
         out_units.append(target)
@@ -389,7 +436,39 @@ def series_to_grid(
             n_undecodable=int(counts.get(n, {}).get("n_undecodable", 0)),
             n_duplicates=n_dup, n_conflicts=n_conf, longest_constant=longest,
             stuck=bool(longest >= stuck_after))
-    return LoadedSignals(grid, values, names, out_units, valid=valid, info=info, source=source)
+    out = LoadedSignals(grid, values, names, out_units, valid=valid, info=info, source=source, t0=t0,
+                        time_origin=time_origin)
+    out.reasons = reasons
+    return out
+
+
+def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """``[start, stop)`` of every run of True."""
+    d = np.diff(np.r_[0, mask.astype(np.int8), 0])
+    return list(zip(np.flatnonzero(d == 1).tolist(), np.flatnonzero(d == -1).tolist()))
+
+
+def _invalid_spans(name, t, fin, grid, ok, method, max_gap, period) -> list[tuple[str, int, int, str]]:
+    """Why each run of invalid grid samples of one channel is invalid: outside the channel's span,
+    a gap longer than ``max_gap`` periods, or an interpolation touching a bad source sample."""
+    out = []
+    bad = ~ok
+    outside = bad & ((grid < t[0]) | (grid > t[-1]))
+    touches = bad & ~outside & _touches_bad(t, fin, grid, method)
+    gap = bad & ~outside & ~touches
+    for a, b in _runs(outside):
+        out.append((name, a, b, f"{name}: no sample (outside its recorded span {t[0]:.6f} .. {t[-1]:.6f} s)"))
+    for a, b in _runs(touches):
+        out.append((name, a, b, f"{name}: interpolated from a NaN, inf or undecodable source sample"))
+    i = np.searchsorted(t, grid, side="right") - 1
+    for a, b in _runs(gap):
+        i0 = int(np.clip(i[a], 0, t.size - 1))
+        i1 = min(i0 + 1, t.size - 1)
+        out.append((name, a, b, f"{name}: gap, no sample from {t[i0]:.6f} s to {t[i1]:.6f} s "
+                                f"({t[i1] - t[i0]:.4g} s, longer than max_gap = {max_gap:g} periods of "
+                                f"{period:.4g} s)"))
+    out.sort(key=lambda r: (r[1], r[0]))
+    return out
 
 
 def _check_signal_list(signals) -> list[str]:
@@ -545,7 +624,7 @@ def frames_to_signals(
     series = {s: series[s] for s in signals}
     return series_to_grid(series, src_units, rate, units=units, max_gap=max_gap, method=method, span=span,
                           log_span=(0.0, t_end - t0), stuck_after=stuck_after, counts=counts,
-                          source=source, where=where)
+                          source=source, where=where, t0=t0, time_origin=origin_of_float(t0))
 
 
 # ---------------------------------------------------------------------------------- frame readers
@@ -821,16 +900,20 @@ def _check_table_time(t: np.ndarray, where: str, time_col: str, present: np.ndar
                         f"({float(t[k - 1])!r} then {float(t[k])!r}); it must be non-decreasing")
 
 
-def _table_to_grid(t, cols, present, values, units_src, rate, kw, src, where):
+def _table_to_grid(t, cols, present, values, units_src, rate, kw, src, where, origin=None):
     series = {}
     for j, c in enumerate(cols):
         m = present[:, j]
         series[c] = (t[m], values[:, j][m])
-    return series_to_grid(series, units_src, rate, source=src, where=where, **kw)
+    rebased = origin is not None and origin.rebased
+    return series_to_grid(series, units_src, rate, source=src, where=where,
+                          t0=origin.seconds if rebased else 0.0, time_origin=origin if rebased else None,
+                          **kw)
 
 
 def read_parquet(path, signals=None, rate=None, *, time: str | None = None,
-                 source_units: Mapping[str, str] | None = None, **kw) -> LoadedSignals:
+                 source_units: Mapping[str, str] | None = None, time_unit: str = "auto",
+                 rebase: bool | None = None, **kw) -> LoadedSignals:
     """Read a Parquet table of decoded signals onto one grid.
 
     The table has one time column (seconds as a number, or a timestamp type, counted from the
@@ -851,6 +934,14 @@ def read_parquet(path, signals=None, rate=None, *, time: str | None = None,
         Time column; default the first of ``t, time, timestamp, timestamps, t_s, time_s``.
     source_units : mapping, optional
         Unit per column, overriding the file's metadata.
+    time_unit : {"auto", "s", "ms", "us", "ns"}
+        Unit of a numeric time column (``"auto"``: seconds, unless the first timestamp is an
+        absolute clock in ms, us or ns; see :mod:`fdikit.io.timebase`). A timestamp-typed column
+        is always counted from its first row.
+    rebase : bool, optional
+        Make time start at 0; default when the time axis is absolute (first timestamp at least
+        10^6 s). Integer time stamps are rebased exactly; the origin is kept in ``t0`` and
+        ``time_origin``.
     **kw
         ``units``, ``max_gap``, ``method``, ``span``, ``stuck_after`` (see :func:`series_to_grid`).
 
@@ -876,14 +967,26 @@ def read_parquet(path, signals=None, rate=None, *, time: str | None = None,
     time_col = _pick_time(names, time, where)
     cols = _pick_columns(names, time_col, signals, where)
     tcol = table.column(time_col)
+    origin = None
     try:
         if pa.types.is_timestamp(tcol.type) or pa.types.is_date(tcol.type):
-            tn = tcol.cast(pa.timestamp("ns")).cast(pa.int64()).to_numpy(zero_copy_only=False)
             t_present = ~np.asarray(tcol.is_null().to_numpy(zero_copy_only=False), bool)
-            t = np.where(t_present, (tn - tn[np.argmax(t_present)]) * 1e-9, np.nan) if tn.size else tn
+            tn = tcol.cast(pa.timestamp("ns")).fill_null(0).cast(pa.int64()).to_numpy(zero_copy_only=False)
+            t = np.full(tn.size, np.nan)
+            if tn.size and t_present.any():
+                t[t_present], origin = times_to_seconds(tn[t_present], "ns", rebase=True, where=where,
+                                                        column=time_col, rows=np.flatnonzero(t_present))
         elif pa.types.is_integer(tcol.type) or pa.types.is_floating(tcol.type):
             t_present = ~np.asarray(tcol.is_null().to_numpy(zero_copy_only=False), bool)
-            t = np.asarray(tcol.cast(pa.float64()).to_numpy(zero_copy_only=False), float)
+            if pa.types.is_integer(tcol.type):
+                raw = np.asarray(tcol.cast(pa.int64()).fill_null(0).to_numpy(zero_copy_only=False), np.int64)
+            else:
+                raw = np.asarray(tcol.cast(pa.float64()).to_numpy(zero_copy_only=False), float)
+            t = np.full(raw.size, np.nan)
+            if raw.size and t_present.all():
+                t, origin = times_to_seconds(raw, time_unit, rebase=rebase, where=where, column=time_col)
+            elif raw.size:
+                t[t_present] = raw[t_present]  # _check_table_time names the empty row
         else:
             raise DataError(f"{where}: time column {time_col!r} has type {tcol.type}, "
                             "not a number or timestamp")
@@ -910,11 +1013,12 @@ def read_parquet(path, signals=None, rate=None, *, time: str | None = None,
         if k in cols:
             units_src[k] = u
     src = SourceReport("parquet", str(p), int(t.size))
-    return _table_to_grid(t, cols, present, values, units_src, rate, kw, src, where)
+    return _table_to_grid(t, cols, present, values, units_src, rate, kw, src, where, origin)
 
 
 def read_table_csv(path, signals=None, rate=None, *, time: str | None = None,
-                   source_units: Mapping[str, str] | None = None, **kw) -> LoadedSignals:
+                   source_units: Mapping[str, str] | None = None, time_unit: str = "auto",
+                   rebase: bool | None = None, **kw) -> LoadedSignals:
     r"""Read a CSV table of decoded signals onto one grid, with the Parquet reader's conventions.
 
     An empty cell is "no sample here"; ``nan`` / ``inf`` text is a bad sample (flagged); any
@@ -925,7 +1029,7 @@ def read_table_csv(path, signals=None, rate=None, *, time: str | None = None,
     Parameters
     ----------
     path : path-like
-    signals, rate, time, source_units, **kw
+    signals, rate, time, source_units, time_unit, rebase, **kw
         As in :func:`read_parquet`.
 
     Returns
@@ -984,7 +1088,11 @@ def read_table_csv(path, signals=None, rate=None, *, time: str | None = None,
                                     "is not a number") from None
         return out, pres
 
-    t, tp = parse(header.index(time_col), time_col)
+    traw = [x.strip() for x in arr[:, header.index(time_col)]]
+    tp = np.array([x != "" for x in traw])
+    _check_table_time(np.zeros(tp.size), where, time_col, tp, line_offset=2)
+    t, origin = times_to_seconds(traw, time_unit, rebase=rebase, where=where, column=time_col,
+                                 line_offset=2)
     _check_table_time(t, where, time_col, tp, line_offset=2)
     values = np.empty((t.size, len(cols)))
     present = np.empty((t.size, len(cols)), bool)
@@ -997,7 +1105,7 @@ def read_table_csv(path, signals=None, rate=None, *, time: str | None = None,
         if k in cols:
             units_src[k] = u
     src = SourceReport("csv", str(p), int(t.size))
-    return _table_to_grid(t, cols, present, values, units_src, rate, kw, src, where)
+    return _table_to_grid(t, cols, present, values, units_src, rate, kw, src, where, origin)
 
 
 # ---------------------------------------------------------------------------------- MDF4
@@ -1296,7 +1404,8 @@ def detect_format(path) -> str:
 
 _COMMON_OPTIONS = ("units", "max_gap", "method", "span", "stuck_after")
 _FORMAT_OPTIONS = {"blf": (), "asc": ("strict", "encoding", "channel"), "candump": ("channel",),
-                   "parquet": ("time", "source_units"), "csv": ("time", "source_units"), "mdf": ("channel",)}
+                   "parquet": ("time", "source_units", "time_unit", "rebase"),
+                   "csv": ("time", "source_units", "time_unit", "rebase"), "mdf": ("channel",)}
 
 
 def read_log(path, dbc=None, signals=None, rate=None, *, format: str | None = None, **kw) -> LoadedSignals:
@@ -1318,7 +1427,10 @@ def read_log(path, dbc=None, signals=None, rate=None, *, format: str | None = No
         Force a format (a key of :data:`FORMATS`) instead of detecting it.
     **kw
         Passed to the reader: ``units``, ``max_gap``, ``method``, ``span``, ``stuck_after``;
-        ``time`` and ``source_units`` for tables; ``strict`` and ``encoding`` for ASC;
+        ``time``, ``source_units``, ``time_unit`` (``"auto"``, ``"s"``, ``"ms"``, ``"us"``,
+        ``"ns"``) and ``rebase`` for tables (:mod:`fdikit.io.timebase`: an absolute time axis is
+        rebased exactly to start at 0, its origin kept in ``t0`` and ``time_origin``; frame
+        logs always start at their first frame, ``t0`` its time); ``strict`` and ``encoding`` for ASC;
         ``channel`` for ASC, candump and MDF4 bus logging. An option that does not apply to
         the detected format is a :class:`~fdikit.errors.DataError`.
 
@@ -1347,6 +1459,15 @@ def read_log(path, dbc=None, signals=None, rate=None, *, format: str | None = No
         if format not in FORMATS:
             raise DataError(f"unknown log format {format!r}; known formats: {sorted(FORMATS)}")
         fmt = format
+    if fmt not in ("csv", "parquet"):
+        # frame logs and MDF count seconds (python-can, asammdf) and start at their first frame
+        unit = kw.pop("time_unit", "auto")
+        if unit not in ("auto", "s"):
+            raise DataError(f"{Path(path).name!r} is a {fmt} log, whose time stamps are seconds; "
+                            f"time_unit={unit!r} applies to CSV and Parquet tables only")
+        if kw.pop("rebase", None) is False:
+            raise DataError(f"{Path(path).name!r} is a {fmt} log: its time always starts at its first "
+                            "frame or sample (rebase=False applies to CSV and Parquet tables only)")
     allowed = set(_COMMON_OPTIONS) | set(_FORMAT_OPTIONS[fmt])
     unknown = sorted(set(kw) - allowed)
     if unknown:

@@ -212,6 +212,12 @@ class FrameGridder:
                     del s.t[:j], s.v[:j]
 
     # --------------------------------------------------------------------- public
+    @property
+    def t0(self) -> float | None:
+        """Absolute time (s) of the stream's first frame: grid time ``t`` is ``t0 + t``
+        (``None`` before the first frame), as ``LoadedSignals.t0`` of the batch loader."""
+        return self._t0
+
     def push(self, t: float, frame_id: int, data: bytes, bus: str | None = None
              ) -> list[tuple[float, dict[str, float], str | None]]:
         """Add one frame (absolute time in s); return the grid samples it completes.
