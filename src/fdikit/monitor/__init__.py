@@ -1,16 +1,22 @@
-"""The runtime: residual generator and processor interfaces, the Monitor that chains them, and
-checkpoint / restore of streaming state."""
+"""The runtime: residual generator and processor interfaces, the Monitor that chains them (with
+its bad-data policy: plausibility, gaps, warm-up), events as episodes, and checkpoint / restore
+of streaming state."""
 
 from ..base.artifacts import load_artifact, save_artifact
 from ..base.stage import ResidualGenerator, ResidualProcessor
 from ..base.state import Stateful, load_state, save_state
-from .core import Decision, Event, Monitor, MonitorResult
+from .core import STATUS_NAMES, Decision, Event, Gap, Monitor, MonitorResult
+from .plausibility import Plausibility, PlausibilityChecker
 
 __all__ = [
+    "STATUS_NAMES",
     "Decision",
     "Event",
+    "Gap",
     "Monitor",
     "MonitorResult",
+    "Plausibility",
+    "PlausibilityChecker",
     "ResidualGenerator",
     "ResidualProcessor",
     "Stateful",
