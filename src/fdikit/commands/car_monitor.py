@@ -6,15 +6,33 @@
   announcements); ``--plot`` draws paper Figs. 4-7, ``--report`` writes the HTML report;
 * ``fdikit car monitor-log PATH --inject SPEC [--json] [--plot FILE] [--report FILE.html]``: the lateral
   monitor designed for the RAV4 (:mod:`fdikit.systems.car.monitor_rav4`) on the real minute in PATH with
-  faults injected into the real signals (SPEC ``yaw_rate:0.03@40`` = a bias of 0.03 rad/s on the
-  yaw-rate sensor from 40 s; ``wheel_rl:0.6@40`` = +0.6 m/s on the rear-left wheel-speed sensor;
-  comma-separated for several; ``none`` for the unaltered log).
+  faults of any type injected into the real signals (SPEC :data:`INJECT_HELP`:
+  ``stuck:STEER_ANGLE_SENSOR@15``, ``drift:YAW_RATE:0.02/s@10`` (deg/s per s),
+  ``gain:WHEEL_SPEED_FL:1.01@20``,
+  ``bias:ACCEL_Y:1.0@25``, ``intermittent:WHEEL_SPEED_RL:1.0@12``, ``yaw_rate:0.03@40`` = a bias of 0.03 rad/s
+  on the internal yaw-rate channel; comma-separated for several; ``none`` for the unaltered log).
 """
 
 from __future__ import annotations
 
 import argparse
 from pathlib import Path
+
+#: The --inject syntax (fdikit.systems.car.monitor_rav4.parse_inject).
+INJECT_HELP = (
+    "faults to inject, comma-separated: [TYPE:]SIGNAL[:VALUE]@START[-END][;period=P;duty=D], times in s "
+    "from the start of the log. TYPE is bias (default), drift (VALUE a slope per s, e.g. 0.05/s), gain "
+    "(VALUE the factor, 1.02 = reads 2 %% high), stuck (at its value at START, or at VALUE) or "
+    "intermittent (a bias VALUE on for duty*period s of every period s; default period=2, duty=0.25). "
+    "SIGNAL is a CAN signal in its own unit (STEER_ANGLE deg, YAW_RATE deg/s, ACCEL_Y m/s^2 in the "
+    "sensor's sign, WHEEL_SPEED_FL..RR and SPEED km/h; also MESSAGE.SIGNAL), a CAN message (every "
+    "signal of it, e.g. STEER_ANGLE_SENSOR: the whole steering sensor), a raw channel (steer_angle, "
+    "yaw_rate_raw, wheel_rl ... SI units) or an internal channel (steer road-wheel rad, a_y m/s^2 left "
+    "positive, yaw_rate rad/s, w_front_diff, w_rear_diff m/s). Examples: stuck:STEER_ANGLE_SENSOR@15, "
+    "drift:YAW_RATE:0.02/s@10, gain:WHEEL_SPEED_FL:1.01@20, bias:ACCEL_Y:1.0@25, "
+    "intermittent:WHEEL_SPEED_RL:1.0@12;period=2;duty=0.25, yaw_rate:0.03@40 (a 0.03 rad/s bias). "
+    "'none' (default) runs the unaltered log")
+
 
 
 def add_monitor_parsers(car_actions) -> None:
@@ -69,17 +87,7 @@ def add_monitor_parsers(car_actions) -> None:
         help="data directory holding the CAN log drive.blf and the signal database "
         "toyota_rav4.dbc (e.g. ../shared/data/rav4-highway)",
     )
-    m.add_argument(
-        "--inject",
-        default="none",
-        help="faults to inject, CHANNEL:MAGNITUDE@START with START in s, comma-separated for "
-        "several: e.g. yaw_rate:0.03@40 (a 0.03 rad/s bias on the yaw-rate sensor from 40 s) or "
-        "wheel_rl:0.6@40 (+0.6 m/s on the rear-left wheel-speed sensor). CHANNEL is steer "
-        "(road-wheel angle, rad), a_y (lateral acceleration, m/s^2, left positive), yaw_rate "
-        "(rad/s), w_front_diff or w_rear_diff (left-right wheel-speed difference of an axle, "
-        "m/s), or one wheel-speed sensor wheel_fl, wheel_fr, wheel_rl, wheel_rr (m/s). 'none' "
-        "(default) runs the unaltered log",
-    )
+    m.add_argument("--inject", default="none", help=INJECT_HELP)
     m.add_argument(
         "--plot",
         metavar="FILE",
@@ -239,7 +247,7 @@ def _rav4_plot(mon, faults, sig, res, path: str) -> str:
         }
     )
     events = [(e.t - sig.t[0], e.hypothesis) for e in res.events]
-    shade = [(f[2], float(t[-1]), "fault", "tab:red") for f in faults[:1]]
+    shade = [(f.start, float(f.end if f.end is not None else t[-1]), "fault", "tab:red") for f in faults[:1]]
     half = mon.record.get("half_s")
     if half:
         shade.append((0.0, float(half), "calibration", "0.6"))
@@ -256,7 +264,17 @@ def _rav4_plot(mon, faults, sig, res, path: str) -> str:
 
 
 def args_inject(faults) -> str:
-    return ", ".join(f"{c} {m:+g} from {t0:g} s" for c, m, t0 in faults) or "none"
+    """A one-line description of injected faults (Fault objects or (channel, magnitude, start) biases)."""
+    out = []
+    for f in faults:
+        if isinstance(f, tuple):
+            out.append(f"{f[0]} {f[1]:+g} from {f[2]:g} s")
+        else:
+            val = {k: getattr(f, k) for k in ("magnitude", "slope", "gain", "value") if hasattr(f, k)}
+            v = ", ".join(f"{k} {x:g}" for k, x in val.items() if x is not None)
+            what = f"{type(f).__name__.lower()} on {f.target}" + (f" ({v})" if v else "")
+            out.append(f"{what} from {f.start:g} s")
+    return ", ".join(out) or "none"
 
 
 def _rav4_report(args, mon, faults, sig, res) -> str:
@@ -317,12 +335,21 @@ def _monitor_log(args: argparse.Namespace) -> int:
         print_json(res)
     else:
         print(f"{res['data']}: {res['seconds']:.1f} s, calibrated on {res['calibrated_on_s']} s")
-        if "expected" in res:
+        if "expected_sensor" in res:
             print(
-                f"  injected {res['inject']}: isolated {res['isolated']} (expected {res['expected']}), "
-                f"delay {res['detection_delay_s']} s"
+                f"  injected {res['inject']}: isolated {res['isolated']} (sensor {res['expected_sensor']}, "
+                f"{'right' if res['isolated_ok'] else 'WRONG'}), "
+                f"detection delay {res['detection_delay_s']} s, "
+                f"announced after {res['announcement_delay_s']} s"
             )
         print(f"  false announcements: {len(res['false_announcements'])}")
+        for part in ("calibration", "held_out"):
+            h = res[part]
+            print(
+                f"  {part.replace('_', '-')} half {h['span_s']} s: {h['announcements']} announcements, "
+                f"{len(h['false_announcements'])} false, "
+                f"max wrong probability {h['max_wrong_probability']:.3g}"
+            )
         for f, p in res["peak_probability"].items():
             print(f"  peak P({f}) = {p:.4f}")
         for k in ("plot", "report"):

@@ -1,5 +1,5 @@
 """Residual processors: threshold rules, GLRT, directional GLRT, MHSSPT (also from labelled real data,
-pre-whitened), feature norms, banks of tests designed together, and threshold design for a target per
+pre-whitened), feature norms, sensor-fault detectors (stuck, drift, gain, intermittent: :mod:`.sensor`), banks of tests designed together, and threshold design for a target per
 sample, per run or per hour (:mod:`.tail`: block bootstrap and GPD tails)."""
 
 from .bank import TestBank, TestSpec
@@ -21,6 +21,16 @@ from .mhsspt import (
     final_diagnosis,
     floor_std,
 )
+from .sensor import (
+    DriftDetector,
+    GainDetector,
+    IntermittentDetector,
+    StuckDetector,
+    design_drift,
+    design_gain,
+    design_intermittent,
+    design_stuck,
+)
 from .threshold import ABSOLUTE_DEFAULT, Hold, consecutive_count
 from .whiten import VARWhitener
 
@@ -29,10 +39,14 @@ __all__ = [
     "GLRT",
     "MHSSPT",
     "DirectionalGLRT",
+    "DriftDetector",
     "FeatureNorms",
+    "GainDetector",
     "Hold",
+    "IntermittentDetector",
     "LineMeanGaussian",
     "MHSSPTCalibration",
+    "StuckDetector",
     "TestBank",
     "TestSpec",
     "ThresholdDesign",
@@ -44,7 +58,11 @@ __all__ = [
     "calibrate_densities",
     "calibrate_segments",
     "consecutive_count",
+    "design_drift",
+    "design_gain",
+    "design_intermittent",
     "design_mhsspt",
+    "design_stuck",
     "design_threshold",
     "detection_time",
     "directional_statistic",

@@ -4,9 +4,11 @@ Fault signals (:mod:`fdikit.faults.signals`) act on one channel named by a targe
 (``"actuator:<input>"``, ``"sensor:<output>"``, ``"param:<name>"`` or a fault input declared on a
 linear model) between a start and an optional end time; :class:`FaultInjector` applies them
 vectorised over runs; :class:`Scenario` bundles faults, noise, time steps, inputs and a controller
-for :func:`fdikit.sim.simulate`.
+for :func:`fdikit.sim.simulate`;
+:func:`apply_faults` applies faults of every type to a whole recorded log.
 """
 
+from .apply import apply_faults, resolve_channels
 from .injector import FaultInjector
 from .scenario import PROCESS_NOISE_MODES, Noise, Scenario
 from .signals import (
@@ -47,6 +49,8 @@ __all__ = [
     "Sinusoid",
     "Step",
     "Stuck",
+    "apply_faults",
     "parse_target",
     "per_run",
+    "resolve_channels",
 ]

@@ -69,6 +69,25 @@ bump (saved only by the 0.2 s hold). The price is the accelerometer: a 0.9 m/s^2
 1.76 s and 0.7 m/s^2 is not announced -- on this road a lateral-acceleration bias below about
 0.9 m/s^2 is not told from the real unexplained lateral events.
 
+Sensor-fault detectors and injection of every fault type (issue 16)
+--------------------------------------------------------------------
+The bias hypotheses of the MHSSPT miss the faults real sensors have that are not a step: a frozen
+steering-angle sensor (P stayed below 1e-7), a slow yaw-rate drift (announced only once it reached
+the smallest calibrated bias, ~30 s), a scaled wheel speed, bursts. :class:`Rav4SensorChannels`
+(analytic redundancy on the raw channels, fitted on the calibration half) feeds the generic
+detectors of :mod:`fdikit.detect.sensor` (:func:`design_sensor_detectors`), which announce
+``"steering:stuck"``, ``"yaw_rate:drift"``, ``"wheel_fl:gain"`` ... beside the MHSSPT's hypotheses.
+:func:`parse_inject` / :func:`inject` take every fault type of :mod:`fdikit.faults` on the CAN
+names in their DBC units (:func:`inject_channels`); :func:`run_rav4_log` reports the statistics
+of the calibration and the held-out halves separately. Measured (tests/test_rav4_injection.py, one
+fault per run, onsets in both halves): stuck STEER_ANGLE_SENSOR at 15 / 45 s announced after
+4.5 / 7.3 s; yaw-rate drift 0.02 deg/s per s at 10 / 35 s after 11.4 / 12.5 s (0.01 deg/s per s:
+19.2 / 20.4 s); WHEEL_SPEED_FL x 1.01 at 20 / 50 s after 0.56 / 0.60 s; ACCEL_Y +1.0 m/s^2 at
+25 / 40 s after 0.92 / 3.66 s (MHSSPT); intermittent WHEEL_SPEED_RL +1 km/h (0.5 s of every 2 s) at
+12 / 42 s after 0.40 / 0.38 s (the first announcement, MHSSPT rear_wheel_diff or the gain test;
+"wheel_rl:intermittent" follows after 4.3 s); each isolated, no false announcement, and none on
+the fault-free minute.
+
 Runtime form (issue 9)
 ----------------------
 The whole monitor is a chain of saveable artifacts (:func:`design`, the recipe of
@@ -91,6 +110,7 @@ from typing import Any
 import numpy as np
 from numba import njit
 
+from ...base.stage import ResidualGenerator
 from ...detect import Hold
 from ...detect.features import FeatureNorms
 from ...detect.mhsspt import (
@@ -109,12 +129,14 @@ from ...residuals import FilterDesign, fault_detection_filter, stack_designs
 from ...residuals.scheduled import ScheduledFilter
 from ...residuals.transforms import band_limited, delayed_feedthrough
 from ...signals import Signals
-from .monitor import FILTER_SETS, LATERAL_SETS
+from .monitor import FILTER_SETS, LATERAL_SETS, _biquads
 from .rav4 import RAV4, default_data_path
 
-__all__ = ["CHANNELS", "RAV4_FAULTS", "RAW_CHANNELS", "RAW_SOURCES", "Rav4FeatureNorms", "Rav4LateralFilter",
-           "Rav4MHSSPT", "Rav4Monitor", "Rav4Preprocessing", "design",
-           "inject", "load_rav4_raw", "parse_inject", "rav4_monitor", "run_rav4_log"]
+__all__ = ["CHANNELS", "HYPOTHESIS_SENSORS", "INJECT_TYPES", "RAV4_FAULTS", "RAW_CHANNELS", "RAW_SOURCES",
+           "SENSOR_CHANNELS", "Rav4FeatureNorms", "Rav4LateralFilter", "Rav4MHSSPT", "Rav4Monitor",
+           "Rav4Preprocessing", "Rav4SensorChannels", "design", "design_sensor_detectors",
+           "fit_sensor_channels", "hypothesis_sensors", "inject", "inject_channels", "injected_sensor",
+           "load_rav4_raw", "parse_inject", "rav4_monitor", "run_rav4_log"]
 
 #: Monitored faults of the RAV4 lateral monitor -> (monitor channel the fault is injected on, magnitudes).
 RAV4_FAULTS: dict[str, tuple[str, tuple[float, ...]]] = {
@@ -459,6 +481,155 @@ class Rav4MHSSPT(WarmupMHSSPT):
         return cls(d["inputs"], dens, d["p"], d["pi"], d["q"], d["groups"], warmup=d["warmup"])
 
 
+# ---------------------------------------------------------------------------------- sensor checks
+#: Channels of :class:`Rav4SensorChannels` (what the sensor-fault detectors read).
+SENSOR_CHANNELS = ["chk:steer", "chk:steer_expected", "chk:yaw_vs_ay", "chk:yaw_vs_rear", "chk:front",
+                   "chk:rear", "chk:axles", "chk:speed"]
+
+
+class Rav4SensorChannels(ResidualGenerator):
+    """The channels the RAV4 sensor-fault detectors read, from the raw CAN channels.
+
+    * ``chk:steer`` -- the measured road-wheel angle (rad), unfiltered (a frozen sensor repeats
+      its value exactly);
+    * ``chk:steer_expected`` -- the road-wheel angle the yaw rate and the speed say
+      (steady-state single track, ``c_1 r / U + c_2 r U + c_0``, fitted on the calibration half),
+      low-passed at ``band_hz[0]``;
+    * ``chk:yaw_vs_ay`` -- yaw rate minus what the accelerometer says (``a_y / U`` scaled),
+      ``chk:yaw_vs_rear`` -- yaw rate minus what the rear wheel-speed difference says (the rear
+      wheels are not steered), both low-passed at ``band_hz[1]`` (rad/s): a yaw-rate sensor
+      fault moves both, an accelerometer or rear wheel-speed fault one;
+    * ``chk:front``, ``chk:rear`` -- each axle's wheel-speed difference minus the yaw-rate
+      kinematics (``k r``), and ``chk:axles`` -- the front difference minus the rear one scaled
+      (``k_f / k_r``: both are the same yaw rate), low-passed at ``band_hz[2]`` (m/s): a front
+      wheel-speed fault moves ``chk:front`` and ``chk:axles``, a rear one ``chk:rear`` and
+      ``chk:axles`` (the other sign), a yaw-rate fault ``chk:front`` and ``chk:rear``;
+    * ``chk:speed`` -- the vehicle speed (m/s).
+
+    Parameters
+    ----------
+    pre : Rav4Preprocessing
+    coef : dict
+        ``steer`` (c_1, c_2, c_0), ``ay`` (gain, offset), ``rear`` (gain, offset), ``k_f``, ``k_r``.
+    dt : float
+        Sample time (s).
+    band_hz : sequence of 3 floats
+        Low-pass cut-offs (Hz) of the steering prediction, the yaw checks and the axle checks.
+
+    Examples
+    --------
+    >>> pre = Rav4Preprocessing(16.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0)
+    >>> coef = {"steer": [2.6, 0.0, 0.0], "ay": [1.0, 0.0], "rear": [1.0, 0.0], "k_f": 1.5, "k_r": 1.0}
+    >>> g = Rav4SensorChannels(pre, coef, 0.02)
+    >>> g.reset(1)
+    >>> out = g.step([0.16, 0.0, 20.0], [0.1, 2.0, 20.15, 20.0, 20.1, 20.0])   # r = 0.1, a_y = U r
+    >>> # (k_f / k_r = 1.5: the front difference 0.15 = 1.5 x the rear one)
+    >>> (np.round(out[0], 6) + 0.0).tolist()
+    [0.01, 0.013, 0.0, 0.0, 0.0, 0.0, 0.0, 20.0]
+    """
+
+    _state_attrs = ("_z", "_started")
+
+    def __init__(self, pre: Rav4Preprocessing, coef: dict[str, Any], dt: float, band_hz=(1.0, 0.1, 3.0)):
+        from scipy.signal import butter
+
+        self.pre = pre
+        self.coef = {"steer": [float(c) for c in coef["steer"]], "ay": [float(c) for c in coef["ay"]],
+                     "rear": [float(c) for c in coef["rear"]], "k_f": float(coef["k_f"]),
+                     "k_r": float(coef["k_r"])}
+        if len(self.coef["steer"]) != 3 or len(self.coef["ay"]) != 2 or len(self.coef["rear"]) != 2:
+            raise DataError(f"sensor-check coefficients need steer (3), ay (2), rear (2); got {self.coef}")
+        self.dt = float(dt)
+        self.band_hz = [float(f) for f in band_hz]
+        if len(self.band_hz) != 3 or not all(0 < f < 0.5 / self.dt for f in self.band_hz):
+            raise DataError(f"band_hz must be 3 cut-offs in (0, {0.5 / self.dt:g}) Hz, got {list(band_hz)}")
+        fc = [self.band_hz[0], self.band_hz[1], self.band_hz[1]] + [self.band_hz[2]] * 3
+        ba = [butter(2, f * 2 * self.dt) for f in fc]
+        self._b = np.array([b for b, _a in ba])
+        self._a = np.array([a for _b, a in ba])
+        self._first = np.array([1, 0, 0, 0, 0, 0], np.int64)    # the steering prediction starts at its value
+        self.u_names, self.y_names = list(_RAW_U), list(_RAW_Y)
+        self.output_names = list(SENSOR_CHANNELS)
+        self.output_units = ["rad", "rad", "rad/s", "rad/s", "m/s", "m/s", "m/s", "m/s"]
+        self.reset(1)
+
+    def __repr__(self) -> str:
+        return f"Rav4SensorChannels(dt={self.dt:g}, band_hz={self.band_hz}, coef={self.coef})"
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"pre": self.pre.to_dict(), "coef": self.coef, "dt": self.dt, "band_hz": self.band_hz}
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> Rav4SensorChannels:
+        return cls(Rav4Preprocessing.from_dict(d["pre"]), d["coef"], d["dt"], d["band_hz"])
+
+    def reset(self, runs: int = 1) -> None:
+        self._z = np.zeros((runs, 6, 2))
+        self._started = np.zeros(runs, np.int64)
+
+    @staticmethod
+    def regressors(pre: Rav4Preprocessing, u: np.ndarray, y: np.ndarray):
+        """Monitor channels of raw ``u`` (..., 3) and ``y`` (..., 6): ``steer, U, a_y, r, fd, rd``."""
+        uu, yy = pre.apply(u, y)
+        U = np.maximum(uu[..., 1], 1.0)                  # (standing still: no lateral kinematics)
+        return uu[..., 0], U, yy[..., 0], yy[..., 1], yy[..., 2], yy[..., 3]
+
+    def _compute(self, u: np.ndarray, y: np.ndarray) -> np.ndarray:
+        steer, U, ay, r, fd, rd = self.regressors(self.pre, u, y)
+        c = self.coef
+        raw = np.stack([c["steer"][0] * r / U + c["steer"][1] * r * U, r - c["ay"][0] * ay / U - c["ay"][1],
+                        r - c["rear"][0] * rd - c["rear"][1], fd - c["k_f"] * r, rd - c["k_r"] * r,
+                        fd - c["k_f"] / c["k_r"] * rd], axis=-1)
+        if not np.all(np.isfinite(raw)):
+            run, k, j = np.argwhere(~np.isfinite(raw))[0]
+            raise DataError(f"sensor-check channel {SENSOR_CHANNELS[j + 1]!r} is not finite at sample {k} "
+                            f"(run {run})")
+        lp = np.empty_like(raw)
+        if raw.shape[0] != self._z.shape[0]:
+            raise DataError(f"sample has {raw.shape[0]} runs; the generator was reset for {self._z.shape[0]}")
+        _biquads(np.ascontiguousarray(raw), self._b, self._a, self._first, self._z, self._started, lp)
+        lp[..., 0] += c["steer"][2]
+        return np.concatenate([steer[..., None], lp, U[..., None]], axis=-1)
+
+    def _step(self, u, y):
+        return self._compute(u[:, None], y[:, None])[:, 0]
+
+    def run(self, signals: Signals) -> Signals:
+        u, y = self._inputs(signals)
+        self.reset(signals.runs)
+        return Signals(signals.t, self._compute(u, y), self.output_names, self.output_units, check=False)
+
+
+def fit_sensor_channels(raw: Signals, half_s: float, pre: Rav4Preprocessing, rec: dict,
+                        band_hz=(1.0, 0.1, 3.0), settle: float = 5.0) -> Rav4SensorChannels:
+    """:class:`Rav4SensorChannels` with its coefficients fitted on ``t <= half_s`` of ``raw`` (least
+    squares on the low-passed signals, the first ``settle`` s left out)."""
+    dt = float(np.mean(np.diff(raw.t)))
+    probe = Rav4SensorChannels(pre, {"steer": [1.0, 0.0, 0.0], "ay": [0.0, 0.0], "rear": [0.0, 0.0],
+                                     "k_f": 0.0, "k_r": 0.0}, dt, band_hz)
+    u, y = probe._inputs(raw)
+    steer, U, ay, r, _fd, rd = (x[0] for x in probe.regressors(pre, u, y))
+    t = raw.t - raw.t[0]
+    cal = (t <= half_s) & (t >= settle)
+
+    def lp(x, f):
+        from scipy.signal import butter, lfilter, lfilter_zi
+
+        b, a = butter(2, f * 2 * dt)
+        return lfilter(b, a, x, zi=lfilter_zi(b, a) * x[0])[0]
+
+    f0, f1 = band_hz[0], band_hz[1]
+    X = np.column_stack([lp(r / U, f0), lp(r * U, f0), np.ones_like(U)])
+    cs = np.linalg.lstsq(X[cal], steer[cal], rcond=None)[0]
+    Xa = np.column_stack([lp(ay / U, f1), np.ones_like(U)])
+    ca = np.linalg.lstsq(Xa[cal], lp(r, f1)[cal], rcond=None)[0]
+    Xr = np.column_stack([lp(rd, f1), np.ones_like(U)])
+    cr = np.linalg.lstsq(Xr[cal], lp(r, f1)[cal], rcond=None)[0]
+    coef = {"steer": cs.tolist(), "ay": [float(ca[0]), float(ca[1])], "rear": [float(cr[0]), float(cr[1])],
+            "k_f": rec["k_f"], "k_r": rec["k_r"]}
+    return Rav4SensorChannels(pre, coef, dt, band_hz)
+
+
 # ---------------------------------------------------------------------------------- design
 #: Disturbance directions that can join every filter's nuisance set (state-equation columns of the
 #: linear model, per unit of disturbance): road bank (a lateral force m g sin(theta) at the centre of
@@ -524,11 +695,82 @@ def _inject_raw(raw: np.ndarray, t: np.ndarray, faults, pre: Rav4Preprocessing) 
     return v
 
 
-def inject(sig: Signals, faults: list[tuple[str, float, float]], pre: Rav4Preprocessing) -> Signals:
-    """Raw signals (:data:`RAW_CHANNELS`) with sensor biases ``(channel, magnitude, start_s)`` added.
+#: Sensors of the RAV4 log: raw channel -> the sensor it comes from.
+_RAW_SENSOR = {"steer_angle": "steering", "steer_fraction": "steering", "speed": "speed",
+               "yaw_rate_raw": "yaw_rate", "accel_y_raw": "lateral_accelerometer", "wheel_fl": "wheel_fl",
+               "wheel_fr": "wheel_fr", "wheel_rl": "wheel_rl", "wheel_rr": "wheel_rr"}
+#: Sensors each announced hypothesis names (a sensor detector's "<sensor>:<type>" names its sensor).
+HYPOTHESIS_SENSORS = {"steering": {"steering"}, "lateral_accelerometer": {"lateral_accelerometer"},
+                      "yaw_rate": {"yaw_rate"}, "front_wheel_diff": {"wheel_fl", "wheel_fr"},
+                      "rear_wheel_diff": {"wheel_rl", "wheel_rr"}}
+_SENSOR_FAULT = {"steering": "steering", "lateral_accelerometer": "lateral_accelerometer",
+                 "yaw_rate": "yaw_rate", "wheel_fl": "front_wheel_diff", "wheel_fr": "front_wheel_diff",
+                 "wheel_rl": "rear_wheel_diff",
+                 "wheel_rr": "rear_wheel_diff"}
 
-    ``channel`` is a monitor channel (:data:`CHANNELS`; ``steer`` in road-wheel rad, ``a_y``
-    left positive) or a wheel (``wheel_fl`` ...; a wheel-speed sensor fault, m/s). Broadcast over runs.
+
+def inject_channels(pre: Rav4Preprocessing) -> dict[str, list[tuple[str, float]]]:
+    """What a fault target may name on the RAV4 log -> the raw channels (SI) and the scale from the
+    target's units to theirs (see :func:`fdikit.faults.apply_faults`).
+
+    * a CAN signal, alone or with its message (``YAW_RATE`` or ``KINEMATICS.YAW_RATE``), in its
+      DBC unit (deg/s, deg, km/h, m/s^2 in the sensor's own sign);
+    * a CAN message (``STEER_ANGLE_SENSOR``, ``KINEMATICS``, ``WHEEL_SPEEDS``): every signal of it
+      (a frozen sensor freezes its whole message), each in its DBC unit;
+    * a raw channel (:data:`RAW_CHANNELS`, SI units);
+    * an internal monitor channel: ``steer`` (road-wheel rad: the hand-wheel angle moves ``i_s``
+      times as much), ``a_y`` (left positive: the opposite sign of the sensor when it is mounted
+      so), ``yaw_rate`` (rad/s), ``w_front_diff`` / ``w_rear_diff`` (the left wheel of the axle).
+      Gain and stuck act on the raw signal the channel is read from.
+    """
+    out: dict[str, list[tuple[str, float]]] = {}
+    for n, (src, scale, _u) in RAW_SOURCES.items():
+        msg, sig = src.split(".", 1)
+        out[sig] = [(n, scale)]
+        out[src] = [(n, scale)]
+        out.setdefault(msg + "*", []).append((n, scale))
+    for k in [k for k in out if k.endswith("*")]:
+        grp = out.pop(k)
+        out.setdefault(k[:-1], grp)
+    out.update({"steer": [("steer_angle", pre.i_s)], "a_y": [("accel_y_raw", pre.ay_sign)],
+                "yaw_rate": [("yaw_rate_raw", 1.0)], "w_front_diff": [("wheel_fl", 1.0)],
+                "w_rear_diff": [("wheel_rl", 1.0)]})
+    return out
+
+
+def injected_sensor(target: str, pre: Rav4Preprocessing | None = None) -> str:
+    """The sensor a fault target of :func:`inject_channels` names (``"yaw_rate"``, ``"wheel_fl"``, ...)."""
+    chans = inject_channels(pre or Rav4Preprocessing(1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0))
+    name = target.split(":", 1)[1] if target.startswith("sensor:") else target
+    raw = [c for c, _s in chans[name]] if name in chans else [name]
+    sensors = {_RAW_SENSOR.get(c, c) for c in raw}
+    return sensors.pop() if len(sensors) == 1 else "+".join(sorted(sensors))
+
+
+def _as_faults(faults) -> list:
+    from ...faults import Bias, Fault
+
+    out = []
+    for f in faults:
+        if isinstance(f, Fault):
+            out.append(f)
+        elif isinstance(f, tuple | list) and len(f) == 3:
+            out.append(Bias(str(f[0]), float(f[1]), start=float(f[2])))
+        else:
+            raise DataError(f"a fault must be a fdikit.faults.Fault or (channel, magnitude, start_s), "
+                            f"got {f!r}")
+    return out
+
+
+def inject(sig: Signals, faults, pre: Rav4Preprocessing) -> Signals:
+    """Raw signals (:data:`RAW_CHANNELS`) with sensor faults applied.
+
+    ``faults``: :class:`~fdikit.faults.Fault` objects of any type (bias, ramp/drift, gain, stuck,
+    intermittent, ...) whose target is a name of :func:`inject_channels` (CAN signal or message
+    in its own units, raw channel, internal channel) and whose times are seconds from the start
+    of the log (what :func:`parse_inject` returns), or ``(channel, magnitude, start_s)`` biases
+    (the historic form: ``channel`` a monitor channel of :data:`CHANNELS` or a wheel ``wheel_fl``
+    ...). Broadcast over runs.
 
     Examples
     --------
@@ -536,10 +778,100 @@ def inject(sig: Signals, faults: list[tuple[str, float, float]], pre: Rav4Prepro
     >>> s = Signals(np.arange(3.0), np.zeros((1, 3, 9)), RAW_CHANNELS)
     >>> inject(s, [("a_y", 0.5, 1.0)], pre)["accel_y_raw"].tolist()
     [[0.0, -0.5, -0.5]]
+    >>> inject(s, parse_inject("drift:YAW_RATE:0.5/s@1"), pre)["yaw_rate_raw"].round(6).tolist()   # deg/s
+    [[0.0, 0.0, 0.008727]]
     """
+    from ...faults import apply_faults
+
     if sig.names[:len(RAW_CHANNELS)] != RAW_CHANNELS:
         raise DataError(f"inject needs the raw channels {RAW_CHANNELS}, got {sig.names}")
-    return Signals(sig.t, _inject_raw(sig.values, sig.t, faults, pre), sig.names, check=False)
+    faults = _as_faults(faults)
+    if not faults:
+        return sig
+    t0 = float(sig.t[0])
+    rel = Signals(sig.t - t0, sig.values, sig.names, sig.units, check=False)
+    out = apply_faults(rel, faults, channels=inject_channels(pre))
+    return Signals(sig.t, out.values, sig.names, sig.units, check=False)
+
+
+#: Fault types of :func:`parse_inject`.
+INJECT_TYPES = ("bias", "drift", "gain", "stuck", "intermittent")
+_TYPE_ALIASES = {"bias": "bias", "offset": "bias", "step": "bias", "drift": "drift", "ramp": "drift",
+                 "gain": "gain", "scale": "gain", "stuck": "stuck", "frozen": "stuck",
+                 "intermittent": "intermittent"}
+_NUM = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
+_SPEC = re.compile(rf"\s*(?:(?P<type>[A-Za-z]+):)??(?P<ch>[A-Za-z_][A-Za-z0-9_.]*)"
+                   rf"(?::(?P<val>{_NUM})(?P<per>/s)?)?"
+                   rf"@(?P<start>{_NUM})(?:-(?P<end>{_NUM}))?(?P<opts>(?:;[A-Za-z_]+=[^;,]+)*)\s*")
+
+def parse_inject(spec: str) -> list:
+    """Faults of an ``--inject`` specification as :class:`~fdikit.faults.Fault` objects; ``"none"`` -> ``[]``.
+
+    Comma-separated ``[TYPE:]SIGNAL[:VALUE]@START[-END][;period=P;duty=D]``, times in s from the
+    start of the log. ``TYPE``: ``bias`` (default; ``offset``, ``step``), ``drift`` (``ramp``;
+    VALUE a slope per s, ``0.02/s``), ``gain`` (VALUE the factor), ``stuck`` (at its value at
+    START, or at VALUE), ``intermittent`` (a bias VALUE on for ``duty * period`` s of every
+    ``period`` s; default 2 s and 0.25). ``SIGNAL``: any name of :func:`inject_channels` (a CAN
+    signal or message in its DBC unit, a raw channel, an internal channel).
+
+    Examples
+    --------
+    >>> parse_inject("yaw_rate:0.03@40")
+    [Bias(target='yaw_rate', start=40.0, end=None, magnitude=0.03)]
+    >>> [type(f).__name__ for f in parse_inject("stuck:STEER_ANGLE_SENSOR@15,drift:YAW_RATE:0.02/s@10-30")]
+    ['Stuck', 'Ramp']
+    >>> parse_inject("intermittent:WHEEL_SPEED_RL:1.0@12;period=3")[0].period
+    3.0
+    """
+    from ...faults import Bias, Gain, Intermittent, Ramp, Stuck
+
+    spec = spec.strip()
+    if spec.lower() in ("", "none"):
+        return []
+    out = []
+    for part in spec.split(","):
+        m = _SPEC.fullmatch(part)
+        if not m:
+            raise DataError(f"bad fault spec {part!r}; use [TYPE:]SIGNAL[:VALUE]@START[-END], e.g. "
+                            f"yaw_rate:0.03@40, drift:YAW_RATE:0.02/s@10, stuck:STEER_ANGLE_SENSOR@15")
+        typ = m.group("type")
+        if typ is None:
+            kind = "bias"
+        elif typ.lower() in _TYPE_ALIASES:
+            kind = _TYPE_ALIASES[typ.lower()]
+        else:
+            raise DataError(f"fault spec {part!r}: unknown fault type {typ!r}; known: {list(INJECT_TYPES)}")
+        ch, val = m.group("ch"), m.group("val")
+        start = float(m.group("start"))
+        end = float(m.group("end")) if m.group("end") else None
+        opts = {}
+        for kv in filter(None, (m.group("opts") or "").split(";")):
+            k, v = kv.split("=", 1)
+            try:
+                opts[k.strip()] = float(v)
+            except ValueError:
+                raise DataError(f"fault spec {part!r}: option {k!r} needs a number, got {v!r}") from None
+        allowed = {"period", "duty"} if kind == "intermittent" else set()
+        if set(opts) - allowed:
+            raise DataError(f"fault spec {part!r}: options {sorted(set(opts) - allowed)} do not apply to "
+                            f"{kind} (allowed: {sorted(allowed) or 'none'})")
+        if m.group("per") and kind != "drift":
+            raise DataError(f"fault spec {part!r}: '/s' (a slope) is only for drift")
+        if val is None and kind != "stuck":
+            raise DataError(f"fault spec {part!r}: {kind} needs a value (SIGNAL:VALUE@START)")
+        v = None if val is None else float(val)
+        kw = {"start": start, "end": end}
+        if kind == "bias":
+            out.append(Bias(ch, v, **kw))
+        elif kind == "drift":
+            out.append(Ramp(ch, v, **kw))
+        elif kind == "gain":
+            out.append(Gain(ch, v, **kw))
+        elif kind == "stuck":
+            out.append(Stuck(ch, v, **kw))
+        else:
+            out.append(Intermittent(ch, v, period=opts.get("period", 2.0), duty=opts.get("duty", 0.25), **kw))
+    return out
 
 
 def _local_means(x: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -656,16 +988,82 @@ class Rav4Monitor:
         return self.artifacts["filter"].monitor_channels(self.raw)
 
 
-def decision_for(faults) -> Decision:
-    """The announcement rule: fault f announced when ``P:f:alarm`` rises (Hold output)."""
-    return Decision([f"P:{f}:alarm" for f in faults], level=0.5, names={f"P:{f}:alarm": f for f in faults})
+def decision_for(faults, sensor: dict[str, str] | None = None) -> Decision:
+    """The announcement rule: fault f announced when ``P:f:alarm`` rises (Hold output); each
+    sensor-detector statistic ``s`` of ``sensor`` (statistic -> announced name) when ``s:alarm`` rises."""
+    names = {f"P:{f}:alarm": f for f in faults}
+    names.update({f"{s}:alarm": n for s, n in (sensor or {}).items()})
+    return Decision(list(names), level=0.5, names=names)
+
+
+def design_sensor_detectors(nominal: Signals, dt: float, *, skip: int = 0, pfa: float = 1.0, per="hour",
+                            margin: float = 0.0, drift_window: float = 20.0, drift_min: float = 2.0,
+                            gain_window: float = 5.0, gain_min: float = 1.0, burst_window: float = 10.0,
+                            min_bursts: int = 2, burst_margin: float = 0.5, stuck_margin: float = 0.5,
+                            min_gain: float = 0.003, nominal_coef: dict | None = None):
+    """The RAV4 sensor-fault detectors, calibrated on nominal :class:`Rav4SensorChannels` outputs.
+
+    * stuck steering: :class:`~fdikit.detect.StuckDetector` on ``chk:steer`` against the steering
+      the yaw rate says (``chk:steer_expected``): frozen for longer than the longest frozen run of
+      the nominal data (the CAN angle legitimately repeats itself for up to 1.5 s on the highway)
+      while the expected steering moved more than it does in half of all windows of that length,
+      times ``1 + stuck_margin``;
+    * yaw-rate drift: :class:`~fdikit.detect.DriftDetector` with the signature (+1, +1) on
+      ``chk:yaw_vs_ay`` and ``chk:yaw_vs_rear`` (both must ramp: an accelerometer or rear-wheel
+      fault ramps one), ramps told from steps (``vs_step``);
+    * wheel-speed gain: :class:`~fdikit.detect.GainDetector` against the speed on
+      (``chk:front``, ``chk:rear``, ``chk:axles``) with the signature (1, 0, 1) for a front wheel
+      and (0, 1, -1) for a rear one, each with the other axle's and the yaw rate's (1, 1, 0) as
+      rivals, and an indifference zone ``min_gain`` (0.3 %: a rolling-radius difference from
+      tyre wear; ``nominal_coef``, the channels' coefficients, gives the axle ratio); the sign
+      names the wheel (+: the left wheel reads high, a left gain > 1; -: the right one);
+    * intermittent wheel speed: :class:`~fdikit.detect.IntermittentDetector` (signed) on
+      ``chk:front`` and ``chk:rear``: ``min_bursts`` episodes within ``burst_window`` s, each above
+      the largest nominal value times ``1 + burst_margin``.
+
+    The thresholds are for ``pfa`` false alarms per ``per`` (default one per hour): half a minute
+    of real data is far too short to show that rate, so :func:`~fdikit.detect.design_stuck` and
+    the others scale the nominal maximum by the growth of an exponential tail's maximum
+    (``ln n_target / ln n_eff``), times ``1 + margin``.
+
+    Returns
+    -------
+    (list of detectors, dict statistic -> announced name)
+    """
+    from ...detect import design_drift, design_gain, design_intermittent, design_stuck
+
+    n = lambda s: max(1, round(s / dt))  # noqa: E731
+    kw = dict(pfa=pfa, per=per, margin=margin, skip=skip)
+    stuck = design_stuck(nominal, "chk:steer", "chk:steer_expected", min_samples="auto", margin=stuck_margin,
+                         skip=skip)
+    drift = design_drift(nominal, ["chk:yaw_vs_ay", "chk:yaw_vs_rear"], n(drift_window), signature=(1, 1),
+                         name="chk:yaw_rate", min_length=n(drift_min), vs_step=True, **kw)
+    # residuals (front, rear, axles): front wheel (1, 0, 1), rear wheel (0, 1, -1), yaw rate (1, 1, 0)
+    sigs = {"front": (1, 0, 1), "rear": (0, 1, -1), "yaw": (1, 1, 0)}
+    kfr = abs(float(nominal_coef["k_f"] / nominal_coef["k_r"])) if nominal_coef else 1.0
+    scale = {"front": (1.0, 1.0, 1.0), "rear": (1.0, 1.0, kfr)}      # how much of the gain reaches each
+    gains = [design_gain(nominal, ["chk:front", "chk:rear", "chk:axles"], "chk:speed", n(gain_window),
+                         min_length=n(gain_min), signature=sigs[a], name=f"chk:{a}",
+                         rivals=[v for k, v in sigs.items() if k != a], min_gain=min_gain,
+                         gain_scale=scale[a], **kw) for a in ("front", "rear")]
+    burst = design_intermittent(nominal, ["chk:front", "chk:rear"], n(burst_window), min_bursts=min_bursts,
+                                gap=n(0.2), margin=burst_margin, signed=True, skip=skip)
+    names = {"chk:steer:stuck": "steering:stuck", "chk:yaw_rate:drift": "yaw_rate:drift",
+             "chk:front:gain+": "wheel_fl:gain", "chk:front:gain-": "wheel_fr:gain",
+             "chk:rear:gain+": "wheel_rl:gain", "chk:rear:gain-": "wheel_rr:gain",
+             "chk:front:intermittent+": "wheel_fl:intermittent",
+             "chk:front:intermittent-": "wheel_fr:intermittent",
+             "chk:rear:intermittent+": "wheel_rl:intermittent",
+             "chk:rear:intermittent-": "wheel_rr:intermittent"}
+    return [stuck, drift, *gains, burst], names
 
 
 @functools.lru_cache(maxsize=4)
 def rav4_monitor(path: str | None = None, *, rate: float = 50.0, q_weight: float = 1e-8, p: float = 1e-5,
                  inflate: float = 2.5, hold: int = 10, tau: float = 0.0, n_speeds: int = 4,
                  band_hz: float = 3.0, h0_window: float = 0.2, warmup: float = 2.0,
-                 level: float = 0.95, nuisance: tuple[str, ...] = (), settle: float = 0.04) -> Rav4Monitor:
+                 level: float = 0.95, nuisance: tuple[str, ...] = (), settle: float = 0.04,
+                 sensor_checks: bool = True, sensor_warmup: float = 5.0) -> Rav4Monitor:
     """Design and calibrate the RAV4 lateral monitor on the first half of the real minute.
 
     Parameters
@@ -700,6 +1098,14 @@ def rav4_monitor(path: str | None = None, *, rate: float = 50.0, q_weight: float
         Disturbances of :data:`DISTURBANCES` added to every filter's nuisance set (default none).
     settle : float
         Seconds after an injected onset left out of each fault's calibration samples.
+    sensor_checks : bool
+        Add the sensor-fault detectors (stuck steering, yaw-rate drift, wheel-speed gain and
+        intermittent wheel speed, :func:`design_sensor_detectors`) on :class:`Rav4SensorChannels`,
+        calibrated on the same half; their announcements name the sensor and the fault type
+        (``"steering:stuck"``, ``"yaw_rate:drift"``, ``"wheel_fl:gain"``, ``"wheel_rl:intermittent"``).
+    sensor_warmup : float
+        Seconds at the start (and after a gap) during which the sensor detectors take nothing in
+        (the low-pass transients of :class:`Rav4SensorChannels`; at least ``warmup``).
 
     Examples
     --------
@@ -749,13 +1155,28 @@ def rav4_monitor(path: str | None = None, *, rate: float = 50.0, q_weight: float
     faults = list(cal.groups)
     test = Rav4MHSSPT(feats.output_names, cal.densities, p=p, groups=cal.groups, warmup=round(warmup / dt))
     announce = Hold([f"P:{f}" for f in faults], level, Z=max(1, int(hold)), absolute=False)
-    dec = decision_for(faults)
-    mon = Monitor([gen], [feats, test, announce], dec)
+    gens, procs = [gen], [feats, test, announce]
+    arts_extra: dict[str, Any] = {}
+    sensor_names: dict[str, str] = {}
+    if sensor_checks:
+        chk = fit_sensor_channels(raw, half_s, pre, rec)
+        dets, sensor_names = design_sensor_detectors(
+            chk.run(Signals(raw.t[cal_t], raw.values[:, cal_t], raw.names, check=False)), dt,
+            skip=round(max(warmup, sensor_warmup) / dt), nominal_coef=chk.coef)
+        sensor_hold = Hold([n for d in dets for n in d.output_names if n in sensor_names], 1.0,
+                           Z=max(1, int(hold)), absolute=False)
+        gens.append(chk)
+        procs.extend([*dets, sensor_hold])
+        arts_extra = {"sensor_channels": chk, **{f"sensor_{i}": d for i, d in enumerate(dets)},
+                      "sensor_hold": sensor_hold}
+        rec["sensor_checks"] = {"coef": chk.coef, "detectors": [repr(d) for d in dets]}
+    dec = decision_for(faults, sensor_names)
+    mon = Monitor(gens, procs, dec)
     rec["filter_methods"] = {f"set{s}/{t_}": d.info.get("method") for s, ds in designs.items()
                              for t_, d in ds.items()}
     rec["calibration"] = {h: {"low": d.low.round(4).tolist(), "high": d.high.round(4).tolist(),
                               "std": d.std.round(4).tolist()} for h, d in cal.densities.items()}
-    arts = {"filter": gen, "features": feats, "mhsspt": test, "hold": announce}
+    arts = {"filter": gen, "features": feats, "mhsspt": test, "hold": announce, **arts_extra}
     return Rav4Monitor(mon, arts, dec, faults, md, designs, raw, rec)
 
 
@@ -791,37 +1212,37 @@ def design(params: dict | None = None) -> dict[str, Any]:
     return dict(rav4_monitor(data, **kw).artifacts)
 
 
-def parse_inject(spec: str) -> list[tuple[str, float, float]]:
-    """``"yaw_rate:0.03@40,wheel_rl:0.6@45"`` -> ``[("yaw_rate", 0.03, 40.0), ("wheel_rl", 0.6, 45.0)]``;
-    ``"none"`` -> ``[]``.
+def hypothesis_sensors(hypothesis: str) -> set[str]:
+    """The sensors an announced hypothesis names: ``"rear_wheel_diff"`` -> ``{"wheel_rl", "wheel_rr"}``,
+    ``"wheel_fl:gain"`` -> ``{"wheel_fl"}``.
 
     Examples
     --------
-    >>> parse_inject("yaw_rate:0.03@40")
-    [('yaw_rate', 0.03, 40.0)]
+    >>> sorted(hypothesis_sensors("front_wheel_diff")), hypothesis_sensors("yaw_rate:drift")
+    (['wheel_fl', 'wheel_fr'], {'yaw_rate'})
     """
-    spec = spec.strip()
-    if spec.lower() in ("", "none"):
-        return []
-    out = []
-    for part in spec.split(","):
-        m = re.fullmatch(r"\s*([A-Za-z_]+):([-+0-9.eE]+)@([0-9.eE+]+)\s*", part)
-        if not m:
-            raise DataError(f"bad fault spec {part!r}; use CHANNEL:MAGNITUDE@START_S, e.g. yaw_rate:0.03@40")
-        out.append((m.group(1), float(m.group(2)), float(m.group(3))))
-    return out
+    if hypothesis in HYPOTHESIS_SENSORS:
+        return set(HYPOTHESIS_SENSORS[hypothesis])
+    return {hypothesis.split(":", 1)[0]}
 
 
 def run_rav4_log(path: str | None = None, inject_spec: str = "none", **design_kw) -> dict[str, Any]:
-    """Run the RAV4 lateral monitor on the real minute with the faults of ``inject_spec``.
+    """Run the RAV4 lateral monitor on the real minute with the faults of ``inject_spec``
+    (:func:`parse_inject`).
 
     Returns
     -------
     dict
-        Announcements (time, fault), detection delay and isolated fault of the first injected
-        fault, peak probability of every fault after the warm-up and the largest probability of
-        a wrong hypothesis (any fault before the injection; any other fault after it), split of
-        the data.
+        ``announcements`` (time, fault); for the first injected fault its sensor
+        (``expected_sensor``), the MHSSPT hypothesis of that sensor (``expected``), the first
+        announcement after the onset (``isolated``) and whether it names that sensor
+        (``isolated_ok``), ``detection_delay_s`` (first sample from the onset at which a test of
+        that sensor is on: an MHSSPT probability >= 0.95 or a sensor detector's statistic >= 1),
+        ``announcement_delay_s`` (first announcement naming the sensor), ``false_announcements``
+        (before the onset, or naming another sensor); ``peak_probability`` of every fault and
+        ``max_wrong_probability`` (a wrong hypothesis: any fault before the onset, any other
+        sensor's after it) over the whole log, and the same statistics for each half
+        separately: ``calibration`` (what the design saw) and ``held_out``.
 
     Examples
     --------
@@ -837,32 +1258,62 @@ def run_rav4_log(path: str | None = None, inject_spec: str = "none", **design_kw
     out = mon.run(sig)
     t = sig.t - sig.t[0]
     probs = {f: out.statistics[f"P:{f}"][0] for f in mon.faults}
+    # every test that announces: (hypothesis, statistic, level)
+    dec = mon.decision
+    tests = [(f, probs[f], 0.95) for f in mon.faults]
+    for ch in dec.alarm_channels:
+        s = ch[:-len(":alarm")]
+        if not s.startswith("P:") and s in out.statistics.names:
+            tests.append((dec.names.get(ch, ch), out.statistics[s][0], 1.0))
     res: dict[str, Any] = {
         "data": str(path or default_data_path()), "seconds": float(t[-1]),
         "calibrated_on_s": [0.0, mon.record["half_s"]], "inject": inject_spec,
+        "faults": [repr(f) for f in faults],
         "announcements": [{"t": round(e.t, 3), "fault": e.hypothesis} for e in out.events],
         "peak_probability": {f: round(float(p.max()), 5) for f, p in probs.items()},
         "speed_mean_m_s": round(mon.record["U_mean"], 2), "filters": mon.record["filter_methods"],
         "band_hz": mon.record["band_hz"],
     }
-    t0 = faults[0][2] if faults else np.inf
-    expect = None
+    t0 = faults[0].start if faults else np.inf
+    sensor = injected_sensor(faults[0].target, pre) if faults else None
+    ok = lambda h: sensor is not None and sensor in hypothesis_sensors(h)  # noqa: E731
+    ev_t = np.array([e.t - sig.t[0] for e in out.events])
+
+    def wrong_in(mask):
+        w = 0.0
+        for f, p in probs.items():
+            mm = mask & ((t < t0) | (not ok(f)))
+            w = max(w, float(p[mm].max()) if mm.any() else 0.0)
+        return w
+
+    def stats(mask, lo, hi):
+        inside = [a for a, te in zip(res["announcements"], ev_t) if lo <= te <= hi]
+        sens = {h: round(float(s[mask].max()), 4) for h, s, lev in tests if lev == 1.0 and mask.any()}
+        return {"span_s": [round(lo, 2), round(hi, 2)], "max_wrong_probability": wrong_in(mask),
+                "peak_probability": ({f: round(float(p[mask].max()), 5) for f, p in probs.items()}
+                                     if mask.any() else {}),
+                "peak_sensor_statistic": sens, "announcements": len(inside),
+                "false_announcements": [a for a, te in zip(res["announcements"], ev_t)
+                                        if lo <= te <= hi and (te < t0 or not ok(a["fault"]))]}
+
+    half = mon.record["half_s"]
+    warm = t >= 0.0
+    res["max_wrong_probability"] = wrong_in(warm)
+    res["calibration"] = stats(t <= half, 0.0, half)
+    res["held_out"] = stats(t > half, half, float(t[-1]))
+    res["false_announcements"] = [a for a, te in zip(res["announcements"], ev_t)
+                                  if te < t0 or not ok(a["fault"])]
     if faults:
-        ch = faults[0][0]
-        key = _WHEEL.get(ch, (ch, 1))[0]
-        expect = next(n for n, (c, _m) in RAV4_FAULTS.items() if c == key)
-    wrong = 0.0
-    for f, p in probs.items():
-        m = (t < t0) | (f != expect)
-        wrong = max(wrong, float(p[m].max()) if m.any() else 0.0)
-    res["max_wrong_probability"] = wrong
-    if faults:
-        ev = [e for e in out.events if e.t - sig.t[0] >= t0]
-        k = np.flatnonzero((t >= t0) & (probs[expect] >= 0.95))
-        res.update(expected=expect, isolated=ev[0].hypothesis if ev else None,
+        after = [e for e, te in zip(out.events, ev_t) if te >= t0]
+        on = np.zeros(t.size, bool)
+        for h, s, lev in tests:
+            if ok(h):
+                on |= s >= lev
+        k = np.flatnonzero((t >= t0) & on)
+        good = [te for e, te in zip(out.events, ev_t) if te >= t0 and ok(e.hypothesis)]
+        res.update(expected_sensor=sensor, expected=_SENSOR_FAULT.get(sensor),
+                   isolated=after[0].hypothesis if after else None,
+                   isolated_ok=bool(after) and ok(after[0].hypothesis),
                    detection_delay_s=round(float(t[k[0]] - t0), 3) if k.size else None,
-                   false_announcements=[a for a in res["announcements"]
-                                        if a["t"] < t0 or a["fault"] != expect])
-    else:
-        res["false_announcements"] = res["announcements"]
+                   announcement_delay_s=round(float(good[0] - t0), 3) if good else None)
     return res

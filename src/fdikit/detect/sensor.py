@@ -1,0 +1,1281 @@
+"""Detectors for the sensor faults that real logs hold: stuck, drifting, scaled and intermittent.
+
+Each is a :class:`~fdikit.base.stage.ResidualProcessor` whose output is its test statistic
+*divided by its threshold*: the detector alarms where an output is ``>= 1`` (chain a
+:class:`~fdikit.detect.Hold` with threshold 1 and ``absolute=False`` for a hold of ``Z`` samples).
+A ``design_*`` function builds each one from nominal (fault-free) data: the nominal levels
+(mean, variance) are estimated and the threshold is the level of the statistic on those data for
+a target false-alarm rate (:func:`~fdikit.detect.design_threshold`; with ``pfa = 0``, the
+default, just above the largest nominal value, times ``1 + margin``: what a short real record
+can honestly support).
+
+=======================  ==========================================================================
+:class:`StuckDetector`   the measured signal has not moved (by more than ``tol``) since sample j,
+                         while the model-expected signal moved by ``g = (max - min) / scale`` over
+                         the same samples (without an expected signal: ``g`` = samples flat)
+:class:`DriftDetector`   GLR of a ramp ``s (i - j + 1)`` starting from zero at an unknown sample
+                         j in the window: ``g = max_j (sum tau_i r_i)^2 / (sigma^2 sum tau_i^2)``
+:class:`GainDetector`    GLR of a gain: the residual proportional to the signal, ``r = theta s``
+                         from sample j: ``g = max_j (sum r_i s_i)^2 / (sigma^2 sum s_i^2)``
+:class:`IntermittentDetector`  bursts that come and go: episodes of ``|r - mu0| > level``
+                         (ended once below ``release`` for ``gap`` samples) counted over the last
+                         ``W`` samples; ``g = count / min_bursts``
+=======================  ==========================================================================
+
+Batch (:meth:`run`) and streaming (:meth:`reset` + :meth:`step`) run the same compiled kernel on
+the same state, so they give identical numbers; the state is declared in ``_state_attrs``
+(checkpoint and restore), and a non-finite sample is refused before any state changes.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+from numba import njit
+
+from ..base.stage import ResidualProcessor
+from ..errors import DataError
+from ..signals import Signals
+
+__all__ = [
+    "DriftDetector",
+    "GainDetector",
+    "IntermittentDetector",
+    "StuckDetector",
+    "design_drift",
+    "design_gain",
+    "design_intermittent",
+    "design_stuck",
+]
+
+
+# ---------------------------------------------------------------------------------- kernels
+@njit(cache=True)
+def _stuck_kernel(x, e, tol, inv_scale, has_e, nmin, out, anchor, pmin, pmax, n, started):  # pragma: no cover
+    """x, e (R, T) measured and expected; state (R,) arrays; out (R, T)."""
+    R, T = x.shape
+    for r in range(R):
+        for k in range(T):
+            v = x[r, k]
+            if started[r] == 0 or abs(v - anchor[r]) > tol:
+                started[r] = 1
+                anchor[r] = v
+                pmin[r] = e[r, k]
+                pmax[r] = e[r, k]
+                n[r] = 0
+            else:
+                n[r] += 1
+                if e[r, k] < pmin[r]:
+                    pmin[r] = e[r, k]
+                if e[r, k] > pmax[r]:
+                    pmax[r] = e[r, k]
+            if has_e:
+                out[r, k] = (pmax[r] - pmin[r]) * inv_scale if n[r] >= nmin else 0.0
+            else:
+                out[r, k] = n[r] * inv_scale
+
+
+@njit(cache=True)
+def _ramp_kernel(x, mu0, W, Lmin, vs_step, out_p, out_m, buf, pos, cnt):  # pragma: no cover
+    """One-sided ramp GLRs (unscaled): x (R, T, C) -> out_p, out_m (R, T, C); ring buffer state.
+    With ``vs_step`` the statistic is 0 unless the best ramp explains the window better than the
+    best step (``max_j ramp GLR > max_j step GLR``)."""
+    R, T, C = x.shape
+    for r in range(R):
+        for c in range(C):
+            b = buf[r, c]
+            for k in range(T):
+                p = pos[r, c]
+                b[p] = x[r, k, c] - mu0[c]
+                p = (p + 1) % W
+                pos[r, c] = p
+                if cnt[r, c] < W:
+                    cnt[r, c] += 1
+                n = cnt[r, c]
+                s0 = 0.0
+                s1 = 0.0
+                gp = 0.0
+                gm = 0.0
+                gs = 0.0
+                i = p
+                for L in range(1, n + 1):
+                    i -= 1
+                    if i < 0:
+                        i += W
+                    s0 += b[i]
+                    s1 += s0  # sum over the last L samples of tau * r, tau = 1 .. L
+                    vs = s0 * s0 / L  # the step alternative: any length
+                    if vs > gs:
+                        gs = vs
+                    if L >= Lmin:
+                        den = L * (L + 1.0) * (2.0 * L + 1.0) / 6.0
+                        v = s1 * s1 / den
+                        if s1 > 0.0:
+                            if v > gp:
+                                gp = v
+                        elif v > gm:
+                            gm = v
+                if vs_step:  # a step from some sample explains the window better: not a drift
+                    if gp <= gs:
+                        gp = 0.0
+                    if gm <= gs:
+                        gm = 0.0
+                out_p[r, k, c] = gp
+                out_m[r, k, c] = gm
+
+
+@njit(cache=True)
+def _gain_kernel(x, s, mu0, W, Lmin, mg, gsc, out_p, out_m, est, bx, bs, pos, cnt):  # pragma: no cover
+    """One-sided gain GLRs (unscaled): residuals x (R, T, C) against the signal s (R, T) -> out_p,
+    out_m, est (R, T, C); ring buffers bx (R, C, W), bs (R, W)."""
+    R, T, C = x.shape
+    for r in range(R):
+        for k in range(T):
+            p = pos[r]
+            bs[r, p] = s[r, k]
+            for c in range(C):
+                bx[r, c, p] = x[r, k, c] - mu0[c]
+            p = (p + 1) % W
+            pos[r] = p
+            if cnt[r] < W:
+                cnt[r] += 1
+            n = cnt[r]
+            for c in range(C):
+                a = 0.0
+                bb = 0.0
+                g = 0.0
+                gm = 0.0
+                best = -1.0
+                th = 0.0
+                i = p
+                for L in range(1, n + 1):
+                    i -= 1
+                    if i < 0:
+                        i += W
+                    a += bx[r, c, i] * bs[r, i]
+                    bb += bs[r, i] * bs[r, i]
+                    if L >= Lmin and bb > 0.0:
+                        v = a * a / bb
+                        if v > best:
+                            best = v
+                            th = a / bb
+                        if mg > 0.0 and abs(a) < mg * gsc[c] * bb:
+                            continue  # |theta| below the indifference zone: not a fault
+                        if a > 0.0:
+                            if v > g:
+                                g = v
+                        elif v > gm:
+                            gm = v
+                out_p[r, k, c] = g
+                out_m[r, k, c] = gm
+                est[r, k, c] = th
+
+
+@njit(cache=True)
+def _burst_kernel(x, mu0, side, level, release, gap, W, out, on, quiet, buf, pos, cnt):  # pragma: no cover
+    """Burst counts: x (R, T, C) -> out (R, T, C) onsets within the last W samples (``side`` 0:
+    |r - mu0|; +-1: the signed deviation)."""
+    R, T, C = x.shape
+    for r in range(R):
+        for c in range(C):
+            for k in range(T):
+                d = x[r, k, c] - mu0[c]
+                a = abs(d) if side[c] == 0 else side[c] * d
+                onset = 0
+                if on[r, c] == 0:
+                    if a > level[c]:
+                        on[r, c] = 1
+                        quiet[r, c] = 0
+                        onset = 1
+                else:
+                    if a < release[c]:
+                        quiet[r, c] += 1
+                        if quiet[r, c] >= gap:
+                            on[r, c] = 0
+                    else:
+                        quiet[r, c] = 0
+                p = pos[r, c]
+                cnt[r, c] += onset - buf[r, c, p]
+                buf[r, c, p] = onset
+                pos[r, c] = (p + 1) % W
+                out[r, k, c] = cnt[r, c]
+
+
+# ---------------------------------------------------------------------------------- helpers
+def _per_channel(v: Any, c: int, what: str, names: Sequence[str], positive: bool = False) -> np.ndarray:
+    a = np.asarray(v, float)
+    if a.ndim > 1 or (a.ndim == 1 and a.size != c):
+        raise DataError(
+            f"{what} must be a scalar or one value per channel {list(names)}, got shape {a.shape}"
+        )
+    a = np.broadcast_to(a, (c,)).copy()
+    if not np.all(np.isfinite(a)):
+        raise DataError(f"{what} must be finite, got {a.tolist()}")
+    if positive and np.any(a <= 0):
+        bad = names[int(np.argmax(a <= 0))]
+        raise DataError(f"{what} must be positive; channel {bad!r} has {a[int(np.argmax(a <= 0))]}")
+    return a
+
+
+def _window(W: Any, what: str) -> int:
+    if isinstance(W, bool) or int(W) != W or W < 1:
+        raise DataError(f"{what} must be an integer >= 1, got {W!r}")
+    return int(W)
+
+
+class _SensorDetector(ResidualProcessor):
+    """Shared plumbing: checked samples, run length bookkeeping, repr."""
+
+    _what = "detector"
+
+    def _check(self, x: np.ndarray, k0: int) -> None:
+        bad = ~np.isfinite(x)
+        if bad.any():
+            run, k, c = np.argwhere(bad)[0]
+            raise DataError(
+                f"{type(self).__name__} input {self.input_names[c]!r} is not finite at sample "
+                f"{k0 + k} (run {run})"
+            )
+
+    def _runs(self, r: np.ndarray) -> None:
+        if r.shape[0] != self._R:
+            raise DataError(
+                f"sample has {r.shape[0]} runs; the {type(self).__name__} was reset for {self._R}"
+            )
+
+    def _set_warmup(self, warmup: Any) -> None:
+        if isinstance(warmup, bool) or int(warmup) != warmup or warmup < 0:
+            raise DataError(f"{type(self).__name__} warmup must be an integer >= 0 (samples), got {warmup!r}")
+        self.warmup = int(warmup)
+
+    def run(self, signals: Signals) -> Signals:
+        x = signals.values[:, :, signals.index(self.input_names)]
+        self._check(x, 0)
+        self.reset(signals.runs)
+        T = signals.n_samples
+        w = min(self.warmup, T)
+        out = np.zeros((signals.runs, T, len(self.output_names)))
+        if T > w:
+            out[:, w:] = self._compute(np.ascontiguousarray(x[:, w:]))
+        self._k = T
+        return Signals(signals.t, out, self.output_names, check=False)
+
+    def _step(self, r: np.ndarray) -> np.ndarray:
+        self._runs(r)
+        self._check(r[:, None, :], self._k)
+        if self._k < self.warmup:  # warm-up: the sample is not taken in, nothing is tested
+            self._k += 1
+            return np.zeros((r.shape[0], len(self.output_names)))
+        out = self._compute(np.ascontiguousarray(r[:, None, :]))
+        self._k += 1
+        return out[:, 0]
+
+    def resume(self, n_held: int) -> None:
+        """After ``n_held`` held (invalid) samples: start again, with the warm-up (the window would
+        span the gap)."""
+        self.reset(self._R)
+
+    def __repr__(self) -> str:
+        args = ", ".join(f"{k}={v!r}" for k, v in self._repr_items())
+        return f"{type(self).__name__}({args})"
+
+    @classmethod
+    def from_dict(cls, d: dict) -> Any:
+        return cls(**d)
+
+
+# ---------------------------------------------------------------------------------- stuck
+class StuckDetector(_SensorDetector):
+    """A measured signal that stopped moving while the model says it should move.
+
+    A *flat run* starts whenever the measured signal moves by more than ``tol`` from the value at
+    the run's start (the anchor). Over the current flat run the statistic is the range of the
+    expected signal, ``g = (max e - min e) / scale``: how far the model (another sensor, a
+    prediction of this one) moved while the sensor did not. A quantised signal legitimately
+    repeats its value when nothing happens (a steering wheel held straight), and then the expected
+    signal does not move either, so ``g`` stays small. Without an expected signal the statistic is
+    the number of samples the signal has been flat (the "recent past" test: a signal that never
+    stays frozen this long in nominal data).
+
+    Parameters
+    ----------
+    measured : str
+        The measured channel.
+    expected : str, optional
+        A channel in the same units that the model expects the measurement to follow (low-pass it
+        if it is noisy: its range over the flat run is the evidence).
+    tol : float
+        Largest change of the measurement still counted as "not moved" (its quantisation step, or
+        0 for exact repetition), in its units.
+    scale : float
+        Unit of ``g``: the expected signal's range (units of the signal), or samples without one.
+    threshold : float
+        Threshold of ``g`` (in units of ``scale``); the output is ``g / threshold``.
+    min_samples : int
+        With an expected signal: ``g`` counts only once the flat run has lasted this many
+        samples (longer than the signal is ever frozen in nominal data; 0: always).
+    warmup : int
+        Samples after a reset (and after a gap, :meth:`resume`) that are not taken in: the output
+        is 0 there (filter transients at the start of a log).
+
+    Outputs ``"<measured>:stuck"`` (alarm at >= 1).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from fdikit import Signals
+    >>> t = np.arange(8.0)
+    >>> x = [0, 1, 2, 3, 3, 3, 3, 3]                       # frozen from sample 3
+    >>> e = [0, 1, 2, 3, 4, 5, 6, 7]                       # ... the model says it kept rising
+    >>> d = StuckDetector("x", "e", threshold=2.0)
+    >>> d.run(Signals(t, np.c_[x, e], ["x", "e"]))["x:stuck"].tolist()
+    [[0.0, 0.0, 0.0, 0.0, 0.5, 1.0, 1.5, 2.0]]
+    """
+
+    _state_attrs = ("_anchor", "_pmin", "_pmax", "_n", "_started", "_k", "_R")
+
+    def __init__(
+        self,
+        measured: str,
+        expected: str | None = None,
+        *,
+        tol: float = 0.0,
+        scale: float = 1.0,
+        threshold: float = 1.0,
+        min_samples: int = 0,
+        warmup: int = 0,
+    ):
+        self._set_warmup(warmup)
+        if isinstance(min_samples, bool) or int(min_samples) != min_samples or min_samples < 0:
+            raise DataError(f"StuckDetector min_samples must be an integer >= 0, got {min_samples!r}")
+        self.min_samples = int(min_samples)
+        self.measured = str(measured)
+        self.expected = None if expected is None else str(expected)
+        self.input_names = [self.measured] + ([self.expected] if self.expected is not None else [])
+        if self.expected == self.measured:
+            raise DataError(
+                f"StuckDetector: the expected channel must differ from the measured one ({self.measured!r})"
+            )
+        for name, v in (("tol", tol), ("scale", scale), ("threshold", threshold)):
+            if not np.isfinite(v) or v < 0 or (name != "tol" and v == 0):
+                raise DataError(
+                    f"StuckDetector {name} must be finite and {'>= 0' if name == 'tol' else '> 0'}, got {v}"
+                )
+        self.tol, self.scale, self.threshold = float(tol), float(scale), float(threshold)
+        self.output_names = [f"{self.measured}:stuck"]
+        self.reset(1)
+
+    def _repr_items(self):
+        return [
+            ("measured", self.measured),
+            ("expected", self.expected),
+            ("tol", self.tol),
+            ("scale", self.scale),
+            ("threshold", self.threshold),
+            ("min_samples", self.min_samples),
+            ("warmup", self.warmup),
+        ]
+
+    def to_dict(self) -> dict:
+        """Configuration as plain data (see :mod:`fdikit.base.artifacts`)."""
+        return dict(self._repr_items())
+
+    def reset(self, runs: int = 1) -> None:
+        self._R = int(runs)
+        self._anchor = np.zeros(runs)
+        self._pmin = np.zeros(runs)
+        self._pmax = np.zeros(runs)
+        self._n = np.zeros(runs, np.int64)
+        self._started = np.zeros(runs, np.int64)
+        self._k = 0
+
+    def _compute(self, x: np.ndarray) -> np.ndarray:
+        R, T, _ = x.shape
+        m = np.ascontiguousarray(x[:, :, 0])
+        e = np.ascontiguousarray(x[:, :, 1]) if self.expected is not None else m
+        out = np.empty((R, T))
+        _stuck_kernel(
+            m,
+            e,
+            self.tol,
+            1.0 / (self.scale * self.threshold),
+            self.expected is not None,
+            self.min_samples,
+            out,
+            self._anchor,
+            self._pmin,
+            self._pmax,
+            self._n,
+            self._started,
+        )
+        return out[:, :, None]
+
+
+# ---------------------------------------------------------------------------------- drift
+class DriftDetector(_SensorDetector):
+    """GLR of a drift: a ramp that grows from zero at an unknown sample in a moving window.
+
+    For each residual channel, with ``r_i`` the residual minus its nominal mean ``mu0`` and the
+    ramp ``s tau_i``, ``tau_i = i - j + 1`` from a change at sample ``j``::
+
+        g_k = max_{k-W+1 <= j <= k-Lmin+1} (sum_{i=j..k} tau_i r_i)^2 / (sigma^2 sum tau_i^2)
+
+    (the maximum over the slope is in closed form, ``s = sum tau r / sum tau^2``). The sums are
+    accumulated backwards from the newest sample, O(W) per sample, nothing carried over between
+    samples but the window itself. A one-sided statistic is kept per sign of the slope.
+
+    ``signature`` turns the per-channel tests into one test of a fault direction: a fault that
+    ramps every channel with ``signature != 0`` with the sign of its entry (a drifting yaw-rate
+    sensor ramps both the residual against the wheel speeds and the one against the
+    accelerometer; a fault of one of those sensors ramps only one of them). The combined
+    statistic is the weakest of the channels' one-sided statistics in the signature's direction
+    (or in the opposite one, whichever is larger), so every channel of the signature must see
+    the ramp.
+
+    Parameters
+    ----------
+    inputs : sequence of str
+        Residual channels.
+    W : int
+        Window (samples): the longest ramp considered.
+    mu0, sigma2 : float or sequence
+        Nominal mean and variance of each residual.
+    threshold : float or sequence
+        Threshold of ``g`` (per channel; one value for the combined test with ``signature``).
+    min_length : int
+        Shortest ramp considered (samples): a one-sample "ramp" is a spike.
+    signature : sequence of {-1, 0, 1}, optional
+        The fault direction; with it the detector has ONE output.
+    name : str, optional
+        Name of the combined output (default the first input).
+    vs_step : bool
+        The statistic is 0 unless the best ramp explains the window better than the best step
+        (a change of the mean, the GLR of :class:`~fdikit.detect.GLRT`) over the same candidate
+        changes: a drift is told from a bias (for a pure step the best ramp reaches 8/9 of the
+        step's GLR, for a pure ramp the best step 8/9 of the ramp's), at some loss of power.
+    warmup : int
+        Samples after a reset (and after a gap, :meth:`resume`) that are not taken in: the output
+        is 0 there (filter transients at the start of a log).
+
+    Outputs ``"<input>:drift"`` per input, or ``"<name>:drift"`` with a signature (alarm at >= 1).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from fdikit import Signals
+    >>> t = np.arange(40.0)
+    >>> r = np.where(t >= 20, 0.1 * (t - 19), 0.0)         # a ramp from sample 20
+    >>> d = DriftDetector(["r"], W=20, sigma2=0.01, threshold=50.0)
+    >>> g = d.run(Signals(t, r, ["r"]))["r:drift"][0]
+    >>> int(np.argmax(g >= 1))                             # s^2 L(L+1)(2L+1)/6 / sigma^2 >= 50
+    24
+    """
+
+    _state_attrs = ("_buf", "_pos", "_cnt", "_k", "_R")
+
+    def __init__(
+        self,
+        inputs: Sequence[str],
+        W: int = 500,
+        mu0=0.0,
+        sigma2=1.0,
+        threshold=1.0,
+        *,
+        min_length: int = 1,
+        signature: Sequence[float] | None = None,
+        name: str | None = None,
+        vs_step: bool = False,
+        warmup: int = 0,
+    ):
+        self._set_warmup(warmup)
+        self.input_names = [str(s) for s in ([inputs] if isinstance(inputs, str) else inputs)]
+        self.vs_step = bool(vs_step)
+        c = len(self.input_names)
+        if c == 0:
+            raise DataError("DriftDetector needs at least one input channel")
+        self.W = _window(W, "DriftDetector window W")
+        self.min_length = _window(min_length, "DriftDetector min_length")
+        if self.min_length > self.W:
+            raise DataError(f"DriftDetector min_length ({self.min_length}) must be <= W ({self.W})")
+        self.mu0 = _per_channel(mu0, c, "DriftDetector mu0", self.input_names)
+        self.sigma2 = _per_channel(sigma2, c, "DriftDetector sigma2", self.input_names, positive=True)
+        if signature is not None:
+            sg = np.sign(np.asarray(signature, float))
+            if sg.shape != (c,) or not np.any(sg != 0):
+                raise DataError(
+                    f"DriftDetector signature must have one entry -1/0/+1 per input "
+                    f"{self.input_names} and at least one non-zero, got {list(signature)}"
+                )
+            self.signature = sg
+            self.threshold = _per_channel(
+                threshold, 1, "DriftDetector threshold", ["combined"], positive=True
+            )
+            self.name = str(name) if name is not None else self.input_names[0]
+            self.output_names = [f"{self.name}:drift"]
+        else:
+            self.signature = None
+            self.threshold = _per_channel(
+                threshold, c, "DriftDetector threshold", self.input_names, positive=True
+            )
+            self.name = name
+            self.output_names = [f"{s}:drift" for s in self.input_names]
+        self.reset(1)
+
+    def _repr_items(self):
+        return [
+            ("inputs", list(self.input_names)),
+            ("W", self.W),
+            ("mu0", self.mu0.tolist()),
+            ("sigma2", self.sigma2.tolist()),
+            ("threshold", self.threshold.tolist()),
+            ("min_length", self.min_length),
+            ("signature", None if self.signature is None else self.signature.tolist()),
+            ("name", self.name),
+            ("vs_step", self.vs_step),
+            ("warmup", self.warmup),
+        ]
+
+    def to_dict(self) -> dict:
+        """Configuration as plain data (see :mod:`fdikit.base.artifacts`)."""
+        return dict(self._repr_items())
+
+    def reset(self, runs: int = 1) -> None:
+        c = len(self.input_names)
+        self._R = int(runs)
+        self._buf = np.zeros((runs, c, self.W))
+        self._pos = np.zeros((runs, c), np.int64)
+        self._cnt = np.zeros((runs, c), np.int64)
+        self._k = 0
+
+    def one_sided(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Advance over ``x`` (runs, T, C): the scaled one-sided statistics ``(g_plus, g_minus)``."""
+        R, T, C = x.shape
+        gp, gm = np.empty((R, T, C)), np.empty((R, T, C))
+        _ramp_kernel(
+            x, self.mu0, self.W, self.min_length, self.vs_step, gp, gm, self._buf, self._pos, self._cnt
+        )
+        return gp / self.sigma2, gm / self.sigma2
+
+    def _compute(self, x: np.ndarray) -> np.ndarray:
+        gp, gm = self.one_sided(x)
+        if self.signature is None:
+            return np.maximum(gp, gm) / self.threshold
+        use = self.signature != 0
+        pos = self.signature[use] > 0
+        up = np.where(pos, gp[..., use], gm[..., use]).min(axis=2)  # the signature's direction
+        down = np.where(pos, gm[..., use], gp[..., use]).min(axis=2)  # the opposite one
+        return (np.maximum(up, down) / self.threshold[0])[:, :, None]
+
+
+# ---------------------------------------------------------------------------------- gain
+class GainDetector(_SensorDetector):
+    """GLR of a gain (scale-factor) fault: residuals that grow in proportion to a signal.
+
+    A sensor reading ``(1 + theta) y`` instead of ``y`` adds ``theta y`` to a residual that
+    compares it with the others. From an unknown sample ``j`` in the window, per residual::
+
+        g_k = max_{k-W+1 <= j <= k-Lmin+1} (sum_{i=j..k} r_i s_i)^2 / (sigma^2 sum_{i=j..k} s_i^2)
+
+    with ``r_i`` the residual minus ``mu0`` and ``s_i`` the signal; the gain estimate at the
+    maximising ``j`` is ``theta = sum r s / sum s^2``. One-sided statistics are kept per sign of
+    ``theta`` (which sensor of a left-minus-right difference is scaled).
+
+    ``signature`` (as :class:`DriftDetector`'s) makes one test of a fault that moves several
+    residuals: the combined statistic is the weakest of the residuals' one-sided statistics in
+    the signature's direction (``gain+``) or the opposite one (``gain-``), so a fault of another
+    sensor that moves only one of the residuals is not taken for this one.
+
+    Parameters
+    ----------
+    residuals : str or sequence of str
+        The residual channel(s).
+    signal : str
+        The signal the fault is proportional to.
+    W : int
+        Window (samples).
+    mu0, sigma2 : float or sequence
+        Nominal mean and variance of each residual.
+    threshold : float or sequence
+        Threshold of ``g`` (per residual; one value with ``signature``).
+    min_length : int
+        Fewest samples of a candidate change.
+    signature : sequence of {-1, 0, 1}, optional
+        The fault direction over the residuals; with it the detector has one set of outputs.
+    name : str, optional
+        Name of the combined outputs (default the first residual).
+    min_gain : float
+        Indifference zone: a candidate change counts only where the estimated gain of the residual
+        is at least ``min_gain * gain_scale`` in magnitude (a scale error too small to matter --
+        or a slow wander of coloured noise that the GLR, scaled by the white-noise variance,
+        over-rates -- is not a fault). 0 (default): the plain GLR. :func:`design_gain` calibrates
+        the threshold on the plain GLR, so the zone only removes alarms.
+    gain_scale : float or sequence
+        Per residual, how much of the gain reaches it (``r = gain_scale * theta * s``; e.g. 1 for
+        a wheel-speed difference, ``k_f / k_r`` for the other axle's scaled difference).
+    rivals : sequence of signatures
+        Signatures of other faults over the same residuals (with a signature): where one of them
+        explains the residuals at least as well (its combined statistic is as large), the output
+        is 0 -- a fault of another sensor that also moves all of this signature's residuals is
+        not taken for this one.
+    warmup : int
+        Samples after a reset (and after a gap, :meth:`resume`) that are not taken in: the output
+        is 0 there (filter transients at the start of a log).
+
+    Outputs per residual (or once, ``"<name>:..."``, with a signature): ``"<residual>:gain"``
+    (``g / threshold``, alarm at >= 1), ``"<residual>:gain_est"`` (theta at the most likely change;
+    of the first residual of the signature), and the one-sided ``"<residual>:gain+"`` and
+    ``"<residual>:gain-"`` over the threshold.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from fdikit import Signals
+    >>> t = np.arange(30.0)
+    >>> s = 20.0 + np.sin(t)                                # a speed, m/s
+    >>> r = np.where(t >= 10, 0.02 * s, 0.0)                # +2 % on one sensor from sample 10
+    >>> out = GainDetector("r", "s", W=20, sigma2=0.01, threshold=100.0).run(
+    ...     Signals(t, np.c_[r, s], ["r", "s"]))
+    >>> int(np.argmax(out["r:gain"][0] >= 1)), round(float(out["r:gain_est"][0, -1]), 6)
+    (16, 0.02)
+    """
+
+    _state_attrs = ("_bx", "_bs", "_pos", "_cnt", "_k", "_R")
+
+    def __init__(
+        self,
+        residuals,
+        signal: str,
+        W: int = 250,
+        mu0=0.0,
+        sigma2=1.0,
+        threshold=1.0,
+        *,
+        min_length: int = 1,
+        signature: Sequence[float] | None = None,
+        name: str | None = None,
+        rivals: Sequence[Sequence[float]] = (),
+        min_gain: float = 0.0,
+        gain_scale=1.0,
+        warmup: int = 0,
+    ):
+        self._set_warmup(warmup)
+        if not (np.isfinite(min_gain) and min_gain >= 0):
+            raise DataError(f"GainDetector min_gain must be finite and >= 0, got {min_gain}")
+        self.min_gain = float(min_gain)
+        self.residuals = [str(x) for x in ([residuals] if isinstance(residuals, str) else residuals)]
+        self.signal = str(signal)
+        c = len(self.residuals)
+        if c == 0:
+            raise DataError("GainDetector needs at least one residual channel")
+        if self.signal in self.residuals:
+            raise DataError(f"GainDetector: the signal {self.signal!r} cannot also be a residual")
+        self.input_names = [*self.residuals, self.signal]
+        self.W = _window(W, "GainDetector window W")
+        self.min_length = _window(min_length, "GainDetector min_length")
+        if self.min_length > self.W:
+            raise DataError(f"GainDetector min_length ({self.min_length}) must be <= W ({self.W})")
+        self.mu0 = _per_channel(mu0, c, "GainDetector mu0", self.residuals)
+        self.sigma2 = _per_channel(sigma2, c, "GainDetector sigma2", self.residuals, positive=True)
+        self.gain_scale = _per_channel(
+            gain_scale, c, "GainDetector gain_scale", self.residuals, positive=True
+        )
+        self._gscale = np.ascontiguousarray(self.gain_scale)
+        if signature is not None:
+            sg = np.sign(np.asarray(signature, float))
+            if sg.shape != (c,) or not np.any(sg != 0):
+                raise DataError(
+                    f"GainDetector signature must have one entry -1/0/+1 per residual "
+                    f"{self.residuals} and at least one non-zero, got {list(signature)}"
+                )
+            self.signature = sg
+            self.threshold = _per_channel(threshold, 1, "GainDetector threshold", ["combined"], positive=True)
+            self.name = str(name) if name is not None else self.residuals[0]
+            heads = [self.name]
+            self.rivals = [np.sign(np.asarray(rv, float)) for rv in rivals]
+            for rv in self.rivals:
+                if rv.shape != (c,) or not np.any(rv != 0):
+                    raise DataError(
+                        f"GainDetector rival signatures need one entry -1/0/+1 per residual "
+                        f"{self.residuals}, got {rv.tolist()}"
+                    )
+        else:
+            if len(rivals):
+                raise DataError("GainDetector rivals need a signature")
+            self.rivals = []
+            self.signature = None
+            self.threshold = _per_channel(
+                threshold, c, "GainDetector threshold", self.residuals, positive=True
+            )
+            self.name = name
+            heads = self.residuals
+        self.output_names = [f"{h}:{k}" for h in heads for k in ("gain", "gain_est", "gain+", "gain-")]
+        self.reset(1)
+
+    def _repr_items(self):
+        return [
+            ("residuals", list(self.residuals)),
+            ("signal", self.signal),
+            ("W", self.W),
+            ("mu0", self.mu0.tolist()),
+            ("sigma2", self.sigma2.tolist()),
+            ("threshold", self.threshold.tolist()),
+            ("min_length", self.min_length),
+            ("signature", None if self.signature is None else self.signature.tolist()),
+            ("name", self.name),
+            ("rivals", [rv.tolist() for rv in self.rivals]),
+            ("min_gain", self.min_gain),
+            ("gain_scale", self.gain_scale.tolist()),
+            ("warmup", self.warmup),
+        ]
+
+    def to_dict(self) -> dict:
+        """Configuration as plain data (see :mod:`fdikit.base.artifacts`)."""
+        return dict(self._repr_items())
+
+    def reset(self, runs: int = 1) -> None:
+        self._R = int(runs)
+        self._bx = np.zeros((runs, len(self.residuals), self.W))
+        self._bs = np.zeros((runs, self.W))
+        self._pos = np.zeros(runs, np.int64)
+        self._cnt = np.zeros(runs, np.int64)
+        self._k = 0
+
+    def _compute(self, x: np.ndarray) -> np.ndarray:
+        R, T, _ = x.shape
+        c = len(self.residuals)
+        gp, gm, th = np.empty((R, T, c)), np.empty((R, T, c)), np.empty((R, T, c))
+        _gain_kernel(
+            np.ascontiguousarray(x[:, :, :c]),
+            np.ascontiguousarray(x[:, :, c]),
+            self.mu0,
+            self.W,
+            self.min_length,
+            self.min_gain,
+            self._gscale,
+            gp,
+            gm,
+            th,
+            self._bx,
+            self._bs,
+            self._pos,
+            self._cnt,
+        )
+        gp, gm = gp / self.sigma2, gm / self.sigma2
+        if self.signature is None:
+            thr = self.threshold
+            cols = [np.maximum(gp, gm) / thr, th, gp / thr, gm / thr]
+            return np.stack(cols, axis=3).reshape(R, T, 4 * c)
+
+        def combined(sig):
+            use = sig != 0
+            pos = sig[use] > 0
+            return (
+                np.where(pos, gp[..., use], gm[..., use]).min(axis=2),
+                np.where(pos, gm[..., use], gp[..., use]).min(axis=2),
+            )
+
+        up, down = combined(self.signature)
+        for rv in self.rivals:  # another fault explains the residuals better: not this one
+            best = np.maximum(*combined(rv))
+            up = np.where(best >= up, 0.0, up)
+            down = np.where(best >= down, 0.0, down)
+        up, down = up / self.threshold[0], down / self.threshold[0]
+        use = self.signature != 0
+        first = int(np.flatnonzero(use)[0])
+        est = th[..., first] * self.signature[first]
+        return np.stack([np.maximum(up, down), est, up, down], axis=2)
+
+
+# ---------------------------------------------------------------------------------- intermittent
+class IntermittentDetector(_SensorDetector):
+    """Bursts of a fault that come and go: episodes of a large residual counted over a window.
+
+    An episode starts when ``|r - mu0| > level`` and ends once ``|r - mu0| < release`` has held
+    for ``gap`` samples (hysteresis and debounce: noise near the level does not make a new
+    episode of every crossing). The statistic is the number of episode onsets in the last ``W``
+    samples over ``min_bursts``: a permanent fault is one episode, an intermittent one several.
+
+    Parameters
+    ----------
+    inputs : sequence of str
+        Residual channels (band-limit them first: a burst is then a clear hump).
+    level : float or sequence
+        Onset level of ``|r - mu0|`` per channel.
+    W : int
+        Window over which onsets are counted (samples).
+    min_bursts : int
+        Onsets within ``W`` that make the fault intermittent (output ``>= 1``).
+    mu0 : float or sequence
+        Nominal mean per channel.
+    release : float or sequence, optional
+        Level below which an episode may end (default ``level / 2``).
+    gap : int
+        Samples below ``release`` that end an episode.
+    signed : bool
+        Count episodes above ``+level`` and below ``-level`` separately (which sensor of a
+        difference is intermittent): two outputs per input.
+    warmup : int
+        Samples after a reset (and after a gap, :meth:`resume`) that are not taken in: the output
+        is 0 there (filter transients at the start of a log).
+
+    Outputs ``"<input>:intermittent"`` per input (alarm at >= 1); with ``signed``,
+    ``"<input>:intermittent+"`` and ``"<input>:intermittent-"``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from fdikit import Signals
+    >>> t = np.arange(60.0)
+    >>> r = np.where((t % 20 >= 5) & (t % 20 < 10), 1.0, 0.0)     # on 5 samples of every 20
+    >>> d = IntermittentDetector(["r"], level=0.5, W=50, min_bursts=3, gap=2)
+    >>> out = d.run(Signals(t, r, ["r"]))["r:intermittent"][0]
+    >>> out[[5, 25, 45]].round(3).tolist()
+    [0.333, 0.667, 1.0]
+    """
+
+    _state_attrs = ("_on", "_quiet", "_buf", "_pos", "_cnt", "_k", "_R")
+
+    def __init__(
+        self,
+        inputs: Sequence[str],
+        level=1.0,
+        W: int = 500,
+        min_bursts: int = 3,
+        *,
+        mu0=0.0,
+        release=None,
+        gap: int = 5,
+        signed: bool = False,
+        warmup: int = 0,
+    ):
+        self._set_warmup(warmup)
+        self.input_names = [str(s) for s in ([inputs] if isinstance(inputs, str) else inputs)]
+        c = len(self.input_names)
+        if c == 0:
+            raise DataError("IntermittentDetector needs at least one input channel")
+        self.W = _window(W, "IntermittentDetector window W")
+        self.min_bursts = _window(min_bursts, "IntermittentDetector min_bursts")
+        self.gap = _window(gap, "IntermittentDetector gap")
+        self.mu0 = _per_channel(mu0, c, "IntermittentDetector mu0", self.input_names)
+        self.level = _per_channel(level, c, "IntermittentDetector level", self.input_names, positive=True)
+        self.release = (
+            0.5 * self.level
+            if release is None
+            else _per_channel(release, c, "IntermittentDetector release", self.input_names, positive=True)
+        )
+        if np.any(self.release > self.level):
+            raise DataError(
+                f"IntermittentDetector release {self.release.tolist()} must not exceed level "
+                f"{self.level.tolist()}"
+            )
+        self.signed = bool(signed)
+        if self.signed:
+            self.output_names = [f"{s}:intermittent{g}" for s in self.input_names for g in "+-"]
+            self._side = np.tile([1, -1], c).astype(np.int64)
+        else:
+            self.output_names = [f"{s}:intermittent" for s in self.input_names]
+            self._side = np.zeros(c, np.int64)
+        self.reset(1)
+
+    def _repr_items(self):
+        return [
+            ("inputs", list(self.input_names)),
+            ("level", self.level.tolist()),
+            ("W", self.W),
+            ("min_bursts", self.min_bursts),
+            ("mu0", self.mu0.tolist()),
+            ("release", self.release.tolist()),
+            ("gap", self.gap),
+            ("signed", self.signed),
+            ("warmup", self.warmup),
+        ]
+
+    def to_dict(self) -> dict:
+        """Configuration as plain data (see :mod:`fdikit.base.artifacts`)."""
+        return dict(self._repr_items())
+
+    def reset(self, runs: int = 1) -> None:
+        c = len(self.output_names)
+        self._R = int(runs)
+        self._on = np.zeros((runs, c), np.int64)
+        self._quiet = np.zeros((runs, c), np.int64)
+        self._buf = np.zeros((runs, c, self.W), np.int64)
+        self._pos = np.zeros((runs, c), np.int64)
+        self._cnt = np.zeros((runs, c), np.int64)
+        self._k = 0
+
+    def _compute(self, x: np.ndarray) -> np.ndarray:
+        m = 2 if self.signed else 1
+        if m > 1:
+            x = np.ascontiguousarray(np.repeat(x, m, axis=2))
+        R, T, C = x.shape
+        rep = lambda a: np.repeat(a, m)  # noqa: E731
+        out = np.empty((R, T, C))
+        _burst_kernel(
+            x,
+            rep(self.mu0),
+            self._side,
+            rep(self.level),
+            rep(self.release),
+            self.gap,
+            self.W,
+            out,
+            self._on,
+            self._quiet,
+            self._buf,
+            self._pos,
+            self._cnt,
+        )
+        return out / self.min_bursts
+
+
+# ---------------------------------------------------------------------------------- design
+def _nominal(nominal: Signals, names: Sequence[str], skip: int) -> Signals:
+    if not isinstance(nominal, Signals):
+        raise DataError(f"nominal data must be Signals, got {type(nominal).__name__}")
+    missing = [n for n in names if n not in nominal.names]
+    if missing:
+        raise DataError(f"nominal data lack channels {missing}; they have {list(nominal.names)}")
+    if int(skip) != skip or skip < 0 or skip >= nominal.n_samples - 1:
+        raise DataError(f"skip must be an integer in [0, {nominal.n_samples - 1}), got {skip}")
+    return nominal
+
+
+def _threshold(
+    stat: np.ndarray,
+    pfa: float,
+    per,
+    margin: float,
+    dt: float | None,
+    Z: int,
+    what: str,
+    floor_chi2: bool = False,
+) -> np.ndarray:
+    """Threshold(s) of statistics (runs, T, C) for the target (see :func:`design_threshold`).
+
+    When the nominal data are too short for the target (``design_threshold`` refuses: too few
+    effective samples for a tail fit; the usual case of a short real record), a target per unit
+    of time falls back to extreme-value scaling: the maximum of ``n`` effective samples of a
+    statistic with an exponential tail (a GLR is chi-square-like) grows as ``ln n``, so the
+    threshold is the nominal maximum times ``ln(n_target) / ln(n_eff)``, with ``n_eff = n / tau``
+    the effective samples of the data and ``n_target`` those of the operating time in which one
+    false alarm is allowed (``tau`` the integrated autocorrelation time,
+    :func:`fdikit.detect.tail.block_length`). Rough, conservative for lighter tails. With
+    ``floor_chi2`` (GLR statistics) the threshold is never below the chi-square(1) level of the
+    target per sample.
+    """
+    from .glrt import TIME_UNITS, design_threshold
+    from .tail import block_length
+
+    if not (np.isfinite(margin) and margin >= 0):
+        raise DataError(f"{what}: margin must be finite and >= 0, got {margin}")
+    try:
+        d = design_threshold(stat, pfa, per=per, Z=Z, margin=margin, absolute=False, dt=dt)
+        thr = np.atleast_1d(np.asarray(d.threshold, float))
+    except DataError:
+        timed = not (isinstance(per, str) and per in ("run", "sample"))
+        if not (pfa > 0 and timed and dt):
+            raise
+        unit = TIME_UNITS[per] if isinstance(per, str) else float(per)
+        thr = np.empty(stat.shape[2])
+        for c in range(stat.shape[2]):
+            x = stat[:, :, c]
+            tau = block_length(x)["tau"]
+            n_eff = max(x.size / tau, np.e)
+            n_target = max(unit / pfa / dt / tau, n_eff)
+            thr[c] = float(x.max()) * np.log(n_target) / np.log(n_eff) * (1.0 + margin)
+    floor = 1e-12
+    if floor_chi2 and pfa > 0 and dt and not (isinstance(per, str) and per in ("run", "sample")):
+        # never below the level of a chi-square(1) GLR of white noise for the target per sample: a
+        # statistic that is 0 on most nominal data (an indifference zone, a gate) is still tested
+        from scipy.stats import chi2
+
+        unit = TIME_UNITS[per] if isinstance(per, str) else float(per)
+        floor = float(chi2.isf(min(pfa * dt / unit, 0.5), 1))
+    return np.maximum(thr, floor)
+
+
+def _dt(s: Signals) -> float | None:
+    return float((s.t[-1] - s.t[0]) / (s.n_samples - 1)) if s.n_samples > 1 else None
+
+
+def design_stuck(
+    nominal: Signals,
+    measured: str,
+    expected: str | None = None,
+    *,
+    tol: float = 0.0,
+    min_samples: int | None = None,
+    quantile: float = 0.5,
+    pfa: float = 0.0,
+    per: str | float = "hour",
+    margin: float = 0.5,
+    Z: int = 1,
+    skip: int = 0,
+) -> StuckDetector:
+    """A :class:`StuckDetector` calibrated on nominal data.
+
+    The scale of the statistic is the standard deviation of the expected signal's increments
+    (its noise: the range over a flat run is then in noise units). The threshold is the level of
+    the statistic on the nominal data for the target (``pfa`` per ``per``, as
+    :func:`~fdikit.detect.design_threshold`; ``pfa = 0``: just above the largest nominal value),
+    times ``1 + margin``. With ``min_samples`` (a flat run must last longer than any the nominal
+    data hold) the threshold is instead the ``quantile`` of the expected signal's range over
+    windows of ``min_samples`` samples (how much it moves in that time in ordinary driving) times
+    ``1 + margin``, and at least the largest gated nominal value times ``1 + margin``.
+
+    Parameters
+    ----------
+    nominal : Signals
+        Fault-free record(s) holding ``measured`` (and ``expected``).
+    measured, expected : str
+        See :class:`StuckDetector`.
+    tol : float
+        See :class:`StuckDetector`.
+    min_samples : int, optional
+        See :class:`StuckDetector`; ``"auto"``: one more than the longest nominal flat run.
+    quantile : float
+        Quantile of the expected signal's windowed range used with ``min_samples``.
+    pfa, per, margin, Z :
+        False-alarm target (see :func:`~fdikit.detect.design_threshold`; a target per unit of time
+        that the data are too short for falls back to extreme-value scaling of the nominal
+        maximum, ``ln(n_target) / ln(n_eff)`` effective samples), relative margin on the
+        threshold and the hold the alarm will use.
+    skip : int
+        Samples left out at the start of every run (transients); the detector's ``warmup``.
+
+    Returns
+    -------
+    StuckDetector
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from fdikit import Signals
+    >>> rng = np.random.default_rng(0)
+    >>> t = np.arange(2000) * 0.02
+    >>> truth = np.sin(0.5 * t)
+    >>> nom = Signals(t, np.c_[np.round(truth, 2), truth + 0.01 * rng.standard_normal(t.size)], ["x", "e"])
+    >>> d = design_stuck(nom, "x", "e", tol=0.0)
+    >>> bool(d.run(nom)["x:stuck"].max() < 1)
+    True
+    """
+    names = [measured] + ([expected] if expected is not None else [])
+    s = _nominal(nominal, names, skip)
+    if expected is not None:
+        e = s[expected][:, skip:]
+        scale = float(np.std(np.diff(e, axis=1)))
+        if not scale > 0:
+            raise DataError(f"expected channel {expected!r} does not vary on the nominal data: no scale")
+    else:
+        scale = 1.0
+    if min_samples == "auto":
+        flat = StuckDetector(measured, None, tol=tol, warmup=skip).run(s).values[:, skip:, 0]
+        min_samples = int(flat.max()) + 1
+    nmin = int(min_samples or 0)
+    d = StuckDetector(measured, expected, tol=tol, scale=scale, threshold=1.0, min_samples=nmin, warmup=skip)
+    g = d.run(s).values[:, skip:]
+    if nmin > 0 and expected is not None:
+        if not 0 < quantile < 1:
+            raise DataError(f"design_stuck: quantile must be in (0, 1), got {quantile}")
+        from numpy.lib.stride_tricks import sliding_window_view
+
+        if e.shape[1] <= nmin:
+            raise DataError(
+                f"design_stuck: nominal records of {e.shape[1]} samples are shorter than min_samples = {nmin}"
+            )
+        w = sliding_window_view(e, nmin + 1, axis=1)
+        moving = float(np.quantile(np.ptp(w, axis=2), quantile)) / scale
+        thr = max(moving, float(g.max())) * (1.0 + margin)
+    else:
+        thr = float(_threshold(g, pfa, per, margin, _dt(s), Z, "design_stuck")[0])
+    return StuckDetector(
+        measured, expected, tol=tol, scale=scale, threshold=max(thr, 1e-12), min_samples=nmin, warmup=skip
+    )
+
+
+def design_drift(
+    nominal: Signals,
+    inputs: Sequence[str],
+    W: int,
+    *,
+    signature: Sequence[float] | None = None,
+    name: str | None = None,
+    min_length: int = 1,
+    vs_step: bool = False,
+    pfa: float = 0.0,
+    per: str | float = "hour",
+    margin: float = 0.5,
+    Z: int = 1,
+    skip: int = 0,
+) -> DriftDetector:
+    """A :class:`DriftDetector` calibrated on nominal data: ``mu0`` and ``sigma2`` are the mean and
+    variance of each residual, the threshold the statistic's level for the target (as
+    :func:`design_stuck`).
+
+    Parameters
+    ----------
+    nominal : Signals
+    inputs : sequence of str
+    W : int
+    signature, name, min_length, vs_step :
+        See :class:`DriftDetector`.
+    pfa, per, margin, Z, skip :
+        See :func:`design_stuck`.
+
+    Returns
+    -------
+    DriftDetector
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from fdikit import Signals
+    >>> t = np.arange(5000) * 0.02
+    >>> r = np.random.default_rng(1).standard_normal(t.size)
+    >>> d = design_drift(Signals(t, r, ["r"]), ["r"], W=250)
+    >>> faulty = Signals(t, r + np.where(t > 50, 0.2 * (t - 50), 0.0), ["r"])   # 0.2 sigma / s
+    >>> k = int(np.argmax(d.run(faulty)["r:drift"][0] >= 1))
+    >>> bool(2 < t[k] - 50 < 4)        # threshold 36: s^2 L^3 / 3 ~ 36 after L ~ 175 samples
+    True
+    """
+    inputs = [inputs] if isinstance(inputs, str) else list(inputs)
+    s = _nominal(nominal, inputs, skip)
+    r = s.values[:, skip:][:, :, s.index(inputs)].reshape(-1, len(inputs))
+    mu0, var = r.mean(axis=0), np.maximum(r.var(axis=0, ddof=1), 1e-300)
+    kw = dict(min_length=min_length, signature=signature, name=name, warmup=skip)
+    # the threshold is the ramp GLR's (the step gate only removes alarms: calibrated without it, the
+    # nominal statistic would be 0 wherever a step fits better, and the threshold degenerate)
+    d = DriftDetector(inputs, W, mu0, var, 1.0, vs_step=False, **kw)
+    kw["vs_step"] = vs_step
+    g = d.run(s).values[:, skip:]
+    thr = _threshold(g, pfa, per, margin, _dt(s), Z, "design_drift", floor_chi2=True)
+    return DriftDetector(inputs, W, mu0, var, thr if signature is None else thr[0], **kw)
+
+
+def design_gain(
+    nominal: Signals,
+    residuals,
+    signal: str,
+    W: int,
+    *,
+    min_length: int = 1,
+    signature: Sequence[float] | None = None,
+    name: str | None = None,
+    rivals=(),
+    min_gain: float = 0.0,
+    gain_scale=1.0,
+    pfa: float = 0.0,
+    per: str | float = "hour",
+    margin: float = 0.5,
+    Z: int = 1,
+    skip: int = 0,
+) -> GainDetector:
+    """A :class:`GainDetector` calibrated on nominal data (``mu0``, ``sigma2`` of each residual; the
+    threshold as :func:`design_stuck`).
+
+    Parameters
+    ----------
+    nominal : Signals
+    residuals : str or sequence of str
+    signal : str
+    W, min_length, signature, name, rivals, min_gain, gain_scale :
+        See :class:`GainDetector`.
+    pfa, per, margin, Z, skip :
+        See :func:`design_stuck`.
+
+    Returns
+    -------
+    GainDetector
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from fdikit import Signals
+    >>> rng = np.random.default_rng(2)
+    >>> t = np.arange(3000) * 0.02
+    >>> v = 20 + 2 * np.sin(0.1 * t)
+    >>> nom = Signals(t, np.c_[0.05 * rng.standard_normal(t.size), v], ["r", "v"])
+    >>> d = design_gain(nom, "r", "v", W=100)
+    >>> bool(d.run(nom)["r:gain"].max() < 1)
+    True
+    """
+    res = [residuals] if isinstance(residuals, str) else list(residuals)
+    s = _nominal(nominal, [*res, signal], skip)
+    r = s.values[:, skip:][:, :, s.index(res)].reshape(-1, len(res))
+    mu0, var = r.mean(axis=0), np.maximum(r.var(axis=0, ddof=1), 1e-300)
+    kw = dict(
+        min_length=min_length,
+        signature=signature,
+        name=name,
+        rivals=rivals,
+        gain_scale=gain_scale,
+        warmup=skip,
+    )
+    d = GainDetector(res, signal, W, mu0, var, 1.0, min_gain=0.0, **kw)  # the plain GLR's threshold
+    kw["min_gain"] = min_gain
+    out = d.run(s)
+    stat = [n for n in d.output_names if n.endswith(":gain")]
+    g = out.values[:, skip:][:, :, out.index(stat)]
+    thr = _threshold(g, pfa, per, margin, _dt(s), Z, "design_gain", floor_chi2=True)
+    return GainDetector(res, signal, W, mu0, var, thr if signature is None else thr[0], **kw)
+
+
+def design_intermittent(
+    nominal: Signals,
+    inputs: Sequence[str],
+    W: int,
+    *,
+    min_bursts: int = 3,
+    gap: int = 5,
+    margin: float = 0.5,
+    release: float = 0.5,
+    signed: bool = False,
+    skip: int = 0,
+) -> IntermittentDetector:
+    """An :class:`IntermittentDetector` calibrated on nominal data: ``mu0`` is each residual's mean
+    and the onset level is the largest nominal ``|r - mu0|`` times ``1 + margin`` (no nominal
+    sample starts an episode), the release level ``release`` times that.
+
+    Parameters
+    ----------
+    nominal : Signals
+    inputs : sequence of str
+    W, min_bursts, gap, signed :
+        See :class:`IntermittentDetector`.
+    margin : float
+        Relative margin of the level over the largest nominal deviation.
+    release : float
+        Release level as a fraction of the onset level (0 < release <= 1).
+    skip : int
+        Samples left out at the start of every run; the detector's ``warmup``.
+
+    Returns
+    -------
+    IntermittentDetector
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from fdikit import Signals
+    >>> rng = np.random.default_rng(3)
+    >>> t = np.arange(3000) * 0.02
+    >>> nom = Signals(t, 0.1 * rng.standard_normal(t.size), ["r"])
+    >>> d = design_intermittent(nom, ["r"], W=500)
+    >>> bool(d.run(nom)["r:intermittent"].max() == 0)
+    True
+    """
+    inputs = [inputs] if isinstance(inputs, str) else list(inputs)
+    s = _nominal(nominal, inputs, skip)
+    if not (np.isfinite(margin) and margin >= 0):
+        raise DataError(f"design_intermittent: margin must be finite and >= 0, got {margin}")
+    if not 0 < release <= 1:
+        raise DataError(f"design_intermittent: release must be in (0, 1], got {release}")
+    r = s.values[:, skip:][:, :, s.index(inputs)].reshape(-1, len(inputs))
+    mu0 = r.mean(axis=0)
+    level = np.maximum(np.abs(r - mu0).max(axis=0), 1e-300) * (1.0 + margin)
+    return IntermittentDetector(
+        inputs, level, W, min_bursts, mu0=mu0, release=release * level, gap=gap, signed=signed, warmup=skip
+    )
