@@ -16,8 +16,21 @@ in :data:`KINDS` are kept for readability and for artifacts written before the c
 recorded.
 
 JSON keeps an artifact readable, diffable and editable by an engineer; NPZ keeps large arrays
-(e.g. support vectors) compact and exact. Loading checks the format
-version and, when asked, the channel names, and refuses a mismatch with a clear message.
+(e.g. support vectors) compact and exact. Loading checks, and refuses with a
+:class:`~fdikit.errors.DataError` naming the key:
+
+* the format version;
+* the fdikit version: an artifact written by a *newer* fdikit than the one installed is refused
+  (it may hold fields this version would silently ignore); upgrade fdikit or rerun the design;
+* the manifest against the payload: every array the manifest lists is in the NPZ file with the
+  shape and dtype the manifest records, no payload entry names an array the manifest does not
+  list, and the ``channels`` recorded equal those of the
+  rebuilt design (an edited channel list would otherwise load without a word);
+* when asked, the channel names a caller expects.
+
+``meta`` is free data for the producer: :func:`fdikit.monitor.config.run_design` stamps
+``design_hash`` there (the hash of the config's ``[design]`` section), and
+:func:`~fdikit.monitor.config.build_monitor` refuses a design made from another one.
 """
 
 from __future__ import annotations
@@ -25,6 +38,7 @@ from __future__ import annotations
 import importlib
 import json
 import os
+import zipfile
 from pathlib import Path
 from typing import Any
 
@@ -34,7 +48,7 @@ from ..errors import DataError
 from .state import _atomic_write, _flatten, _unflatten
 
 __all__ = ["ARTIFACT_FORMAT", "KINDS", "MOVED", "artifact_channels", "load_artifact", "moved",
-           "save_artifact"]
+           "read_manifest", "save_artifact", "version_tuple"]
 
 #: Version of the artifact layout; a different major version is refused on loading.
 ARTIFACT_FORMAT = "fdikit-artifact/1"
@@ -116,6 +130,9 @@ def _resolve(kind: str, where: str | None = None) -> type:
     Only modules inside the ``fdikit`` package are ever imported (an artifact cannot name code
     from elsewhere), and the class must provide ``from_dict``.
     """
+    if where and str(moved(where)).partition(":")[0].split(".")[0] != "fdikit":
+        raise DataError(f"artifact kind {kind!r}: key 'class' names {where!r}, which is not an fdikit design "
+                        "class; refusing to import it")
     target = KINDS.get(kind) or (moved(where) if where else where)
     if not target:
         raise DataError(f"unknown artifact kind {kind!r}; known kinds: {sorted(KINDS)}")
@@ -153,9 +170,48 @@ def _stem(path: str | os.PathLike) -> Path:
     return p.with_suffix("") if p.suffix in (".json", ".npz") else p
 
 
+def version_tuple(version: str) -> tuple[int, ...]:
+    """The leading numeric release of a version string (trailing zeros dropped, so 1.0 == 1.0.0),
+    without the ``packaging`` library.
+
+    Examples
+    --------
+    >>> version_tuple("0.10.2"), version_tuple("1.2.dev3"), version_tuple("2.0rc1+local")
+    ((0, 10, 2), (1, 2), (2,))
+    >>> version_tuple("0.1.0") < version_tuple("0.10")
+    True
+    """
+    out: list[int] = []
+    for part in str(version).split("+")[0].split("."):
+        digits = ""
+        for ch in part:
+            if not ch.isdigit():
+                break
+            digits += ch
+        if not digits:
+            break
+        out.append(int(digits))
+        if len(digits) != len(part):
+            break
+    while len(out) > 1 and out[-1] == 0:
+        out.pop()
+    return tuple(out)
+
+
 def save_artifact(path: str | os.PathLike, obj: Any, *, meta: dict | None = None,
                   units: dict[str, str] | None = None) -> Path:
     """Save a design as ``<stem>.json`` (+ ``<stem>.npz`` when it has arrays); returns the JSON path.
+
+    Parameters
+    ----------
+    path : path-like
+        Stem of the artifact (``.json`` / ``.npz`` are added); a missing folder is created.
+    obj : object
+        A design: a registered kind or any fdikit class with ``to_dict`` / ``from_dict``.
+    meta : dict, optional
+        Free JSON-able data stored in the manifest (e.g. ``design_hash``).
+    units : dict, optional
+        Channel name -> unit, for the record.
 
     Examples
     --------
@@ -185,30 +241,27 @@ def save_artifact(path: str | os.PathLike, obj: Any, *, meta: dict | None = None
         "units": dict(units or {}),
         "meta": dict(meta or {}),
         "arrays": {k: f"a{i}" for i, k in enumerate(arrays)},
+        "shapes": {k: {"shape": list(a.shape), "dtype": str(a.dtype)} for k, a in arrays.items()},
         "payload": payload,
     }
     if arrays:
         stored = {f"a{i}": a for i, a in enumerate(arrays.values())}
-        _atomic_write(stem.with_suffix(".npz"), lambda fh: np.savez(fh, **stored))
+        _atomic_write(stem.with_suffix(".npz"), lambda fh: np.savez(fh, **stored), mkdir=True)
     text = json.dumps(manifest, indent=1, allow_nan=True)
-    _atomic_write(stem.with_suffix(".json"), lambda fh: fh.write(text.encode()))
+    _atomic_write(stem.with_suffix(".json"), lambda fh: fh.write(text.encode()), mkdir=True)
     return stem.with_suffix(".json")
 
 
-def load_artifact(path: str | os.PathLike, *, kind: str | None = None,
-                  expect_inputs: list[str] | None = None,
-                  expect_outputs: list[str] | None = None) -> Any:
-    """Load a design saved by :func:`save_artifact`.
+def read_manifest(path: str | os.PathLike) -> dict:
+    """The manifest (JSON) of an artifact, checked for its format and fdikit version only.
 
-    Parameters
-    ----------
-    kind : str, optional
-        Refuse an artifact of another kind.
-    expect_inputs, expect_outputs : list of str, optional
-        Refuse an artifact whose channel names differ (a design from another model).
+    Raises
+    ------
+    DataError
+        A missing or unreadable file, another artifact format, or an artifact written by a newer
+        fdikit than the one installed (naming both versions).
     """
-    stem = _stem(path)
-    jpath = stem.with_suffix(".json")
+    jpath = _stem(path).with_suffix(".json")
     try:
         manifest = json.loads(jpath.read_text())
     except FileNotFoundError:
@@ -220,6 +273,55 @@ def load_artifact(path: str | os.PathLike, *, kind: str | None = None,
     fmt = str(manifest["format"])
     if fmt.split("/")[0] != ARTIFACT_FORMAT.split("/")[0] or fmt != ARTIFACT_FORMAT:
         raise DataError(f"{jpath}: artifact format {fmt!r}, this fdikit reads {ARTIFACT_FORMAT!r}")
+    from .. import __version__
+
+    mine, theirs = version_tuple(__version__), version_tuple(str(manifest.get("fdikit_version", "")))
+    if mine and mine != (0,) and theirs and theirs > mine:
+        raise DataError(f"{jpath}: key 'fdikit_version': the artifact was written by fdikit "
+                        f"{manifest.get('fdikit_version')}, newer than the installed {__version__}; it may "
+                        "hold design data this version would ignore. Upgrade fdikit, or rerun the design "
+                        "(fdikit design CONFIG) with this version")
+    for key, typ in (("channels", dict), ("meta", dict), ("arrays", dict), ("units", dict)):
+        if key in manifest and not isinstance(manifest[key], typ):
+            raise DataError(f"{jpath}: key {key!r} must be a JSON object, got {type(manifest[key]).__name__}")
+    return manifest
+
+
+def _array_refs(d: Any, out: set[str]) -> set[str]:
+    """The array keys a flattened payload refers to."""
+    if isinstance(d, dict):
+        if "__array__" in d:
+            out.add(str(d["__array__"]))
+        for v in d.values():
+            _array_refs(v, out)
+    elif isinstance(d, list):
+        for v in d:
+            _array_refs(v, out)
+    return out
+
+
+def load_artifact(path: str | os.PathLike, *, kind: str | None = None,
+                  expect_inputs: list[str] | None = None,
+                  expect_outputs: list[str] | None = None) -> Any:
+    """Load a design saved by :func:`save_artifact`, checking the manifest against the payload.
+
+    Parameters
+    ----------
+    path : path-like
+        The artifact (its stem, or the ``.json`` / ``.npz`` file).
+    kind : str, optional
+        Refuse an artifact of another kind.
+    expect_inputs, expect_outputs : list of str, optional
+        Refuse an artifact whose channel names differ (a design from another model).
+
+    Raises
+    ------
+    DataError
+        See the module docstring: each check names the key that disagrees.
+    """
+    stem = _stem(path)
+    jpath = stem.with_suffix(".json")
+    manifest = read_manifest(jpath)
     k = manifest.get("kind")
     if kind is not None and k != kind:
         raise DataError(f"{jpath}: artifact is a {k}, expected a {kind}")
@@ -228,16 +330,50 @@ def load_artifact(path: str | os.PathLike, *, kind: str | None = None,
         if want is not None and list(ch.get(what, [])) != list(want):
             raise DataError(f"{jpath}: the design's {what} are {ch.get(what)}, but {list(want)} were "
                             "expected (a design for another model or channel map?)")
+    if "payload" not in manifest:
+        raise DataError(f"{jpath}: key 'payload' is missing (the design itself)")
+    listed = dict(manifest.get("arrays") or {})
+    unlisted = sorted(_array_refs(manifest["payload"], set()) - set(listed))
+    if unlisted:
+        raise DataError(f"{jpath}: the payload refers to arrays {unlisted} that key 'arrays' does not list")
     arrays: dict[str, np.ndarray] = {}
-    if manifest.get("arrays"):
+    if listed:
         npz = stem.with_suffix(".npz")
         try:
             with np.load(npz, allow_pickle=False) as z:
-                arrays = {key: z[stored] for key, stored in manifest["arrays"].items()}
-        except (OSError, ValueError, KeyError) as exc:
-            raise DataError(f"{npz}: arrays of the artifact are missing or unreadable ({exc})") from None
+                missing = [key for key, stored in listed.items() if stored not in z.files]
+                if missing:
+                    raise DataError(f"{npz}: arrays {missing} listed under key 'arrays' of {jpath.name} are "
+                                    f"not in the NPZ file (it holds {sorted(z.files)})")
+                extra = sorted(set(z.files) - set(listed.values()))
+                if extra:
+                    raise DataError(f"{npz}: the NPZ file holds arrays {extra} that key 'arrays' of "
+                                    f"{jpath.name} does not list: the arrays do not belong to this manifest")
+                arrays = {key: z[stored] for key, stored in listed.items()}
+        except DataError:
+            raise
+        except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as exc:
+            raise DataError(f"{npz}: arrays of the artifact are missing, corrupt or unreadable "
+                            f"({type(exc).__name__}: {exc})") from None
+        shapes = manifest.get("shapes")
+        if isinstance(shapes, dict):   # artifacts written before shapes were recorded have none
+            for key, a in arrays.items():
+                rec = shapes.get(key)
+                if rec is None:
+                    raise DataError(f"{jpath}: array {key!r} has no entry under key 'shapes'")
+                if list(rec.get("shape", [])) != list(a.shape) or str(rec.get("dtype")) != str(a.dtype):
+                    raise DataError(f"{jpath}: array {key!r} is {a.dtype} of shape {list(a.shape)} in "
+                                    f"the NPZ file, but key 'shapes' records {rec.get('dtype')} of shape "
+                                    f"{rec.get('shape')}: the manifest and the arrays disagree")
     cls = _resolve(str(k), manifest.get("class"))
     try:
-        return cls.from_dict(_unflatten(manifest["payload"], arrays))
-    except (KeyError, TypeError, ValueError) as exc:
+        obj = cls.from_dict(_unflatten(manifest["payload"], arrays))
+    except (KeyError, TypeError, ValueError, IndexError) as exc:
         raise DataError(f"{jpath}: a {k} cannot be rebuilt from this artifact ({exc!r})") from None
+    got = artifact_channels(obj)
+    for what in ("inputs", "outputs"):
+        if what in ch and list(ch[what]) != got[what]:
+            raise DataError(f"{jpath}: key 'channels.{what}' lists {list(ch[what])}, but the design in the "
+                            f"payload has {got[what]}: the manifest was edited or does not belong to "
+                            "this payload")
+    return obj

@@ -123,11 +123,48 @@ def _unflatten(d: Any, arrays: dict[str, np.ndarray]) -> Any:
     return d
 
 
-def _atomic_write(path: Path, write) -> None:
-    """Write a file through ``write(fh)`` atomically: a temporary file beside it, fsync, rename
-    (a crash mid-write never leaves a corrupt file; shared by checkpoints and artifacts)."""
-    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
+def _umask() -> int:
+    """The process's umask: from ``/proc/self/status`` where Linux gives it (thread-safe), else
+    read by setting and restoring it."""
     try:
+        with open("/proc/self/status") as fh:
+            for line in fh:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    except (OSError, ValueError, IndexError):
+        pass
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+def _atomic_write(path: Path, write, *, mkdir: bool = False) -> None:
+    """Write a file through ``write(fh)`` atomically: a temporary file beside it, fsync, rename
+    (a crash mid-write never leaves a corrupt file; shared by checkpoints and artifacts).
+
+    The file gets the permissions of any file the process creates (``0o666`` less the umask),
+    not the ``0o600`` of a temporary file. A missing folder is created with ``mkdir=True`` and
+    is otherwise a :class:`DataError` naming it, as is a folder that cannot be written.
+    """
+    path = Path(path)
+    parent = path.parent if str(path.parent) else Path(".")
+    if not parent.is_dir():
+        if parent.exists():
+            raise DataError(f"{path}: cannot write there, {str(parent)!r} is a file, not a folder")
+        if not mkdir:
+            raise DataError(f"{path}: cannot write there, the folder {str(parent)!r} does not exist")
+        try:
+            parent.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise DataError(f"{path}: cannot create the folder {str(parent)!r} ({exc.strerror or exc})"
+                            ) from None
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=parent)
+    except OSError as exc:
+        raise DataError(f"{path}: cannot write into the folder {str(parent)!r} ({exc.strerror or exc})"
+                        ) from None
+    try:
+        os.fchmod(fd, 0o666 & ~_umask())
         with os.fdopen(fd, "wb") as fh:
             write(fh)
             fh.flush()

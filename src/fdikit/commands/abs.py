@@ -93,10 +93,9 @@ def _simulate(args) -> int:
 
     if args.runs < 1:
         raise DataError(f"--runs must be >= 1, got {args.runs}")
-    if args.plot:
-        from .car_monitor import _check_outputs
+    from ._output import check_output_paths
 
-        _check_outputs(args)
+    check_output_paths(args, "plot")
     sc = Scenario(fault=args.fault, magnitude=args.magnitude, snr_db=args.snr, meas_var=args.meas_var,
                   v0=args.v0, t_brake=args.t_brake, t_end=args.t_end, noise_hold=args.noise_hold,
                   pedal="step" if args.pedal_ramp is None else "ramp", pedal_ramp=args.pedal_ramp)

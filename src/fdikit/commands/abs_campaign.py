@@ -118,12 +118,9 @@ def _campaign(args) -> int:
     import sys
 
     from ..systems.abs.campaign import run_campaign
-    from ._output import print_json
+    from ._output import check_output_paths, print_json
 
-    if args.report:
-        from ..report import check_output_path
-
-        check_output_path(args.report)
+    check_output_paths(args, "report")
     if args.runs < 1:
         raise DataError(f"--runs must be >= 1, got {args.runs}")
     if args.pedal_ramp is not None and not args.pedal_ramp > 0:

@@ -315,12 +315,11 @@ FIGURES = {
 def _cmd(args) -> int:
     from ..report.figures import save
     from ..report.progress import progress_steps, progress_wanted
-    from ._output import print_json
-    from .car_monitor import _check_outputs
+    from ._output import check_output_paths, print_json
 
     if args.number not in FIGURES:
         raise DataError(f"luo-et-al figure {args.number} is not reproduced; figures: {sorted(FIGURES)}")
-    _check_outputs(args)
+    check_output_paths(args, "plot", "report")
     for k in ("runs", "design_runs", "per_size"):
         if getattr(args, k) < 1:
             raise DataError(f"--{k.replace('_', '-')} must be >= 1, got {getattr(args, k)}")

@@ -148,7 +148,6 @@ def default_report_path() -> str:
 
 
 def run(args) -> int:
-    from ..report import check_output_path
     from ..report.progress import progress_steps, progress_wanted
 
     available = sections()
@@ -156,8 +155,11 @@ def run(args) -> int:
     unknown = [s for s in chosen if s not in available]
     if unknown:
         raise SystemExit(f"fdikit demo: unknown section(s) {unknown}; available: {list(available)}")
+    from ._output import check_output_paths
+
     report = args.report or default_report_path()
-    check_output_path(report)
+    args.report = report
+    check_output_paths(args, "report")
     summary: dict = {}
     details: dict = {}
     with progress_steps(progress_wanted(args.json), len(chosen) + 1, "fdikit demo") as steps:

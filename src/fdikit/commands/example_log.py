@@ -233,8 +233,9 @@ def write_example_logs(
 
 
 def _cmd(args) -> int:
-    from ._output import print_json
+    from ._output import check_output_paths, print_json
 
+    check_output_paths(args, folders=("out",))
     t0 = time.perf_counter()
     out = write_example_logs(args.config, args.out, fault=args.fault, seed=args.seed, duration=args.duration)
     out["wall_seconds"] = round(time.perf_counter() - t0, 3)

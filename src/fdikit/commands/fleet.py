@@ -409,6 +409,9 @@ def _fleet(args) -> int:
             raise DataError(f"--{flag} must be >= 1, got {v}")
     if sum(x is not None for x in (args.workers, args.scheduler, args.processes)) > 1:
         raise DataError("choose one of --processes, --workers and --scheduler")
+    from ._output import check_output_paths
+
+    check_output_paths(args, folders=("out",))
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     tasks = plan(args.logs, args.config, out, manifest=args.manifest, template=args.path_fields,

@@ -4,8 +4,12 @@
   artifacts (JSON + NPZ) into the config's artifact directory.
 * ``fdikit monitor LOG --config CONFIG [--events FILE.jsonl] [--stats FILE.parquet] [--json]``
   reads a recorded log, maps its channels (scale, offset), runs the monitor built from the
-  artifacts, writes the announcements (and every held bad sample) as JSON lines and the full
-  residuals and statistics as Parquet, and prints a summary.
+  artifacts, writes the fault episodes (an onset record, the announcement, and a cleared record
+  each, with kind, size and episode number), every time gap and every held bad sample as JSON
+  lines and the full residuals and statistics (with each sample's status code: 0 ok,
+  1 cannot_judge, 2 warmup, :data:`fdikit.monitor.core.STATUS_NAMES`) as Parquet,
+  and prints a summary with the status counts and the gaps. Every output path is checked
+  before anything is computed.
 * ``fdikit monitor - --config CONFIG --follow`` reads CSV lines from standard input as they
   arrive (a header line with the time column and the source channels first), steps the
   monitor per line and prints each announcement as one JSON line at once; the results equal
@@ -56,8 +60,47 @@ def _design(args) -> int:
 
 
 def _event_record(e) -> dict:
-    return {"t": e.t, "run": e.run, "sample": e.k, "hypothesis": e.hypothesis, "value": e.value,
-            "announcement": True}
+    """An onset or cleared event as one JSON record (``announcement`` is True for an onset)."""
+    kind = getattr(e, "kind", "onset")
+    size = getattr(e, "size", None)
+    return {"t": e.t, "run": e.run, "sample": e.k, "kind": kind, "hypothesis": e.hypothesis,
+            "value": e.value, "size": None if size is None or not np.isfinite(size) else float(size),
+            "episode": int(getattr(e, "episode", 0)), "announcement": kind == "onset"}
+
+
+def _gap_record(g) -> dict:
+    """A time gap (the state held, nothing judged): at its first sample after it."""
+    return {"t": g.t_end, "run": g.run, "sample": g.k, "gap": True, "t_start": g.t_start,
+            "n_missing": int(g.n_missing)}
+
+
+def _invalid_record(t: float, run: int, k: int, why: str) -> dict:
+    return {"t": float(t), "run": run, "sample": k, "invalid": why}
+
+
+def _order(d: dict) -> tuple:
+    """Records of one sample: the gap that ended at it, its held reason, cleared, then onsets."""
+    rank = 0 if d.get("gap") else 1 if "invalid" in d else 2 if d.get("kind") == "cleared" else 3
+    return (d["sample"], rank, d.get("run", 0), d.get("hypothesis", ""))
+
+
+def _status_counts(res) -> dict:
+    """Samples per status (``ok``, ``cannot_judge``, ``warmup``), over every run."""
+    status = getattr(res, "status", None)
+    names = getattr(res, "STATUS_NAMES", ("ok", "cannot_judge", "warmup"))
+    if status is None:
+        return {"ok": int(res.valid.sum()) if res.valid is not None else 0,
+                "cannot_judge": len(res.invalid)}
+    return {n: int(np.sum(status == i)) for i, n in enumerate(names)}
+
+
+def _batch_records(sig, res) -> list[dict]:
+    """Every record of a batch run, in the order follow mode writes them."""
+    records = [_event_record(e) for e in (*res.events, *getattr(res, "cleared", []))]
+    records += [_invalid_record(sig.t[k], r, k, why) for r, k, why in res.invalid]
+    records += [_gap_record(g) for g in getattr(res, "gaps", [])]
+    records.sort(key=_order)
+    return records
 
 
 def _batch(args, cfg) -> int:
@@ -68,9 +111,7 @@ def _batch(args, cfg) -> int:
     sig = map_channels(cfg, log)
     mon = build_monitor(cfg)
     res = mon.run(sig)
-    records = [_event_record(e) for e in res.events]
-    records += [{"t": float(sig.t[k]), "run": r, "sample": k, "invalid": why} for r, k, why in res.invalid]
-    records.sort(key=lambda d: (d["sample"], "invalid" in d))
+    records = _batch_records(sig, res)
     if args.events:
         with open(args.events, "w") as fh:
             for rec in records:
@@ -83,6 +124,9 @@ def _batch(args, cfg) -> int:
             for i, ch in enumerate(s.names):
                 df[ch] = s.values[0, :, i]
         df["valid"] = res.valid[0] if res.valid is not None else True
+        status = getattr(res, "status", None)
+        if status is not None:
+            df["status"] = status[0].astype(np.int8)   # STATUS_NAMES[code]: 0 ok, 1 cannot_judge, 2 warmup
         df.to_parquet(args.stats, index=False)
     summary = {
         "config": str(cfg.path), "log": str(args.log), "samples": sig.n_samples,
@@ -91,6 +135,11 @@ def _batch(args, cfg) -> int:
         "events": [_event_record(e) for e in res.events[:100]],
         "first_event": _event_record(res.events[0]) if res.events else None,
         "invalid_samples": len(res.invalid),
+        "status": _status_counts(res),
+        "n_cleared": len(getattr(res, "cleared", [])),
+        "cleared": [_event_record(e) for e in getattr(res, "cleared", [])[:100]],
+        "n_gaps": len(getattr(res, "gaps", [])),
+        "gaps": [_gap_record(g) for g in getattr(res, "gaps", [])[:100]],
         "max_statistics": {n: float(np.max(res.statistics.values[..., i]))
                            for i, n in enumerate(res.statistics.names)},
         "wall_seconds": round(time.perf_counter() - t0, 3),
@@ -110,10 +159,19 @@ def _batch(args, cfg) -> int:
     if args.json:
         print_json(summary)
     else:
-        print(f"{summary['samples']} samples, {summary['n_events']} announcements, "
-              f"{summary['invalid_samples']} invalid samples held")
-        for e in res.events:
-            print(f"  t = {e.t:.3f} s  {e.hypothesis}  ({e.value:.4g})")
+        st = summary["status"]
+        print(f"{summary['samples']} samples, {summary['n_events']} announcements "
+              f"({summary['n_cleared']} cleared), {summary['invalid_samples']} invalid samples held, "
+              f"{summary['n_gaps']} gaps; status: " + ", ".join(f"{v} {k.replace('_', ' ')}"
+                                                              for k, v in st.items()))
+        for rec in records:
+            if rec.get("gap"):
+                print(f"  t = {rec['t']:.3f} s  gap of {rec['n_missing']} samples since "
+                      f"t = {rec['t_start']:.3f} s: cannot judge, warm-up after it")
+            elif "kind" in rec:
+                size = "" if rec["size"] is None else f", size {rec['size']:.4g}"
+                what = "cleared" if rec["kind"] == "cleared" else f"({rec['value']:.4g}{size})"
+                print(f"  t = {rec['t']:.3f} s  {rec['hypothesis']}  {what}  [episode {rec['episode']}]")
     return 0
 
 
@@ -136,6 +194,7 @@ class _Output:
         self.t_last: float | None = None   # latest time of a consumed input line
         self.resumed: dict | None = None
         self.header: list[str] | None = None
+        self.time_first: str | None = None   # follow CSV: the first timestamp's text (the origin)
         self._since = 0
         self.fh = None
         if args.events:
@@ -157,6 +216,7 @@ class _Output:
             f = state["follow"]
             self.n, self.lines, self.t_last = int(f["n"]), int(f["lines"]), f["t_last"]
             self.header = f.get("header")
+            self.time_first = f.get("time_first")
             if gridder is not None:
                 _gridder_restore(gridder, state["gridder"])
             if self.fh is not None:
@@ -212,7 +272,7 @@ class _Output:
             os.fsync(self.fh.fileno())
             size = self.fh.seek(0, 2)
         follow = {"n": self.n, "lines": self.lines, "t_last": self.t_last, "events_bytes": size,
-                  "header": self.header}
+                  "header": self.header, "time_first": self.time_first}
         state = {"monitor": self.mon.state(), "follow": follow,
                  "gridder": None if self._gridder is None else _gridder_state(self._gridder)}
         save_state(self.ckpt, state, meta={"kind": "follow", "input": self.kind,
@@ -263,13 +323,11 @@ def _follow_candump(args, cfg, mon, stream, out: _Output) -> int:
 
     def feed(samples):
         for t, vals, why in samples:
+            k = out.n
             _, _, events = mon.step(t, map_sample(cfg, vals))
-            if mon.last_invalid is not None:
-                out.write({"t": t, "sample": out.n, "invalid": mon.last_invalid})
-            elif why:  # cannot happen: an invalid grid value is NaN and the monitor flags it
+            if mon.last_invalid is None and why:  # cannot happen: an invalid grid value is NaN
                 raise AssertionError(why)
-            for e in events:
-                out.write(_event_record(e))
+            _write_step(out, mon, t, k, events)
             out.stepped()
 
     for index, line in enumerate(stream):
@@ -300,11 +358,45 @@ def _follow_candump(args, cfg, mon, stream, out: _Output) -> int:
     return 0
 
 
+def _write_step(out, mon, t: float, k: int, events) -> None:
+    """Follow mode: the records of one stepped sample, as the batch run writes them."""
+    recs = []
+    gap = getattr(mon, "last_gap", None)
+    if gap is not None:
+        recs.append(_gap_record(gap._replace(k=k) if hasattr(gap, "_replace") else gap))
+    if mon.last_invalid is not None:
+        recs.append(_invalid_record(t, 0, k, mon.last_invalid))
+    recs += [_event_record(e) for e in events]
+    for rec in sorted(recs, key=_order):
+        out.write(rec)
+
+
+class _Clock:
+    """Follow mode's time column, read by the batch readers' rule (:mod:`fdikit.io.timebase`): the
+    unit of ``[log].time_unit``, an absolute clock rebased to its first timestamp, exactly."""
+
+    def __init__(self, unit: str, first: str | None = None):
+        self.unit, self.first = unit, first
+
+    def seconds(self, cell: str, lineno: int) -> float:
+        from ..io.timebase import times_to_seconds
+
+        cell = cell.strip()
+        if self.first is None:
+            t, _ = times_to_seconds([cell], self.unit, where="follow mode", rows=[lineno], line_offset=0)
+            self.first = cell
+            return float(t[0])
+        t, _ = times_to_seconds([self.first, cell], self.unit, where="follow mode", rows=[0, lineno],
+                                line_offset=0)
+        return float(t[1])
+
+
 def _follow_csv(args, cfg, mon, stream, out: _Output) -> int:
     from ..monitor.config import map_sample
 
     tcol = cfg.log.get("time", "t")
     out.start()
+    clock = _Clock(cfg.time_unit, out.time_first)
     lines = iter(stream)
     header = out.header
     first = next(lines, None)
@@ -327,8 +419,8 @@ def _follow_csv(args, cfg, mon, stream, out: _Output) -> int:
         t_row = None
         if len(row) == len(header):
             try:
-                t_row = float(row[it])
-            except ValueError:
+                t_row = clock.seconds(row[it], lineno)
+            except (ValueError, DataError):
                 t_row = None
             if t_row is not None and not np.isfinite(t_row):
                 t_row = None
@@ -340,19 +432,20 @@ def _follow_csv(args, cfg, mon, stream, out: _Output) -> int:
             continue
         vals = {}
         for h, v in zip(header, row):
+            if h == tcol:
+                continue
             try:
                 vals[h] = float(v)
             except ValueError:
                 vals[h] = float("nan")
-        t = vals.pop(tcol)
-        if not np.isfinite(t):
+        if t_row is None:
             out.write({"line": lineno, "invalid": f"time {row[it]!r} is not a number"})
             continue
+        t = t_row
+        out.time_first = clock.first
+        k = out.n
         _, _, events = mon.step(t, map_sample(cfg, vals))
-        if mon.last_invalid is not None:
-            out.write({"t": t, "sample": out.n, "invalid": mon.last_invalid})
-        for e in events:
-            out.write(_event_record(e))
+        _write_step(out, mon, t, k, events)
         out.stepped()
         out.maybe_checkpoint()
     out.maybe_checkpoint(force=True)
@@ -386,15 +479,15 @@ def _monitor(args) -> int:
     from ..monitor.config import load_config
 
     cfg = load_config(args.config)
-    from ..report import check_output_path
+    from ._output import check_output_paths
 
-    outputs = ((args.report, (".html", ".htm")), (args.plot, ()), (args.events, ()), (args.stats, ()))
-    for out, kinds in outputs:
-        if out:
-            check_output_path(out, kinds)
+    check_output_paths(args, "events", "stats", "plot", "report", "checkpoint")
     if args.follow:
         if args.json:
             raise DataError("--follow prints one JSON line per announcement; it does not take --json")
+        if args.log != "-" and not Path(args.log).is_file():
+            raise DataError(f"{args.log}: no such log file (follow mode reads a file, or - for standard "
+                            "input)")
         return _follow(args, cfg)
     if args.log == "-":
         raise DataError("reading a log from standard input needs --follow")
@@ -439,9 +532,13 @@ def register(sub) -> None:
                    "or - with --follow to read standard input")
     p.add_argument("--config", required=True, help="monitor configuration file (TOML)")
     p.add_argument("--events",
-                   help="JSON Lines file to write: one line per announcement and per held (invalid) sample "
-                   "(in follow mode the same lines as on standard output, exactly once across --resume)")
-    p.add_argument("--stats", help="Parquet file to write: the residuals and test statistics of every sample")
+                   help="JSON Lines file to write: one line per fault-episode onset (the announcement) and "
+                   "per cleared episode (kind, hypothesis, value, size, episode), per time gap and per held "
+                   "(invalid) sample; batch and follow mode write the same lines (in follow mode also on "
+                   "standard output, exactly once across --resume)")
+    p.add_argument("--stats",
+                   help="Parquet file to write: the residuals and test statistics of every sample, "
+                   "with its valid flag and status code (0 ok, 1 cannot judge: held, 2 warm-up)")
     p.add_argument("--follow", action="store_true",
                    help="follow mode: process CSV or candump lines as they arrive (from standard input with "
                    "LOG = -) and print one JSON line per announcement")

@@ -9,9 +9,23 @@ __all__ = ["register"]
 
 
 def _check_outputs(args) -> None:
-    from .car_monitor import _check_outputs as check
+    """The output paths and the numeric options, checked before any computation."""
+    import math
 
-    check(args)
+    from ..errors import DataError
+    from ._output import check_output_paths
+
+    check_output_paths(args, "plot", "report")
+    for flag, v in (("--h", args.h), ("--t-final", args.t_final)):
+        if not (math.isfinite(v) and v > 0):
+            raise DataError(f"{flag} must be a positive, finite number of seconds, got {v}")
+    if not (math.isfinite(args.settle) and args.settle >= 0):
+        raise DataError(f"--settle must be >= 0 s, got {args.settle}")
+    if args.h >= args.t_final:
+        raise DataError(f"--h = {args.h} s must be smaller than --t-final = {args.t_final} s")
+    if args.settle >= args.t_final:
+        raise DataError(f"--settle = {args.settle} s must be smaller than --t-final = {args.t_final} s "
+                        "(the RMS error is scored after it)")
 
 
 def _figure(res: dict, path: str) -> str:

@@ -20,10 +20,10 @@ __all__ = ["register"]
 
 
 def _report(args) -> int:
-    from ..report import check_output_path, report_from_files
-    from ._output import print_json
+    from ..report import report_from_files
+    from ._output import check_output_paths, print_json
 
-    check_output_path(args.out)
+    check_output_paths(args, "out", suffixes={"out": (".html", ".htm")}, labels={"out": "OUT"})
     t0 = time.perf_counter()
     out = report_from_files(
         args.out,

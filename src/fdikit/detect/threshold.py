@@ -72,7 +72,15 @@ class Hold(ResidualProcessor):
         self.input_names = [str(s) for s in inputs]
         if not self.input_names:
             raise DataError("Hold needs at least one input channel")
-        thr = np.broadcast_to(np.asarray(threshold, float), (len(self.input_names),)).copy()
+        try:
+            thr = np.asarray(threshold, float)
+        except (TypeError, ValueError):
+            raise DataError(f"Hold: threshold must be a number or one number per channel, got {threshold!r}"
+                            ) from None
+        if thr.ndim > 1 or (thr.ndim == 1 and thr.size not in (1, len(self.input_names))):
+            raise DataError(f"Hold: {thr.size} thresholds given for {len(self.input_names)} channels "
+                            f"{self.input_names}; give one threshold, or one per channel")
+        thr = np.broadcast_to(thr.ravel() if thr.ndim else thr, (len(self.input_names),)).copy()
         if not np.all(np.isfinite(thr)):
             raise DataError(f"thresholds must be finite, got {thr.tolist()}")
         if absolute and np.any(thr <= 0):
@@ -103,6 +111,10 @@ class Hold(ResidualProcessor):
         self._count = np.zeros((runs, len(self.input_names)), int)
 
     def _step(self, r: np.ndarray) -> np.ndarray:
+        if not np.isfinite(r).all():   # refused before the state changes (a Monitor holds such samples)
+            run, c = np.argwhere(~np.isfinite(r))[0]
+            raise DataError(f"Hold: input channel {self.input_names[c]!r} is not finite ({r[run, c]}) in "
+                            f"run {run}; the state is unchanged")
         e = self._exceed(r)
         self._count = (self._count + 1) * e
         return (self._count >= self.Z).astype(float)

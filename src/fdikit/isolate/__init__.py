@@ -7,7 +7,8 @@ tree as IF-THEN-ELSE logic in Python or C (:func:`to_python`, :func:`to_c`, :fun
 as in luo-et-al, Section VII; decide from binary outcomes by maximum likelihood
 (:func:`diagnose_ml`, :meth:`DMatrix.diagnose` with ambiguity sets) or down a tree
 (:func:`diagnose_tree`); isolate by a fault signature matrix of structured residuals
-(:class:`SignatureIsolator`). AO* takes a node and time budget and then falls back to a greedy
+(:class:`SignatureIsolator`); announce one diagnosis per fault episode from streaming test alarms
+(:class:`DMatrixDecision`). AO* takes a node and time budget and then falls back to a greedy
 completion with its optimality gap reported. :class:`SVMIsolator` (scikit-learn)
 separates faults that the residual tests cannot (luo-et-al, Section VI).
 """
@@ -16,6 +17,7 @@ from .classify import WindowedIsolator, moving_average
 from .codegen import compile_python, to_c, to_listing, to_python
 from .decide import Diagnosis, diagnose_likelihood, diagnose_ml, diagnose_tree
 from .dmatrix import DMatrix, wilson_interval
+from .online import DMatrixDecision
 from .sequencing import DiagnosticTree, TreeNode, ao_star, exhaustive, huffman_cost
 from .signature import SignatureDecision, SignatureIsolator
 
@@ -33,6 +35,7 @@ def __getattr__(name: str):
 
 __all__ = [
     "DMatrix",
+    "DMatrixDecision",
     "Diagnosis",
     "DiagnosticTree",
     "SVMDecision",

@@ -8,18 +8,33 @@ Schema (every key is checked: an unknown key or a wrong type is an error naming 
     name = "two-mass"             # free text
     artifacts = "designs"         # directory of the design artifacts, relative to this file
     on_invalid = "hold"           # "hold" (flag bad samples, keep state) or "raise"
+    max_gap = 0.05                # s: a longer time step is a gap (state held, "cannot judge",
+                                  #    warm-up after it); see fdikit.monitor.Monitor
+    warmup = 1.0                  # s: warm-up at the start and after a gap (nothing announced)
+    max_abs = 1e12                # a value of larger magnitude is invalid (a 1e300 spike)
 
     [log]                         # how `fdikit monitor LOG` reads a recorded log
     format = "auto"               # "auto" (by extension), "csv" or "can"
     time = "t"                    # CSV time column
     dbc = "car.dbc"               # CAN logs: the DBC, relative to this file
     rate = 100.0                  # Hz: resample onto this grid (CAN logs need it)
+    time_unit = "auto"            # unit of the time column: "auto", "s", "ms", "us" or "ns";
+                                  # absolute (epoch) timestamps start at 0, at full precision
+                                  # (fdikit.io.timebase), in batch and follow mode alike
 
     [channels.pos1]               # a monitor channel (the name the designs use)
     source = "POS.P1"             # the column / "MESSAGE.SIGNAL" in the log (default: the name)
     scale = 1.0                   # value = scale * source - offset
     offset = 0.0                  # nominal operating point to subtract (ng-chen-speyer, Section V)
     unit = "m"                    # unit after scaling (documentation, stored in artifacts)
+    min = -1.0                    # plausibility, in the channel's monitor units (after scale and
+    max = 1.0                     #   offset): physical range,
+    max_rate = 10.0               #   largest rate of change (unit/s),
+    spike = 8.0                   #   spike: an increment more than this many robust standard
+    spike_window = 50             #   deviations (1.4826 MAD) of the recent increments (samples);
+                                  #   a sample that fails is invalid, flagged with its reason and
+                                  #   never fed to a filter (fdikit.monitor.Plausibility)
+    # shared_source = true        # allow another channel to read the same source column
 
     [design]                      # how `fdikit design CONFIG` makes the artifacts
     recipe = "package.module:function"   # function(params: dict) -> {artifact name: design}
@@ -32,15 +47,32 @@ Schema (every key is checked: an unknown key or a wrong type is an error naming 
     [[processors]]                # residual processors, in order
     artifact = "hold"
 
-    [decision]                    # announcements
+    [decision]                    # announcements: one per fault episode (onset and cleared)
     channels = ["r:pos2:alarm"]
     level = 0.5
     names = { "r:pos2:alarm" = "sensor:pos2" }
+    clear_level = 0.25            # the episode clears below this level ...
+    clear_after = 0.5             # ... held this long (see fdikit.monitor.Decision)
+    sizes = { "r:pos2:alarm" = "r:pos2" }   # channel whose value is the episode's size estimate
+    # processor = "diagnosis"     # instead of channels: announce what this processor artifact
+    #                             # decides (its `announce` and `size_channels`, e.g. a
+    #                             # fdikit.isolate.DMatrixDecision: one diagnosis per episode)
+
+Two channels reading one source column are refused (two monitor channels that always agree
+look to the residuals like a fault), unless each of them sets ``shared_source = true``.
+
+``fdikit design`` stamps every artifact with :func:`design_hash` (a hash of the ``[design]``
+section and the files it names); :func:`build_monitor` refuses artifacts whose stamp differs from
+the config's (a design changed since ``fdikit design``: rerun it). Artifacts without a stamp
+(written by an older fdikit) are accepted as they are.
 """
 
 from __future__ import annotations
 
+import hashlib
 import importlib
+import inspect
+import json
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -48,13 +80,17 @@ from typing import Any
 
 import numpy as np
 
-from ..base.artifacts import load_artifact, moved, save_artifact
+from ..base.artifacts import load_artifact, moved, read_manifest, save_artifact
 from ..errors import DataError
 from ..signals import Signals
 from .core import Decision, Monitor
 
-__all__ = ["ChannelMap", "MonitorConfig", "build_monitor", "load_config", "map_channels", "read_log",
-           "run_design"]
+__all__ = ["TIME_UNITS", "ChannelMap", "MonitorConfig", "build_monitor", "design_hash", "load_config",
+           "map_channels", "read_log", "run_design"]
+
+#: ``[log].time_unit`` -> seconds per unit (``"auto"``: by the magnitude of the first timestamp,
+#: see :mod:`fdikit.io.timebase`).
+TIME_UNITS: dict[str, float | None] = {"auto": None, "s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
 
 #: Designs that need a runtime wrapper: artifact kind -> "module:class".
 RUNTIMES = {
@@ -63,27 +99,39 @@ RUNTIMES = {
 }
 
 _SCHEMA: dict[str, dict[str, type | tuple[type, ...]]] = {
-    "monitor": {"name": str, "artifacts": str, "on_invalid": str},
-    "log": {"format": str, "time": str, "dbc": str, "rate": (int, float)},
+    "monitor": {"name": str, "artifacts": str, "on_invalid": str, "max_gap": (int, float),
+                "warmup": (int, float), "max_abs": (int, float)},
+    "log": {"format": str, "time": str, "dbc": str, "rate": (int, float), "time_unit": str},
     "design": {"recipe": str, "params": dict, "sample_time": (int, float), "plant": dict, "faults": dict,
                "disturbances": dict, "noise": dict, "alarm": dict, "structure": dict},
-    "decision": {"channels": list, "level": (int, float), "names": dict},
+    "decision": {"channels": list, "level": (int, float), "names": dict, "clear_level": (int, float),
+                 "clear_after": (int, float), "sizes": dict, "processor": str},
 }
+#: Plausibility keys of a channel (monitor units), passed to :class:`fdikit.monitor.Plausibility`.
+PLAUSIBILITY_KEYS = ("min", "max", "max_rate", "spike")
 _CHANNEL_KEYS: dict[str, type | tuple[type, ...]] = {"source": str, "scale": (int, float),
-                                                      "offset": (int, float), "unit": str}
+                                                      "offset": (int, float), "unit": str,
+                                                      **{k: (int, float) for k in PLAUSIBILITY_KEYS},
+                                                      "spike_window": int, "shared_source": bool}
 _STAGE_KEYS: dict[str, type | tuple[type, ...]] = {"artifact": str}
 _TOP = {"monitor", "log", "channels", "design", "generators", "processors", "decision"}
 
 
 @dataclass
 class ChannelMap:
-    """One monitor channel: ``value = scale * log[source] - offset``."""
+    """One monitor channel: ``value = scale * log[source] - offset``.
+
+    ``plausibility`` holds the channel's checks (``min``, ``max``, ``max_rate``, ``spike``, in the
+    monitor units); ``shared_source`` allows another channel to read the same source.
+    """
 
     name: str
     source: str
     scale: float = 1.0
     offset: float = 0.0
     unit: str = ""
+    plausibility: dict[str, float] = field(default_factory=dict)
+    shared_source: bool = False
 
 
 @dataclass
@@ -100,10 +148,17 @@ class MonitorConfig:
     log: dict[str, Any] = field(default_factory=dict)
     design: dict[str, Any] = field(default_factory=dict)
     decision: dict[str, Any] | None = None
+    #: ``[monitor]`` runtime options (``max_gap``, ``warmup``, ``max_abs``) that are set
+    runtime: dict[str, float] = field(default_factory=dict)
 
     @property
     def channel_names(self) -> list[str]:
         return [c.name for c in self.channels]
+
+    @property
+    def time_unit(self) -> str:
+        """Unit of the log's time column (``[log].time_unit``, default ``"auto"``)."""
+        return str(self.log.get("time_unit", "auto"))
 
 
 def _check_keys(table: Any, allowed: dict, where: str) -> None:
@@ -135,6 +190,10 @@ def load_config(path: str | Path) -> MonitorConfig:
         raw = tomllib.loads(path.read_text())
     except FileNotFoundError:
         raise DataError(f"{path}: no such config file") from None
+    except IsADirectoryError:
+        raise DataError(f"{path}: is a folder, not a config file (TOML)") from None
+    except OSError as exc:
+        raise DataError(f"{path}: cannot read the config file ({exc.strerror or exc})") from None
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise DataError(f"{path}: not valid TOML ({exc})") from None
     for k in raw:
@@ -153,11 +212,40 @@ def load_config(path: str | Path) -> MonitorConfig:
         raise DataError("config: [channels] must name at least one channel ([channels.NAME] tables)")
     for name, spec in ch_tab.items():
         _check_keys(spec, _CHANNEL_KEYS, f"channels.{name}")
+        plaus: dict[str, Any] = {k: float(spec[k]) for k in PLAUSIBILITY_KEYS if k in spec}
+        if "spike_window" in spec:
+            if "spike" not in spec:
+                raise DataError(f"config: [channels.{name}].spike_window needs spike (the threshold)")
+            if spec["spike_window"] < 5:
+                raise DataError(f"config: [channels.{name}].spike_window must be >= 5 samples, got "
+                                f"{spec['spike_window']}")
+            plaus["window"] = int(spec["spike_window"])
         c = ChannelMap(name, spec.get("source", name), float(spec.get("scale", 1.0)),
-                       float(spec.get("offset", 0.0)), spec.get("unit", ""))
+                       float(spec.get("offset", 0.0)), spec.get("unit", ""), plaus,
+                       bool(spec.get("shared_source", False)))
         if not (np.isfinite(c.scale) and np.isfinite(c.offset)) or c.scale == 0:
             raise DataError(f"config: [channels.{name}] scale must be finite and non-zero and offset finite")
+        _check_plausibility(plaus, f"channels.{name}", c.unit)
         chans.append(c)
+    by_source: dict[str, list[ChannelMap]] = {}
+    for c in chans:
+        by_source.setdefault(c.source, []).append(c)
+    for src, users in by_source.items():
+        if len(users) > 1 and not all(c.shared_source for c in users):
+            names = [c.name for c in users]
+            raise DataError(f"config: channels {names} all read the source column {src!r}: two monitor "
+                            "channels that always agree look like a fault to the residuals (a copy-paste "
+                            "slip?). Map each channel to its own source, or set shared_source = true in "
+                            f"each of [channels.{names[0]}] ... [channels.{names[-1]}] if this is meant")
+    runtime = {}
+    for key in ("max_gap", "warmup", "max_abs"):
+        if key in mon:
+            v = float(mon[key])
+            ok = np.isfinite(v) and (v >= 0 if key == "warmup" else v > 0)
+            if not ok:
+                raise DataError(f"config: [monitor].{key} must be a finite number "
+                                f"{'>= 0' if key == 'warmup' else '> 0'}, got {mon[key]!r}")
+            runtime[key] = v
     stages = {}
     for sec in ("generators", "processors"):
         items = raw.get(sec, [])
@@ -185,16 +273,106 @@ def load_config(path: str | Path) -> MonitorConfig:
     dec = raw.get("decision")
     if dec is None and declarative:
         dec = decision_for(raw["design"])
-    if dec is not None and "channels" not in dec:
-        raise DataError("config: [decision] needs 'channels'")
+    if dec is not None and "processor" in dec:
+        if "channels" in dec:
+            raise DataError("config: [decision] takes 'channels' or 'processor', not both")
+        if dec["processor"] not in stages["processors"]:
+            raise DataError(f"config: [decision].processor = {dec['processor']!r} is not one of the "
+                            f"[[processors]] artifacts {stages['processors']}")
+        for key in ("names", "sizes"):
+            if key in dec:
+                raise DataError(f"config: [decision].{key} comes from the processor with "
+                                f"[decision].processor; remove it")
+    elif dec is not None and "channels" not in dec:
+        raise DataError("config: [decision] needs 'channels' (or 'processor')")
+    if dec is not None and "channels" in dec:
+        _check_decision(dec)
     log = dict(raw.get("log", {}))
     if log.get("format", "auto") not in ("auto", "csv", "can"):
         raise DataError(f"config: [log].format must be 'auto', 'csv' or 'can', got {log['format']!r}")
+    if "rate" in log and not (np.isfinite(log["rate"]) and log["rate"] > 0):
+        raise DataError(f"config: [log].rate must be a positive, finite number of samples per second (Hz), "
+                        f"got {log['rate']!r}")
+    if log.get("time_unit", "auto") not in TIME_UNITS:
+        raise DataError(f"config: [log].time_unit must be one of {list(TIME_UNITS)}, got "
+                        f"{log['time_unit']!r}")
     return MonitorConfig(path=path, name=mon.get("name", path.stem),
                          artifacts=(path.parent / mon.get("artifacts", "designs")).resolve(),
                          on_invalid=on_invalid, channels=chans, generators=stages["generators"],
                          processors=stages["processors"], log=log, design=dict(raw.get("design", {})),
-                         decision=dec)
+                         decision=dec, runtime=runtime)
+
+
+def _check_plausibility(p: dict[str, float], where: str, unit: str) -> None:
+    """Refuse plausibility limits that cannot be meant (naming the key and its value)."""
+    u = f" {unit}" if unit else ""
+    for k, v in p.items():
+        if not np.isfinite(v):
+            raise DataError(f"config: [{where}].{k} must be finite, got {v}")
+    if "min" in p and "max" in p and not p["min"] < p["max"]:
+        raise DataError(f"config: [{where}] min = {p['min']}{u} must be below max = {p['max']}{u}")
+    for k, what in (("max_rate", f"{unit or 'unit'}/s"), ("spike", "robust standard deviations")):
+        if k in p and not p[k] > 0:
+            raise DataError(f"config: [{where}].{k} must be > 0 ({what}), got {p[k]}")
+
+
+def _check_decision(dec: dict) -> None:
+    """Types and cross-references of ``[decision]`` (an implied declarative one included)."""
+    chans = dec["channels"]
+    if not all(isinstance(c, str) for c in chans):
+        raise DataError(f"config: [decision].channels must be a list of channel names, got {chans!r}")
+    for key in ("names", "sizes"):
+        tab = dec.get(key, {})
+        for ch, v in tab.items():
+            if ch not in chans:
+                raise DataError(f"config: [decision].{key} names channel {ch!r}, which is not in "
+                                f"[decision].channels {chans}")
+            if not isinstance(v, str):
+                raise DataError(f"config: [decision].{key}.{ch} must be a name, got {v!r}")
+    level = float(dec.get("level", 0.5))
+    if not (np.isfinite(level) and 0 < level <= 1):
+        raise DataError(f"config: [decision].level must be in (0, 1] (the alarm and probability channels "
+                        f"it compares are in [0, 1]), got {dec.get('level')!r}")
+    if "clear_level" in dec:
+        cl = float(dec["clear_level"])
+        if not (np.isfinite(cl) and cl <= level):
+            raise DataError(f"config: [decision].clear_level = {cl} must be finite and not above "
+                            f"level = {level} (an episode clears below clear_level)")
+    if "clear_after" in dec:
+        ca = float(dec["clear_after"])
+        if not (np.isfinite(ca) and ca >= 0):
+            raise DataError(f"config: [decision].clear_after must be a finite number >= 0, got {ca}")
+
+
+def design_hash(cfg: MonitorConfig) -> str:
+    """The hash stamped on every artifact by :func:`run_design`: SHA-256 of the ``[design]``
+    section (recipe, parameters, declarative tables; canonical JSON) and of the contents of the
+    files it names (``[design.plant].file``, ``[design.noise].nominal_log``).
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> p = pathlib.Path(tempfile.mkdtemp()) / "m.toml"
+    >>> _ = p.write_text('[channels.r]\\n[design]\\nrecipe = "m:f"\\n[design.params]\\nZ = 3\\n'
+    ...                  '[[generators]]\\nartifact = "g"\\n')
+    >>> h = design_hash(load_config(p))
+    >>> _ = p.write_text(p.read_text().replace("Z = 3", "Z = 4"))
+    >>> design_hash(load_config(p)) == h
+    False
+    """
+    text = json.dumps(cfg.design, sort_keys=True, default=str, separators=(",", ":"))
+    h = hashlib.sha256(text.encode())
+    refs = [("plant", "file"), ("noise", "nominal_log")]
+    for sec, key in refs:
+        tab = cfg.design.get(sec)
+        if isinstance(tab, dict) and isinstance(tab.get(key), str):
+            f = cfg.path.parent / tab[key]
+            h.update(f"\0{sec}.{key}\0".encode())
+            try:
+                h.update(hashlib.sha256(f.read_bytes()).digest())
+            except OSError:
+                h.update(b"missing")
+    return h.hexdigest()
 
 
 def _import_recipe(cfg: MonitorConfig, recipe: str):
@@ -228,7 +406,8 @@ def run_design(cfg: MonitorConfig) -> dict[str, Path]:
         raise DataError(f"design recipe {recipe!r} must return a non-empty dict name -> design")
     cfg.artifacts.mkdir(parents=True, exist_ok=True)
     units = {c.name: c.unit for c in cfg.channels if c.unit}
-    out = {name: save_artifact(cfg.artifacts / name, obj, units=units, meta={"config": cfg.name})
+    meta = {"config": cfg.name, "design_hash": design_hash(cfg)}
+    out = {name: save_artifact(cfg.artifacts / name, obj, units=units, meta=meta)
            for name, obj in designs.items()}
     if report is not None:
         import json
@@ -250,8 +429,46 @@ def _runtime(obj: Any) -> Any:
     return obj
 
 
+def _check_fresh(cfg: MonitorConfig, names: list[str]) -> None:
+    """Refuse artifacts designed from another ``[design]`` section than the config's."""
+    if not cfg.design:
+        return
+    want = None
+    for a in names:
+        stamp = read_manifest(cfg.artifacts / a).get("meta", {}).get("design_hash")
+        if stamp is None:
+            continue  # written by an fdikit that did not stamp designs: accepted as it is
+        want = want or design_hash(cfg)
+        if stamp != want:
+            raise DataError(f"{cfg.path}: the artifact {a!r} ({cfg.artifacts / a}.json) was designed from "
+                            f"another [design] section (design_hash {stamp[:12]}..., the config's is "
+                            f"{want[:12]}...): the design changed since 'fdikit design'. Rerun "
+                            f"'fdikit design {cfg.path}' to rebuild the artifacts")
+
+
+def _supported(func, keys: list[str], what: str) -> None:
+    params = inspect.signature(func).parameters
+    if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params.values()):
+        return
+    missing = [k for k in keys if k not in params]
+    if missing:
+        raise DataError(f"this fdikit's {what} does not take {missing} yet; remove them from the config")
+
+
 def build_monitor(cfg: MonitorConfig) -> Monitor:
-    """Load the artifacts named by the config and chain them into a :class:`Monitor`."""
+    """Load the artifacts named by the config and chain them into a :class:`Monitor`.
+
+    The channels' plausibility checks, the ``[monitor]`` runtime options (gaps, warm-up,
+    ``max_abs``) and the ``[decision]`` episode options go to :class:`Monitor` and
+    :class:`Decision`.
+
+    Raises
+    ------
+    DataError
+        A missing or inconsistent artifact, a stale design (see :func:`design_hash`), or an
+        artifact reading channels the config does not define.
+    """
+    _check_fresh(cfg, [*cfg.generators, *cfg.processors])
     gens = [_runtime(load_artifact(cfg.artifacts / a)) for a in cfg.generators]
     procs = [_runtime(load_artifact(cfg.artifacts / a)) for a in cfg.processors]
     for a, g in zip(cfg.generators, gens):
@@ -261,9 +478,46 @@ def build_monitor(cfg: MonitorConfig) -> Monitor:
                             f"config channels: {cfg.channel_names}")
     decision = None
     if cfg.decision is not None:
-        decision = Decision(list(cfg.decision["channels"]), float(cfg.decision.get("level", 0.5)),
-                            dict(cfg.decision.get("names", {})))
-    return Monitor(gens, procs, decision, on_invalid=cfg.on_invalid)
+        dec = dict(cfg.decision)
+        if "processor" in dec:
+            proc = procs[cfg.processors.index(dec["processor"])]
+            announce = getattr(proc, "announce", None)
+            if not isinstance(announce, dict) or not announce:
+                raise DataError(f"{cfg.path}: [decision].processor = {dec['processor']!r} is a "
+                                f"{type(proc).__name__}, which announces nothing (it has no 'announce' "
+                                "map of channel -> name)")
+            dec["channels"], dec["names"] = list(announce), dict(announce)
+            dec["sizes"] = dict(getattr(proc, "size_channels", None) or {})
+            dec.setdefault("level", 1e-9)
+            _check_decision(dec)
+        dkw: dict[str, Any] = {}
+        if "clear_level" in dec:
+            dkw["clear_level"] = float(dec["clear_level"])
+        if "clear_after" in dec:
+            dkw["clear_after"] = float(dec["clear_after"])
+        if dec.get("sizes"):
+            dkw["size_channels"] = dict(dec["sizes"])
+            if "size_channels" not in inspect.signature(Decision).parameters and "processor" in dec:
+                dkw.pop("size_channels")   # sizes stay in the statistics until Decision reports them
+        _supported(Decision, list(dkw), "Decision")
+        decision = Decision(list(dec["channels"]), float(dec.get("level", 0.5)), dict(dec.get("names", {})),
+                            **dkw)
+    kw: dict[str, Any] = dict(cfg.runtime)
+    plaus = {c.name: c.plausibility for c in cfg.channels if c.plausibility}
+    if plaus:
+        try:
+            from .plausibility import Plausibility
+        except ImportError:
+            raise DataError("this fdikit's Monitor has no plausibility checks yet; remove min/max/"
+                            "max_rate/spike from the [channels] tables") from None
+        kw["plausibility"] = {}
+        for n, p in plaus.items():
+            try:
+                kw["plausibility"][n] = Plausibility(**p)
+            except DataError as exc:
+                raise DataError(f"{cfg.path}: [channels.{n}]: {exc}") from None
+    _supported(Monitor, list(kw), "Monitor")
+    return Monitor(gens, procs, decision, on_invalid=cfg.on_invalid, **kw)
 
 
 def read_log(cfg: MonitorConfig, path: str | Path) -> Signals:
@@ -278,12 +532,18 @@ def read_log(cfg: MonitorConfig, path: str | Path) -> Signals:
     path = Path(path)
     fmt = cfg.log.get("format", "auto")
     sources = list(dict.fromkeys(c.source for c in cfg.channels))
+    kw: dict[str, Any] = {}
+    if "time_unit" in cfg.log:
+        kw["time_unit"] = cfg.time_unit
     if fmt == "csv" or (fmt == "auto" and path.suffix.lower() == ".csv"):
-        return io.read_csv(path, time=cfg.log.get("time", "t"), columns=sources, rate=cfg.log.get("rate"))
+        _supported(io.read_csv, list(kw), "CSV reader (fdikit.io.read_csv)")
+        return io.read_csv(path, time=cfg.log.get("time", "t"), columns=sources, rate=cfg.log.get("rate"),
+                           **kw)
     dbc = cfg.log.get("dbc")
     if fmt == "can" and not dbc:
         raise DataError(f"{cfg.path}: a CAN log needs [log].dbc")
-    return io.read_log(path, cfg.path.parent / dbc if dbc else None, sources, cfg.log.get("rate"))
+    _supported(io.read_log, list(kw), "log reader (fdikit.io.read_log)")
+    return io.read_log(path, cfg.path.parent / dbc if dbc else None, sources, cfg.log.get("rate"), **kw)
 
 
 def map_channels(cfg: MonitorConfig, log: Signals) -> Signals:

@@ -15,7 +15,23 @@ artifact        stage
 ``gate_NAME``   the time gate (35) of the gated tests G_O_T1 / G_O_T2
 ``dglrt_NAME``  with ``tests = "extended"``: the directional GLRT of a test ``G_D_*``
                 (:class:`~fdikit.detect.DirectionalGLRT`), and ``hold_NAME`` its alarm rule
+``diagnosis``   the diagnosis (:class:`fdikit.isolate.DMatrixDecision`): the D-matrix of the test
+                set learned from ``dmatrix_runs`` Monte Carlo runs per fault class
+                (:func:`~fdikit.systems.abs.campaign.run_campaign` with the designed tests), one
+                decision per episode by maximum likelihood over the learned Pd/Pf, made once the
+                fired tests have been stable for ``settle`` s
 ==============  ==============================================================================
+
+The diagnosis is what the config monitor announces (``[decision] processor = "diagnosis"``): one
+announcement per fault episode naming the fault class -- or the group of classes no outcome of
+the tests can tell apart (``F1.1|F1.2``: every test fires for both) -- with its posterior
+probability. Severity: the ABS classes are severity bins (F1.1 / F1.2 a wheel-speed sensor 2-5 %
+/ >= 5 % low, F2.1 / F2.2 the wheel radius 2-20 % / >= 20 % smaller), so the class is the
+severity estimate of the paper's test set; with ``tests = "extended"`` the size of an R_w, K_f or
+I_w diagnosis is the amplitude estimate of the matching directional GLRT (``G_D_Rw:eta``, ...:
+the relative parameter change). The output-error estimate of
+:mod:`fdikit.systems.abs.estimation` needs the whole record and stays with
+:class:`~fdikit.systems.abs.diagnoser.ABSDiagnoser`.
 
 With ``tests = "extended"`` (:func:`fdikit.systems.abs.campaign.extended_tests`) the ``observer``
 artifact is the observer with its parameter signatures
@@ -36,7 +52,7 @@ from typing import Any
 
 from ...errors import DataError
 
-__all__ = ["PARAMS", "design"]
+__all__ = ["PARAMS", "alarm_channel", "design", "diagnosis"]
 
 #: Recipe parameters and their defaults.
 PARAMS: dict[str, Any] = {
@@ -47,7 +63,19 @@ PARAMS: dict[str, Any] = {
     "seed": 0,
     "dt": 0.01,            # measurement period (s), the paper's 100 Hz
     "tests": "paper",      # "paper": the five GLRT tests; "extended": plus the directional GLRTs
+    "dmatrix_runs": 40,    # Monte Carlo runs per fault class that learn the D-matrix (0: no diagnosis)
+    "settle": 1.0,         # s: the fired tests stable this long before the diagnosis is made
 }
+
+#: Directional test -> the fault classes whose size its amplitude estimate gives.
+_SIZE_TESTS = {"G_D_Rw": ("F2.1", "F2.2"), "G_D_Kf": ("F3",), "G_D_Iw": ("F4",)}
+
+
+def alarm_channel(spec) -> str:
+    """The alarm channel of one test of the recipe's monitor (see the module docstring)."""
+    if spec.signature is not None:
+        return f"{spec.statistic_channel}:alarm"
+    return f"{spec.residual}:glrt:alarm" + (":gated" if spec.gate is not None else "")
 
 
 def design(params: dict[str, Any] | None = None) -> dict[str, Any]:
@@ -102,4 +130,42 @@ def design(params: dict[str, Any] | None = None) -> dict[str, Any]:
                 raise DataError(f"gated test {s.name} must share residual, window, hold and threshold "
                                 f"with an ungated test on {r}")
             out[f"gate_{s.name}"] = TimeGated([f"{r}:glrt:alarm"], 0.5, s.gate)
+    runs = int(p["dmatrix_runs"])
+    if runs < 0:
+        raise DataError(f"ABS recipe: dmatrix_runs must be >= 0, got {runs}")
+    if runs:
+        out["diagnosis"] = diagnosis(bank, runs=runs, settle=float(p["settle"]), dt=dt,
+                                     snr_db=float(p["snr_db"]), seed=int(p["seed"]) + 1)
     return out
+
+
+def diagnosis(bank, *, runs: int = 40, settle: float = 1.0, dt: float = 0.01, snr_db: float = 23.0,
+              seed: int = 1):
+    """The episode diagnosis of a designed ABS test bank: a :class:`fdikit.isolate.DMatrixDecision`
+    on the D-matrix learned from ``runs`` Monte Carlo runs of every fault class (nominal included).
+
+    Parameters
+    ----------
+    bank : TestBank
+        The designed tests (:func:`~fdikit.systems.abs.campaign.design_tests`).
+    runs : int
+        Runs per fault class (and nominal runs) that learn the D-matrix.
+    settle : float
+        Seconds the fired tests must be stable before the decision.
+    dt : float
+        Sample time, s.
+    snr_db : float
+        Process-noise level of the learning runs.
+    seed : int
+        Seed of the learning runs (a stream apart from the design's).
+    """
+    from ...isolate import DMatrixDecision
+    from .campaign import run_campaign
+
+    if not (settle >= 0 and dt > 0):
+        raise DataError(f"ABS recipe: settle must be >= 0 s and dt > 0 s, got {settle} and {dt}")
+    dm = run_campaign(runs=runs, nominal_runs=runs, bank=bank, seed=seed, snr_db=snr_db).dmatrix
+    spec = {s.name: s for s in bank.specs}
+    inputs = [alarm_channel(spec[t]) for t in dm.tests]
+    sizes = {c: f"{t}:eta" for t, classes in _SIZE_TESTS.items() if t in spec for c in classes}
+    return DMatrixDecision(dm, inputs, nominal="F0", settle=round(settle / dt), sizes=sizes)
