@@ -26,9 +26,8 @@ the BLF reader (files written by python-can from random frames, and corrupted by
 mode (CSV lines into ``fdikit monitor --follow``; candump lines through the FrameGridder into
 ``Monitor.step``).
 
-Cases that wait for work other helpers are doing in parallel (H2: monitor core; H3: config, CLI,
-artifacts) are marked ``xfail(strict=False)`` with the reason "awaits H2/H3: ..."; remove the
-mark once that work is in.
+A case that still fails is marked with :func:`awaits` (a strict xfail naming what it waits for),
+so that it turns red the day it passes and its mark must go.
 """
 
 from __future__ import annotations
@@ -62,7 +61,7 @@ FUZZ = settings(
 
 
 def awaits(who: str, what: str):
-    return pytest.mark.xfail(strict=False, reason=f"awaits {who}: {what}")
+    return pytest.mark.xfail(strict=True, reason=f"awaits {who}: {what}")
 
 
 def expect_error(call, pattern: str, types=(DataError, ConditionError)):
@@ -781,7 +780,7 @@ CLI_TABLE = [
         "config_is_dir",
         ["monitor", "@log.csv", "--config", "@somedir"],
         "somedir",
-        (awaits("H3", "a config path that is a directory is a DataError (IsADirectoryError today)"),),
+        (),
     ),
     ("events_missing_dir", M("--events", "@no/dir/ev.jsonl"), "no/dir|does not exist|folder", ()),
     ("stats_missing_dir", M("--stats", "@no/dir/st.parquet"), "no/dir|does not exist|folder", ()),
@@ -819,7 +818,7 @@ CLI_TABLE = [
         "follow_missing_log",
         M("--follow", log="nope.csv"),
         "nope.csv",
-        (awaits("H3", "follow mode: a missing log file is a DataError"),),
+        (),
     ),
 ]
 
@@ -842,22 +841,11 @@ def test_cli_error(workdir, argv, pattern):
 
 
 GOOD_CLI = ["batch", "batch_epoch", "follow", "follow_garbled", "follow_epoch"]
-_FOLLOW_MARK = awaits(
-    "H2/H3",
-    "follow mode writes a cleared event as an announcement (t = 5.2 s, value 0) "
-    "that the batch summary does not list; batch and follow must give the same events",
-)
-_EPOCH_MARK = awaits(
-    "H3",
-    "follow CSV reads its time column with float(); an epoch log must rebase like "
-    "the batch reader (fdikit.io.StreamTimes does it stamp by stamp), and the cleared "
-    "event must not be written as an announcement",
-)
 CLI_OK = [
     pytest.param(
         k,
         id=f"ok-{k}",
-        marks=[_EPOCH_MARK] if k == "follow_epoch" else [_FOLLOW_MARK] if k.startswith("follow") else [],
+        marks=[],
     )
     for k in GOOD_CLI
 ]
@@ -930,7 +918,6 @@ def cfg_text(fn):
     return lambda text=BASE_TOML: fn(text)
 
 
-H3_RANGE = awaits("H3", "config ranges checked on loading, naming the key")
 CONFIG_TABLE = [
     # unknown keys
     ("unknown_section", cfg_text(lambda t: t + "\n[plots]\nx = 1\n"), r"unknown section \[plots\]", ()),
@@ -1019,11 +1006,11 @@ CONFIG_TABLE = [
     ("range_warmup_negative", cfg_set("monitor", "warmup", "-1"), r"warmup must be a finite number >= 0", ()),
     ("range_max_abs_zero", cfg_set("monitor", "max_abs", "0"), r"max_abs must be", ()),
     ("range_max_abs_inf", cfg_set("monitor", "max_abs", "inf"), r"max_abs must be", ()),
-    ("range_rate_zero", cfg_set("log", "rate", "0"), r"rate", (H3_RANGE,)),
-    ("range_rate_negative", cfg_set("log", "rate", "-100"), r"rate", (H3_RANGE,)),
-    ("range_rate_nan", cfg_set("log", "rate", "nan"), r"rate", (H3_RANGE,)),
-    ("range_level_above_1", cfg_set("decision", "level", "1.5"), r"level", (H3_RANGE,)),
-    ("range_level_negative", cfg_set("decision", "level", "-0.1"), r"level", (H3_RANGE,)),
+    ("range_rate_zero", cfg_set("log", "rate", "0"), r"rate", ()),
+    ("range_rate_negative", cfg_set("log", "rate", "-100"), r"rate", ()),
+    ("range_rate_nan", cfg_set("log", "rate", "nan"), r"rate", ()),
+    ("range_level_above_1", cfg_set("decision", "level", "1.5"), r"level", ()),
+    ("range_level_negative", cfg_set("decision", "level", "-0.1"), r"level", ()),
     (
         "range_min_above_max",
         cfg_text(lambda t: t.replace('unit = "N"', 'unit = "N"\nmin = 5.0\nmax = -5.0')),
@@ -1196,7 +1183,6 @@ def _first_key(z):
     return sorted(z)[0]
 
 
-H3_NPZ = awaits("H3", "a corrupt NPZ payload is a DataError (zipfile.BadZipFile today)")
 ARTIFACT_TABLE = [
     ("missing_json", "hold", lambda j: j.unlink(), r"no such artifact", ()),
     ("missing_npz", "observer", lambda j: j.with_suffix(".npz").unlink(), r"npz", ()),
@@ -1267,14 +1253,14 @@ ARTIFACT_TABLE = [
         "observer",
         lambda j: j.with_suffix(".npz").write_bytes(j.with_suffix(".npz").read_bytes()[:200]),
         r"npz|corrupt|cannot",
-        (H3_NPZ,),
+        (),
     ),
     (
         "npz_garbage",
         "observer",
         lambda j: j.with_suffix(".npz").write_bytes(b"PK\x03\x04garbage"),
         r"npz|corrupt|cannot",
-        (H3_NPZ,),
+        (),
     ),
     (
         "npz_array_missing",
@@ -1306,7 +1292,7 @@ ARTIFACT_TABLE = [
         "observer",
         lambda j: _npz_rewrite(j.with_suffix(".npz"), lambda z: z.update(zz=np.ones(2))),
         r"zz|array|manifest",
-        (awaits("H3", "an NPZ entry the manifest does not list is refused"),),
+        (),
     ),
     (
         "npz_object_array",
@@ -1666,7 +1652,7 @@ API_TABLE = [
         "obs_nan_state_kept",
         _nan_refused_state_kept(_obs, _feed_obs, r"non-finite|NaN|finite"),
         r"",
-        (awaits("H2", "ObserverResidual.step refuses NaN without touching its state (it accepts it today)"),),
+        (awaits("residuals.observer", "ObserverResidual.step refuses NaN without touching its state (it accepts it today)"),),
     ),
     (
         "glrt_nan_state_kept",
@@ -1678,7 +1664,7 @@ API_TABLE = [
         "hold_nan_state_kept",
         _nan_refused_state_kept(lambda: _hold_c(), _feed2, r"non-finite|NaN|finite"),
         r"",
-        (awaits("H2", "Hold.step refuses a NaN residual without touching its state (it accepts it today)"),),
+        (),
     ),
     (
         "mhsspt_nan_state_kept",
