@@ -193,9 +193,9 @@ def test_config_monitor_with_an_injected_fault_matches(designed, tmp_path):
     cfg = load_config(designed)
     m = build_monitor(cfg)
     got = m.run(sig)
-    # examples/rav4-lateral/monitor.toml chains the lateral filters and the MHSSPT (not the sensor
-    # detectors of issue 16): compare with the same chain run directly
-    direct = run_rav4_log(None, "yaw_rate:0.03@40", sensor_checks=False)
+    # examples/rav4-lateral/monitor.toml chains the lateral filters, the MHSSPT and the sensor
+    # detectors of issue 16, as rav4_monitor() does by default
+    direct = run_rav4_log(None, "yaw_rate:0.03@40")
     assert [(round(e.t, 3), e.hypothesis) for e in got.events] == \
         [(a["t"], a["fault"]) for a in direct["announcements"]] != []
 
@@ -229,7 +229,12 @@ def test_checkpoint_mid_log_restore_in_a_fresh_monitor(designed, tmp_path):
         np.testing.assert_allclose(sb, sa, rtol=0, atol=1e-12)
         ea += [(e.k, e.hypothesis) for e in eva]
         eb += [(e.k, e.hypothesis) for e in evb]
-    assert ea == eb and [h for _k, h in ea] == ["rear_wheel_diff"], (ea, eb)
+    # the MHSSPT names the rear axle first; the gain cross-check then names the wheel (a 0.6 m/s
+    # bias at highway speed is a 2 % reading error, which the gain test cannot tell from a gain)
+    from fdikit.systems.car.monitor_rav4 import hypothesis_sensors
+
+    assert ea == eb and ea and ea[0][1] == "rear_wheel_diff", (ea, eb)
+    assert all("wheel_rl" in hypothesis_sensors(h) for _k, h in ea), ea
 
 
 @rav4

@@ -990,10 +990,19 @@ class Rav4Monitor:
 
 def decision_for(faults, sensor: dict[str, str] | None = None) -> Decision:
     """The announcement rule: fault f announced when ``P:f:alarm`` rises (Hold output); each
-    sensor-detector statistic ``s`` of ``sensor`` (statistic -> announced name) when ``s:alarm`` rises."""
+    sensor-detector statistic ``s`` of ``sensor`` (statistic -> announced name) when ``s:alarm`` rises.
+
+    An episode clears after :data:`CLEAR_AFTER` seconds below the level: an intermittent fault
+    (bursts every few seconds, e.g. a loose wheel-speed connector) is then one episode, not one
+    announcement per burst."""
     names = {f"P:{f}:alarm": f for f in faults}
     names.update({f"{s}:alarm": n for s, n in (sensor or {}).items()})
-    return Decision(list(names), level=0.5, names=names)
+    return Decision(list(names), level=0.5, names=names, clear_after=CLEAR_AFTER)
+
+
+#: seconds an alarm must stay off before its episode clears (longer than the off-time of the
+#: intermittent faults the monitor is meant to see: bursts up to every 5 s)
+CLEAR_AFTER = 5.0
 
 
 def design_sensor_detectors(nominal: Signals, dt: float, *, skip: int = 0, pfa: float = 1.0, per="hour",
