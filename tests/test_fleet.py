@@ -101,9 +101,14 @@ def test_fleet_writes_what_a_direct_run_gives(fleet, first_run):
         assert row["samples"] == sig.n_samples and row["invalid_samples"] == len(res.invalid)
         assert row["duration_s"] == pytest.approx(float(sig.t[-1] - sig.t[0]), abs=0)
         mine = e[e["log_id"] == row["log_id"]]
+        onsets, cleared = mine[mine["kind"] == "onset"], mine[mine["kind"] == "cleared"]
         assert [(ev.k, ev.t, ev.hypothesis, ev.value) for ev in res.events] == \
-            list(zip(mine["sample"], mine["t"], mine["hypothesis"], mine["value"]))
-        assert row["episodes"] == len(res.events)
+            list(zip(onsets["sample"], onsets["t"], onsets["hypothesis"], onsets["value"]))
+        assert [(ev.k, ev.hypothesis, ev.episode) for ev in res.cleared] == \
+            list(zip(cleared["sample"], cleared["hypothesis"], cleared["episode"]))
+        assert row["episodes"] == len(res.events) and row["cleared"] == len(res.cleared)
+        assert row["gaps"] == len(res.gaps)
+        assert row["cannot_judge_samples"] + row["warmup_samples"] == int((res.status[0] != 0).sum())
         n_episodes += len(res.events)
     assert n_episodes >= 1  # the injected faults are announced (the comparison is not of empty lists)
     assert s.loc[s["log_id"] == "veh1/b.blf", "episodes"].item() >= 1

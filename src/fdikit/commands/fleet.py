@@ -11,10 +11,12 @@ What it writes in ``DIR`` (Parquet datasets partitioned Hive-style by vehicle, o
 
     summaries/vehicle=V/<log>.parquet   one row per log: log_id, path, route, status ("ok" or
                                         "error"), error (the reason), format, duration_s, samples,
-                                        invalid_samples, episodes (announcements), first event,
+                                        invalid_samples, episodes (announcements), cleared, gaps,
+                                        cannot_judge/warmup samples, t0, first event,
                                         max statistics, extra fields, timings, worker
-    events/vehicle=V/<log>.parquet      one row per announcement (log_id, route, t, sample,
-                                        hypothesis, value)
+    events/vehicle=V/<log>.parquet      one row per onset (announcement) and per cleared event
+                                        (log_id, route, t, sample, hypothesis, value, kind,
+                                        episode, size)
     stats/vehicle=V/<log>.parquet       with --stats: every sample's residuals and statistics
 
 ``pandas.read_parquet(DIR / "summaries")`` reads a dataset with its ``vehicle`` column.
@@ -255,6 +257,8 @@ def _schemas():
         ("log_id", pa.string()), ("path", pa.string()), ("route", pa.string()), ("status", pa.string()),
         ("error", pa.string()), ("format", pa.string()), ("duration_s", pa.float64()),
         ("samples", pa.int64()), ("invalid_samples", pa.int64()), ("episodes", pa.int64()),
+        ("cleared", pa.int64()), ("gaps", pa.int64()), ("cannot_judge_samples", pa.int64()),
+        ("warmup_samples", pa.int64()), ("t0", pa.float64()),
         ("hypotheses", pa.string()), ("first_event_t", pa.float64()), ("first_hypothesis", pa.string()),
         ("max_statistics", pa.string()), ("fields", pa.string()), ("config", pa.string()),
         ("load_s", pa.float64()), ("monitor_s", pa.float64()), ("write_s", pa.float64()),
@@ -262,7 +266,8 @@ def _schemas():
     ])
     events = pa.schema([("log_id", pa.string()), ("route", pa.string()), ("t", pa.float64()),
                         ("sample", pa.int64()), ("run", pa.int64()), ("hypothesis", pa.string()),
-                        ("value", pa.float64())])
+                        ("value", pa.float64()), ("kind", pa.string()), ("episode", pa.int64()),
+                        ("size", pa.float64())])
     return summary, events
 
 
@@ -293,6 +298,7 @@ def process_log(task: LogTask) -> dict:
     summary_schema, events_schema = _schemas()
     row = {"log_id": task.log_id, "path": task.path, "route": task.route, "status": "ok", "error": None,
            "format": None, "duration_s": None, "samples": 0, "invalid_samples": 0, "episodes": 0,
+           "cleared": 0, "gaps": 0, "cannot_judge_samples": 0, "warmup_samples": 0, "t0": None,
            "hypotheses": "[]", "first_event_t": None, "first_hypothesis": None, "max_statistics": "{}",
            "fields": json.dumps(task.fields, sort_keys=True), "config": task.config,
            "load_s": 0.0, "monitor_s": 0.0, "write_s": 0.0, "wall_s": 0.0,
@@ -316,14 +322,23 @@ def process_log(task: LogTask) -> dict:
         row["duration_s"] = float(sig.t[-1] - sig.t[0]) if sig.n_samples else 0.0
         row["invalid_samples"] = len(res.invalid)
         row["episodes"] = len(res.events)
+        row["cleared"] = len(res.cleared)
+        row["gaps"] = len(res.gaps)
+        row["t0"] = float(getattr(sig, "t0", 0.0) or 0.0)
+        if res.status is not None:
+            row["cannot_judge_samples"] = int(np.count_nonzero(res.status[0] == 1))
+            row["warmup_samples"] = int(np.count_nonzero(res.status[0] == 2))
         row["hypotheses"] = json.dumps(sorted({e.hypothesis for e in res.events}))
         if res.events:
             row["first_event_t"], row["first_hypothesis"] = float(res.events[0].t), res.events[0].hypothesis
         row["max_statistics"] = json.dumps({n: float(np.max(res.statistics.values[..., i]))
                                             for i, n in enumerate(res.statistics.names)})
+        # onsets (announcements) and cleared events, in time order
         events = [{"log_id": task.log_id, "route": task.route, "t": float(e.t), "sample": int(e.k),
-                   "run": int(e.run), "hypothesis": e.hypothesis, "value": float(e.value)}
-                  for e in res.events]
+                   "run": int(e.run), "hypothesis": e.hypothesis, "value": float(e.value),
+                   "kind": e.kind, "episode": int(e.episode),
+                   "size": None if e.size is None else float(e.size)}
+                  for e in sorted([*res.events, *res.cleared], key=lambda e: (e.run, e.k, e.kind != "onset"))]
         if task.stats:
             cols = {"t": sig.t}
             for s in (res.residuals, res.statistics):
@@ -457,7 +472,7 @@ def register(sub) -> None:
             "results as Parquet datasets partitioned by vehicle in --out:\n"
             "  summaries/vehicle=V/*.parquet  one row per log (log id, route, status, error,\n"
             "                                 duration, samples, invalid samples, episodes, ...)\n"
-            "  events/vehicle=V/*.parquet     one row per announcement\n"
+            "  events/vehicle=V/*.parquet     one row per onset and per cleared event\n"
             "  stats/vehicle=V/*.parquet      with --stats: residuals and statistics per sample\n"
             "\n"
             "LOGS are directories (searched recursively), glob patterns or list files (.txt,\n"
