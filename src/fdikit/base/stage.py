@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import DataError
-from ..signals import Signals
+from ..signals import Signals, check_finite
 from .state import Stateful
 
 __all__ = ["ResidualGenerator", "ResidualProcessor"]
@@ -66,9 +66,16 @@ class ResidualGenerator(Stateful):
         raise NotImplementedError
 
     def step(self, u_k: Any, y_k: Any) -> np.ndarray:
-        """Advance one sample. ``u_k``: (runs, n_u), ``y_k``: (runs, n_y) -> (runs, n_out)."""
+        """Advance one sample. ``u_k``: (runs, n_u), ``y_k``: (runs, n_y) -> (runs, n_out).
+
+        A NaN or inf is refused with a :class:`DataError` naming the channel, before any state
+        changes (a :class:`~fdikit.monitor.Monitor` with ``on_invalid="hold"`` holds such samples
+        instead)."""
         u = _as_batch(u_k, len(self.u_names), "input", self.u_names)
         y = _as_batch(y_k, len(self.y_names), "measurement", self.y_names)
+        if not np.isfinite(u.sum() + y.sum()):  # refused before any state changes
+            check_finite(u, self.u_names, what="input")
+            check_finite(y, self.y_names, what="measurement")
         return self._step(u, y)
 
     def _inputs(self, signals: Signals) -> tuple[np.ndarray, np.ndarray]:
