@@ -434,6 +434,11 @@ def _check_fresh(cfg: MonitorConfig, names: list[str]) -> None:
     if not cfg.design:
         return
     want = None
+    missing = [a for a in names if not (cfg.artifacts / f"{a}.json").exists()]
+    if missing:
+        raise DataError(f"{cfg.path}: the config names artifacts {missing} that {cfg.artifacts} does not "
+                        f"hold (the config changed since 'fdikit design', or it was never run). Run "
+                        f"'fdikit design {cfg.path}' to build them")
     for a in names:
         stamp = read_manifest(cfg.artifacts / a).get("meta", {}).get("design_hash")
         if stamp is None:
