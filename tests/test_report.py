@@ -220,3 +220,22 @@ def test_abs_campaign_json_makes_a_report(tmp_path):
         titles
     )
     assert data["campaign"]["pf"] == camp["pf"]
+
+
+def test_events_timeline_draws_episodes_from_onset_to_cleared(tmp_path):
+    """Issue 16 item 4 in the report: an onset and its cleared event make one episode bar and one
+    row of the episode table; a second onset with no cleared event is open to the record's end."""
+    from fdikit.monitor import Event
+    from fdikit.report import Report, add_events
+
+    rep = Report("episodes")
+    ev = [Event(0, 100, 1.0, "sensor:a", 0.9, kind="onset", size=0.25, episode=0),
+          Event(0, 300, 3.0, "sensor:a", 0.1, kind="cleared", episode=0),
+          Event(0, 500, 5.0, "sensor:b", 0.8, kind="onset", episode=0)]
+    add_events(rep, ev, (0.0, 9.0))
+    html = rep.to_html()
+    assert "2 announcement(s) (fault episodes), 1 cleared" in html
+    assert "<td>open</td>" in html and "<td>0.25</td>" in html
+    bars = [d for f in rep._figures for d in f["data"] if d.get("name", "").endswith("episodes")]
+    assert [(b["name"], b["x"]) for b in bars] == [("sensor:a episodes", [1.0, 3.0, None]),
+                                                   ("sensor:b episodes", [5.0, 9.0, None])]

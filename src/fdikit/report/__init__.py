@@ -18,6 +18,7 @@ This package is core: it never imports a system or a command.
 from .builders import (
     add_campaign,
     add_events,
+    episode_spans,
     add_monitor,
     add_roc,
     add_signature,
@@ -38,6 +39,7 @@ __all__ = [
     "Report",
     "add_campaign",
     "add_events",
+    "episode_spans",
     "add_monitor",
     "add_roc",
     "add_signature",

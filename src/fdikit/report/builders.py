@@ -33,6 +33,7 @@ from .html import Report, check_output_path, heatmap_figure, stacked_time_figure
 __all__ = [
     "add_campaign",
     "add_events",
+    "episode_spans",
     "add_monitor",
     "add_roc",
     "campaign_report",
@@ -57,13 +58,16 @@ def _version() -> str:
 
 
 def event_records(events: Sequence[Any]) -> list[dict]:
-    """Events as dicts ``{t, run, sample, hypothesis, value}`` (from :class:`fdikit.monitor.Event`
-    objects, or dicts as ``fdikit monitor --events`` writes them; held-sample records dropped)."""
+    """Events as dicts ``{t, run, sample, hypothesis, value, kind, episode, size}`` (from
+    :class:`fdikit.monitor.Event` objects, or dicts as ``fdikit monitor --events`` writes them;
+    held-sample and gap records dropped). ``kind`` is ``"onset"`` (an announcement) or
+    ``"cleared"``; records of an older fdikit, which had no kind, are onsets."""
     out = []
     for e in events:
         if isinstance(e, Mapping):
-            if "invalid" in e or "hypothesis" not in e:
+            if "invalid" in e or e.get("gap") or "hypothesis" not in e:
                 continue
+            size = e.get("size")
             out.append(
                 {
                     "t": float(e["t"]),
@@ -71,9 +75,13 @@ def event_records(events: Sequence[Any]) -> list[dict]:
                     "sample": e.get("sample", e.get("k")),
                     "hypothesis": str(e["hypothesis"]),
                     "value": e.get("value"),
+                    "kind": str(e.get("kind", "onset")),
+                    "episode": e.get("episode"),
+                    "size": None if size is None else float(size),
                 }
             )
         else:
+            size = getattr(e, "size", None)
             out.append(
                 {
                     "t": float(e.t),
@@ -81,9 +89,43 @@ def event_records(events: Sequence[Any]) -> list[dict]:
                     "sample": int(e.k),
                     "hypothesis": str(e.hypothesis),
                     "value": float(e.value),
+                    "kind": str(getattr(e, "kind", "onset")),
+                    "episode": getattr(e, "episode", None),
+                    "size": None if size is None else float(size),
                 }
             )
-    out.sort(key=lambda d: (d["t"], d["run"], d["hypothesis"]))
+    out.sort(key=lambda d: (d["t"], d["run"], d["hypothesis"], d["kind"] != "onset"))
+    return out
+
+
+def episode_spans(events: Sequence[Mapping[str, Any]], t_end: float | None = None) -> list[dict]:
+    """Pair each onset with its cleared event: ``{hypothesis, run, t_onset, t_cleared, open}``.
+
+    An episode with no cleared event is still open at the end of the record (``t_end``, or its
+    onset time when ``t_end`` is not given).
+
+    Examples
+    --------
+    >>> ev = [{"t": 1.0, "run": 0, "hypothesis": "a", "kind": "onset", "episode": 0},
+    ...       {"t": 3.0, "run": 0, "hypothesis": "a", "kind": "cleared", "episode": 0},
+    ...       {"t": 5.0, "run": 0, "hypothesis": "a", "kind": "onset", "episode": 1}]
+    >>> [(e["t_onset"], e["t_cleared"], e["open"]) for e in episode_spans(ev, 9.0)]
+    [(1.0, 3.0, False), (5.0, 9.0, True)]
+    """
+    open_: dict[tuple, dict] = {}
+    out: list[dict] = []
+    for e in sorted(events, key=lambda d: (d["t"], d.get("kind", "onset") != "onset")):
+        key = (e.get("run", 0), e["hypothesis"])
+        if e.get("kind", "onset") == "onset":
+            if key in open_:  # an onset without a cleared event before it: close the old one here
+                out.append({**open_.pop(key), "t_cleared": float(e["t"]), "open": False})
+            open_[key] = {"hypothesis": e["hypothesis"], "run": key[0], "t_onset": float(e["t"]),
+                          "size": e.get("size")}
+        elif key in open_:
+            out.append({**open_.pop(key), "t_cleared": float(e["t"]), "open": False})
+    for ep in open_.values():
+        out.append({**ep, "t_cleared": float(t_end) if t_end is not None else ep["t_onset"], "open": True})
+    out.sort(key=lambda d: (d["t_onset"], d["hypothesis"]))
     return out
 
 
@@ -111,6 +153,8 @@ def read_events_jsonl(path: str | os.PathLike) -> tuple[list[dict], list[dict]]:
                 raise DataError(f"{p}, line {lineno}: expected a JSON object, got {type(rec).__name__}")
             if "invalid" in rec:
                 held.append(rec)
+            elif rec.get("gap"):  # a time gap: its missing samples were held ("cannot judge")
+                continue
             elif "hypothesis" in rec and "t" in rec:
                 ann.append(rec)
             else:
@@ -232,11 +276,21 @@ def add_events(
     held: Sequence[tuple[float, float]] = (),
     title: str = "Events",
 ) -> list[dict]:
-    """The events timeline (one row per hypothesis, held stretches as a row) and the event table."""
+    """The events timeline and the event table.
+
+    One row per hypothesis: each fault episode is a bar from its onset (a diamond: the
+    announcement) to its cleared event (a circle), or to the end of the record while it is still
+    open; held stretches of samples ("cannot judge") are a grey row. Returns the event records
+    (onsets and cleared events)."""
     ev = event_records(events)
+    onsets = [e for e in ev if e["kind"] == "onset"]
+    cleared = [e for e in ev if e["kind"] == "cleared"]
+    spans = episode_spans(ev, t_range[1] if t_range is not None else None)
     rep.section(
         title,
-        f"{len(ev)} announcement(s)" + (f", {len(held)} held stretch(es) of samples" if held else "") + ".",
+        f"{len(onsets)} announcement(s) (fault episodes), {len(cleared)} cleared"
+        + (f", {len(held)} held stretch(es) of samples" if held else "")
+        + ". Each episode is a bar from its announcement (diamond) to its cleared event (circle).",
     )
     rows = sorted({e["hypothesis"] for e in ev})
     data: list[dict] = []
@@ -255,7 +309,24 @@ def add_events(
             }
         )
     for h in rows:
-        es = [e for e in ev if e["hypothesis"] == h]
+        sp = [e for e in spans if e["hypothesis"] == h]
+        if sp:
+            xs = []
+            for e in sp:
+                xs += [e["t_onset"], e["t_cleared"], None]
+            data.append(
+                {
+                    "type": "scatter",
+                    "mode": "lines",
+                    "name": f"{h} episodes",
+                    "x": xs,
+                    "y": [h if x is not None else None for x in xs],
+                    "line": {"width": 6},
+                    "opacity": 0.45,
+                    "hoverinfo": "skip",
+                }
+            )
+        es = [e for e in onsets if e["hypothesis"] == h]
         data.append(
             {
                 "type": "scatter",
@@ -264,10 +335,25 @@ def add_events(
                 "x": [e["t"] for e in es],
                 "y": [h] * len(es),
                 "marker": {"size": 11, "symbol": "diamond"},
-                "text": [f"{h} at t = {e['t']:.3f} s (run {e['run']}, value {e['value']})" for e in es],
+                "text": [f"{h} announced at t = {e['t']:.3f} s (run {e['run']}, value {e['value']}"
+                         + (f", size {e['size']:.4g}" if e["size"] is not None else "") + ")" for e in es],
                 "hoverinfo": "text",
             }
         )
+        cs = [e for e in cleared if e["hypothesis"] == h]
+        if cs:
+            data.append(
+                {
+                    "type": "scatter",
+                    "mode": "markers",
+                    "name": f"{h} cleared",
+                    "x": [e["t"] for e in cs],
+                    "y": [h] * len(cs),
+                    "marker": {"size": 9, "symbol": "circle-open"},
+                    "text": [f"{h} cleared at t = {e['t']:.3f} s" for e in cs],
+                    "hoverinfo": "text",
+                }
+            )
     if not data:
         data.append({"type": "scatter", "mode": "markers", "name": "no events", "x": [], "y": []})
     layout: dict[str, Any] = {
@@ -281,22 +367,23 @@ def add_events(
     if t_range is not None:
         layout["xaxis"]["range"] = [t_range[0], t_range[1]]
     rep.figure({"data": data, "layout": layout})
-    if ev:
+    if spans:
         rep.table(
             [
                 {
-                    "t (s)": round(e["t"], 4),
+                    "onset t (s)": round(e["t_onset"], 4),
+                    "cleared t (s)": "open" if e["open"] else round(e["t_cleared"], 4),
                     "run": e["run"],
-                    "sample": e["sample"],
                     "hypothesis (fault)": e["hypothesis"],
-                    "value": e["value"],
+                    "size": None if e.get("size") is None else round(float(e["size"]), 6),
                 }
-                for e in ev
+                for e in spans
             ],
-            caption="announcements",
+            caption="fault episodes",
             css_class="events",
         )
-    rep.data.setdefault("events", []).extend(ev)
+    rep.data.setdefault("events", []).extend(onsets)
+    rep.data.setdefault("cleared", []).extend(cleared)
     return ev
 
 
@@ -349,7 +436,8 @@ def add_monitor(
     if result is not None:
         residuals = residuals if residuals is not None else getattr(result, "residuals", None)
         statistics = statistics if statistics is not None else getattr(result, "statistics", None)
-        events = events if events is not None else getattr(result, "events", None)
+        if events is None and result is not None:  # onsets and cleared events (episodes)
+            events = [*getattr(result, "events", []), *(getattr(result, "cleared", None) or [])]
         valid = valid if valid is not None else getattr(result, "valid", None)
         invalid = invalid if invalid is not None else getattr(result, "invalid", None)
     ref = next((s for s in (signals, residuals, statistics) if s is not None), None)
@@ -364,7 +452,7 @@ def add_monitor(
     held = true_intervals(t, held_mask)
     ev = event_records(events or [])
     ev_run = [e for e in ev if e["run"] == run]
-    marks = [(e["t"], e["hypothesis"]) for e in ev_run]
+    marks = [(e["t"], e["hypothesis"]) for e in ev_run if e["kind"] == "onset"]
     add_events(
         rep, ev_run, (float(t[0]), float(t[-1])) if T else None, held=held, title=f"{title_prefix}Events"
     )
@@ -1118,4 +1206,5 @@ def report_from_files(
         title=title,
         meta={k: str(v) for k, v in (("events file", events), ("statistics file", stats)) if v is not None},
     )
-    return {"report": str(out), "kind": "monitor", "events": len(ev), "held_samples": len(held_recs)}
+    return {"report": str(out), "kind": "monitor", "events": sum(e["kind"] == "onset" for e in ev),
+            "cleared": sum(e["kind"] == "cleared" for e in ev), "held_samples": len(held_recs)}
