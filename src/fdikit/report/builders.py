@@ -33,11 +33,11 @@ from .html import Report, check_output_path, heatmap_figure, stacked_time_figure
 __all__ = [
     "add_campaign",
     "add_events",
-    "episode_spans",
     "add_monitor",
     "add_roc",
     "campaign_report",
     "design_hash",
+    "episode_spans",
     "event_records",
     "monitor_report",
     "monitor_thresholds",
