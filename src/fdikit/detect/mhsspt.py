@@ -63,6 +63,9 @@ def _log_diff_ndtr(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     return lhi + np.log1p(-np.exp(np.minimum(llo - lhi, 0.0)))
 
 
+_INV_SQRT2 = 1.0 / math.sqrt(2.0)
+
+
 @njit(cache=True)
 def _log_ndtr_nb(x):  # pragma: no cover - compiled
     """log Phi(x): erfc down to x = -37 (Phi ~ 1e-300), the asymptotic series below."""
@@ -91,6 +94,11 @@ def umg_component_logpdf(x, low, high, std, point, logw):  # pragma: no cover - 
         hi, lo = -v, -u
     else:
         hi, lo = u, v
+    if hi > -30.0:  # Phi(hi) - Phi(lo) directly (lo <= min(hi, 0): no cancellation beyond the range's
+        # own, as in the log form), two erfc and one log instead of five transcendentals
+        p = 0.5 * (math.erfc(-hi * _INV_SQRT2) - math.erfc(-lo * _INV_SQRT2))
+        if p > 0.0:
+            return math.log(p) - logw
     lhi = _log_ndtr_nb(hi)
     d = _log_ndtr_nb(lo) - lhi
     if d > 0.0:

@@ -1040,43 +1040,72 @@ def residual_covariance(design: FilterDesign, model: LinearFaultModel, group: st
 
 
 # ---------------------------------------------------------------------------------- runtime
+def _sparse_rows(M: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Compressed rows of ``M`` (its nonzero entries in column order): ``(ptr, col, val)``.
+
+    The filters of a bank are stacked block-diagonally (:func:`stack_designs`), so most of
+    ``[[C, Dv], [A, Bv]]`` is structurally zero; the runtime multiplies the nonzeros only, in the
+    same column order as the dense product (the skipped terms are exact zeros).
+    """
+    M = np.asarray(M, float)
+    nz = M != 0.0
+    ptr = np.zeros(M.shape[0] + 1, np.int64)
+    ptr[1:] = np.cumsum(nz.sum(axis=1))
+    rows, cols = np.nonzero(nz)
+    return ptr, np.ascontiguousarray(cols, dtype=np.int64), np.ascontiguousarray(M[rows, cols])
+
+
 @njit(cache=True)
-def _advance_row(xi, v, A, Bv, C, Dv, r, tmp):  # pragma: no cover - compiled
-    """One sample of one run: r = C xi + Dv v; xi <- A xi + Bv v (in place; tmp scratch (nf,))."""
-    nf, m, q = A.shape[0], v.shape[0], C.shape[0]
-    for a in range(q):
+def _advance_row(z, nf, ptr, col, val, r, q):  # pragma: no cover - compiled
+    """One sample of one run, in place on ``z = [xi, v]`` (nf + m,):
+    r = C xi + Dv v; xi <- A xi + Bv v, with ``[[C, Dv], [A, Bv]]`` in compressed rows (q + nf rows);
+    the new state is formed in ``r``'s tail scratch ``q[...]`` before it overwrites ``xi``."""
+    nr = r.shape[0]
+    for a in range(nr):
         acc = 0.0
-        for j in range(nf):
-            acc += C[a, j] * xi[j]
-        for j in range(m):
-            acc += Dv[a, j] * v[j]
+        for e in range(ptr[a], ptr[a + 1]):
+            acc += val[e] * z[col[e]]
         r[a] = acc
     for a in range(nf):
         acc = 0.0
-        for j in range(nf):
-            acc += A[a, j] * xi[j]
-        for j in range(m):
-            acc += Bv[a, j] * v[j]
-        tmp[a] = acc
+        for e in range(ptr[nr + a], ptr[nr + a + 1]):
+            acc += val[e] * z[col[e]]
+        q[a] = acc
     for a in range(nf):
-        xi[a] = tmp[a]
+        z[a] = q[a]
 
 
 @njit(cache=True)
-def _step_kernel(xi, v, A, Bv, C, Dv, r):  # pragma: no cover - compiled
+def _step_kernel(xi, v, ptr, col, val, r):  # pragma: no cover - compiled
     """All runs, one sample: xi (R, nf) in place, v (R, m), r (R, q)."""
-    tmp = np.empty(A.shape[0])
+    nf, m = xi.shape[1], v.shape[1]
+    z = np.empty(nf + m)
+    tmp = np.empty(nf)
     for i in range(xi.shape[0]):
-        _advance_row(xi[i], v[i], A, Bv, C, Dv, r[i], tmp)
+        for a in range(nf):
+            z[a] = xi[i, a]
+        for j in range(m):
+            z[nf + j] = v[i, j]
+        _advance_row(z, nf, ptr, col, val, r[i], tmp)
+        for a in range(nf):
+            xi[i, a] = z[a]
 
 
 @njit(cache=True)
-def _run_kernel(xi, v, A, Bv, C, Dv, out):  # pragma: no cover - compiled
+def _run_kernel(xi, v, ptr, col, val, out):  # pragma: no cover - compiled
     """All runs, all samples: v (R, T, m), out (R, T, q); the same row arithmetic as the step."""
-    tmp = np.empty(A.shape[0])
+    nf, m = xi.shape[1], v.shape[2]
+    z = np.empty(nf + m)
+    tmp = np.empty(nf)
     for i in range(v.shape[0]):
+        for a in range(nf):
+            z[a] = xi[i, a]
         for k in range(v.shape[1]):
-            _advance_row(xi[i], v[i, k], A, Bv, C, Dv, out[i, k], tmp)
+            for j in range(m):
+                z[nf + j] = v[i, k, j]
+            _advance_row(z, nf, ptr, col, val, out[i, k], tmp)
+        for a in range(nf):
+            xi[i, a] = z[a]
 
 
 class FaultDetectionFilter(ResidualGenerator):
@@ -1084,7 +1113,8 @@ class FaultDetectionFilter(ResidualGenerator):
 
     Both paths call the same compiled row update (numba, strict IEEE arithmetic in a fixed
     order), sample by sample, so their outputs are bitwise equal; the batch path loops over
-    runs and samples inside compiled code.
+    runs and samples inside compiled code. The update multiplies the structural nonzeros of
+    ``[[C, Dv], [A, Bv]]`` only (a stacked bank is block-diagonal), in the dense product's order.
 
     Examples
     --------
@@ -1108,6 +1138,7 @@ class FaultDetectionFilter(ResidualGenerator):
         self._C = np.ascontiguousarray(design.C, dtype=float)
         self._Bv = np.ascontiguousarray(np.hstack([design.Bu, design.By]), dtype=float)
         self._Dv = np.ascontiguousarray(np.hstack([design.Du, design.Dy]), dtype=float)
+        self._rows = _sparse_rows(np.block([[self._C, self._Dv], [self._A, self._Bv]]))
         self.reset(1)
 
     _state_attrs = ("_xi",)
@@ -1120,7 +1151,8 @@ class FaultDetectionFilter(ResidualGenerator):
             raise ModelError(f"sample has {u.shape[0]} runs but the filter was reset for "
                              f"{self._xi.shape[0]}")
         r = np.empty((u.shape[0], self._C.shape[0]))
-        _step_kernel(self._xi, np.concatenate((u, y), axis=1), self._A, self._Bv, self._C, self._Dv, r)
+        uy = np.ascontiguousarray(np.concatenate((u, y), axis=1), dtype=float)
+        _step_kernel(self._xi, uy, *self._rows, r)
         return r
 
     def run(self, signals: Signals) -> Signals:
@@ -1134,7 +1166,7 @@ class FaultDetectionFilter(ResidualGenerator):
         self.reset(signals.runs)
         v = np.ascontiguousarray(np.concatenate([u, y], axis=2), dtype=float)
         out = np.empty((signals.runs, signals.n_samples, len(self.output_names)))
-        _run_kernel(self._xi, v, self._A, self._Bv, self._C, self._Dv, out)
+        _run_kernel(self._xi, v, *self._rows, out)
         return Signals(signals.t, out, self.output_names, check=False)
 
 
