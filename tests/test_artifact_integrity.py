@@ -16,6 +16,14 @@ from fdikit.monitor.config import build_monitor, design_hash, load_config, run_d
 
 EXAMPLES = Path(__file__).parents[1] / "examples"
 
+def _array_design():
+    """A design whose artifact holds NPZ arrays (the ABS parity residual r1, its Butterworth
+    sections), made here: a clean checkout has no designed examples."""
+    from fdikit.systems.abs.residuals import ParityR1
+
+    return ParityR1(1e-3)
+
+
 
 @pytest.fixture(scope="module")
 def two_mass(tmp_path_factory):
@@ -88,7 +96,7 @@ def test_edited_manifest_channels_are_refused(two_mass, tmp_path):
 
 
 def test_array_shapes_keys_and_kind_are_checked_against_the_payload(tmp_path):
-    r1 = load_artifact(EXAMPLES / "abs" / "designs" / "r1")
+    r1 = _array_design()
     p = save_artifact(tmp_path / "r1", r1)
     m = json.loads(p.read_text())
     key = next(iter(m["arrays"]))

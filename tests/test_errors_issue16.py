@@ -31,6 +31,14 @@ time = "t"
 artifact = "obs"
 """
 
+def _array_design():
+    """A design whose artifact holds NPZ arrays (the ABS parity residual r1, its Butterworth
+    sections), made here: a clean checkout has no designed examples."""
+    from fdikit.systems.abs.residuals import ParityR1
+
+    return ParityR1(1e-3)
+
+
 
 def _fails_if_called(*args, **kwargs):  # pragma: no cover - reaching it is the failure
     raise AssertionError("the computation started before the output paths were checked")
@@ -93,12 +101,11 @@ def test_save_state_into_a_missing_folder_is_a_clear_error(tmp_path):
 # ----------------------------------------------------------------------------- umask
 @pytest.mark.parametrize("mask", [0o022, 0o027, 0o002])
 def test_artifacts_and_checkpoints_follow_the_umask(tmp_path, mask):
-    from pathlib import Path
 
     from fdikit.detect import Hold
-    from fdikit.monitor import load_artifact, save_artifact, save_state
+    from fdikit.monitor import save_artifact, save_state
 
-    r1 = load_artifact(Path(__file__).parents[1] / "examples" / "abs" / "designs" / "r1")   # has arrays
+    r1 = _array_design()
     old = os.umask(mask)
     try:
         a = save_artifact(tmp_path / "hold", Hold(["r"], 0.5))
@@ -305,12 +312,11 @@ def test_config_folder_rate_and_level_are_clear_errors(tmp_path, capsys, two_mas
 
 
 def test_corrupt_or_foreign_artifact_files_are_clear_errors(tmp_path):
-    from pathlib import Path
 
     from fdikit.detect import Hold
     from fdikit.monitor import load_artifact, save_artifact
 
-    r1 = load_artifact(Path(__file__).parents[1] / "examples" / "abs" / "designs" / "r1")
+    r1 = _array_design()
     p = save_artifact(tmp_path / "r1", r1)
     npz = p.with_suffix(".npz")
     good = npz.read_bytes()

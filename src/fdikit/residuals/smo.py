@@ -1319,6 +1319,7 @@ class SlidingModeReconstructor(ResidualGenerator):
 
     # ------------------------------------------------------------------ state
     _state_attrs = ("_state",)
+    _checks_finite = True  # _advance names the channel, run and sample of a NaN itself
 
     def reset(self, runs: int = 1) -> None:
         """Zero observer states for ``runs`` parallel runs."""
