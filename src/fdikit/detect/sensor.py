@@ -281,6 +281,10 @@ class _SensorDetector(ResidualProcessor):
         args = ", ".join(f"{k}={v!r}" for k, v in self._repr_items())
         return f"{type(self).__name__}({args})"
 
+    def to_dict(self) -> dict:
+        """Configuration as plain data (see :mod:`fdikit.base.artifacts`)."""
+        return dict(self._repr_items())
+
     @classmethod
     def from_dict(cls, d: dict) -> Any:
         return cls(**d)
@@ -377,10 +381,6 @@ class StuckDetector(_SensorDetector):
             ("min_samples", self.min_samples),
             ("warmup", self.warmup),
         ]
-
-    def to_dict(self) -> dict:
-        """Configuration as plain data (see :mod:`fdikit.base.artifacts`)."""
-        return dict(self._repr_items())
 
     def reset(self, runs: int = 1) -> None:
         self._R = int(runs)
@@ -536,10 +536,6 @@ class DriftDetector(_SensorDetector):
             ("vs_step", self.vs_step),
             ("warmup", self.warmup),
         ]
-
-    def to_dict(self) -> dict:
-        """Configuration as plain data (see :mod:`fdikit.base.artifacts`)."""
-        return dict(self._repr_items())
 
     def reset(self, runs: int = 1) -> None:
         c = len(self.input_names)
@@ -730,10 +726,6 @@ class GainDetector(_SensorDetector):
             ("warmup", self.warmup),
         ]
 
-    def to_dict(self) -> dict:
-        """Configuration as plain data (see :mod:`fdikit.base.artifacts`)."""
-        return dict(self._repr_items())
-
     def reset(self, runs: int = 1) -> None:
         self._R = int(runs)
         self._bx = np.zeros((runs, len(self.residuals), self.W))
@@ -891,10 +883,6 @@ class IntermittentDetector(_SensorDetector):
             ("signed", self.signed),
             ("warmup", self.warmup),
         ]
-
-    def to_dict(self) -> dict:
-        """Configuration as plain data (see :mod:`fdikit.base.artifacts`)."""
-        return dict(self._repr_items())
 
     def reset(self, runs: int = 1) -> None:
         c = len(self.output_names)
