@@ -21,11 +21,11 @@ import time
 import warnings
 
 import numpy as np
-from scipy.linalg import null_space
 
 from fdikit.errors import ConditionError
 from fdikit.faults import Bias, Chirp, Ramp, Sinusoid
 from fdikit.model.linear import LinearFaultModel
+from fdikit.model.random_systems import as_fault_model, random_fault_system
 from fdikit.residuals.smo import (
     SATURATED,
     SLIDING,
@@ -42,67 +42,12 @@ NOISE_LEVELS = (1e-5, 1e-4, 1e-3)
 
 
 # ----------------------------------------------------------------------------- generator
-def _siso_block(num_roots, den_roots):
-    """Controllable companion form of prod(s - z) / prod(s - p) (monic)."""
-    den = np.poly(den_roots).real
-    num = np.poly(num_roots).real if len(num_roots) else np.array([1.0])
-    n = len(den) - 1
-    A = np.zeros((n, n))
-    A[:-1, 1:] = np.eye(n - 1)
-    A[-1] = -den[1:][::-1]
-    B = np.zeros((n, 1))
-    B[-1] = 1.0
-    c = np.zeros((1, n))
-    c[0, :len(num)] = num[::-1]
-    return A, B, c
-
-
-def random_system(seed: int, kind: str = "rd2"):
-    """``(A, M, C, Q)`` of a random system.
-
-    ``kind``: ``"rd2"`` (C M = 0, rank C A M = q: relative degree two; generically no zeros),
-    ``"rd2_zero"`` (q = 1 with an invariant zero in [-2, -0.01] built in), ``"slow_zero"`` (a
-    zero at -0.01), ``"unstable_zero"``
-    (a zero at +0.5: B2 fails), ``"rd3"`` (relative degree three: B1 fails). The structure is
-    hidden by a random change of state coordinates and a random mixing of the outputs.
-    """
-    rng = np.random.default_rng(seed)
-    n, p, h = int(rng.integers(6, 10)), int(rng.integers(3, 5)), int(rng.integers(1, 3))
-    q = int(rng.integers(1, 3)) if kind == "rd2" else 1
-    if kind == "rd2":
-        while True:
-            A = rng.standard_normal((n, n))
-            A -= (np.linalg.eigvals(A).real.max() + rng.uniform(0.3, 2.0)) * np.eye(n)
-            C = rng.standard_normal((p, n))
-            M = null_space(C) @ rng.standard_normal((n - p, q))
-            M[np.abs(M) < 1e-15] = 0.0
-            if np.linalg.matrix_rank(C @ A @ M) == q:
-                break
-    else:
-        poles = -rng.uniform(0.5, 4.0, 3)
-        zeros = {"rd2_zero": [-10 ** rng.uniform(-2, np.log10(2.0))], "slow_zero": [-0.01],
-                 "unstable_zero": [0.5], "rd3": []}[kind]
-        Af, bf, cf = _siso_block(zeros, poles)
-        nr = n - 3
-        Ar = rng.standard_normal((nr, nr))
-        Ar -= (np.linalg.eigvals(Ar).real.max() + rng.uniform(0.3, 2.0)) * np.eye(nr)
-        # fault block and the rest uncoupled: outputs 2..p do not see f, so the block's zero is a
-        # zero of the whole system
-        A = np.block([[Af, np.zeros((3, nr))], [np.zeros((nr, 3)), Ar]])
-        M = np.vstack([bf, np.zeros((nr, 1))])
-        C = np.block([[cf, np.zeros((1, nr))], [np.zeros((p - 1, 3)), rng.standard_normal((p - 1, nr))]])
-        S = rng.standard_normal((n, n)) + 3 * np.eye(n)
-        Si = np.linalg.inv(S)
-        A, M, C = S @ A @ Si, S @ M, (rng.standard_normal((p, p)) + 2 * np.eye(p)) @ C @ Si
-    Q = rng.standard_normal((n, h)) * 10 ** rng.uniform(-2, 0)
-    return A, M, C, Q
+# the systems come from fdikit.model.random_systems (the tests draw theirs from it too)
+random_system = random_fault_system
 
 
 def as_model(A, M, C, Q) -> LinearFaultModel:
-    n = A.shape[0]
-    return LinearFaultModel(A, np.zeros((n, 0)), C, Bd=Q,
-                            faults=[(f"f{j}", M[:, j], None) for j in range(M.shape[1])],
-                            disturbances=[f"xi{k}" for k in range(Q.shape[1])])
+    return as_fault_model(A, M, C, Q)
 
 
 def kinds(count: int) -> list[tuple[int, str]]:
@@ -219,6 +164,9 @@ def main(n_systems: int = 40) -> dict:
         x2 = float(np.sqrt(np.sum(xi ** 2) * H))
         gam = recx.info["l2_bound"]
         bound_checks.append({"seed": seed, "gamma_bar": gam, "ratio": e2 / (gam * x2),
+                             "claimed": bool(recx.info["l2_bound_claimed"]),
+                             "implemented_gain_self_check": recx.info["l2_bound_implemented"],
+                             "delta2": recx.secondary["delta"],
                              "always_sliding_after_0.1s": bool(np.all(st[0, t >= 0.1, 0] == SLIDING))})
         # measurement noise (first 8 systems): noise-aware design, the 0.5 Hz sinusoid
         if seed < 8:
@@ -237,7 +185,8 @@ def main(n_systems: int = 40) -> dict:
         print(f"seed {seed:2d} {kind:8s} n={n} p={p} q={q} h={h} gamma={row['l2_bound']:.3g} "
               f"rho={row['rho']:.3g} "
               f"rho2={row['rho2']:.3g} worst rmse={max(ratios.values()):.2e} "
-              f"L2 ratio={bound_checks[-1]['ratio']:.3f}")
+              f"L2 ratio={bound_checks[-1]['ratio']:.3f} claimed={bound_checks[-1]['claimed']} "
+              f"delta={rec.primary['delta']:.0e}")
     # condition failures that must be named
     cases = {}
     for kind, want in (("rd3", "B1"), ("unstable_zero", "B2")):
@@ -254,7 +203,10 @@ def main(n_systems: int = 40) -> dict:
     ok_rows = [r for r in rows if "rmse_ratio" in r]
     worst = {k: max(r["rmse_ratio"][k] for r in ok_rows) for k in shapes} if ok_rows else {}
     n_ok = sum(all(v <= 0.01 for v in r["rmse_ratio"].values()) for r in ok_rows)
-    bound_claims = [b for b in bound_checks if b["always_sliding_after_0.1s"]]
+    # the design claims gamma-bar where its self-check on its own model reaches it (a sampled observer
+    # with a boundary layer has a floor that an LMI gamma-bar near 1e-7 does not see); the bound is
+    # an ideal-sliding one, so the run must also slide throughout
+    bound_claims = [b for b in bound_checks if b["claimed"] and b["always_sliding_after_0.1s"]]
     out = {
         "benchmark": "smo_random",
         "systems": len(rows),
@@ -269,6 +221,10 @@ def main(n_systems: int = 40) -> dict:
         "undersized_systems_flagged_saturated": flagged_undersized,
         "l2_bound_checks": len(bound_checks),
         "l2_bound_claimed_checks": len(bound_claims),
+        "l2_bound_not_claimed": [{"seed": b["seed"], "gamma_bar": b["gamma_bar"],
+                                  "implemented_gain_self_check": b["implemented_gain_self_check"],
+                                  "measured_gain": b["ratio"] * b["gamma_bar"]}
+                                 for b in bound_checks if not b["claimed"]],
         "l2_bound_worst_ratio_claimed": max((b["ratio"] for b in bound_claims), default=None),
         "l2_bound_holds_fraction_claimed": (sum(b["ratio"] <= 1.0 for b in bound_claims) / len(bound_claims)
                                              if bound_claims else None),
