@@ -121,7 +121,9 @@ class Browser:
                         " plots: Array.from(document.querySelectorAll('div.plot')).map(d => ({id: d.id,"
                         "   svg: d.querySelectorAll('svg.main-svg').length,"
                         "   xtitle: (d.querySelector('.g-xtitle') || {}).textContent || '',"
-                        "   traces: (d.data || []).length, width: d.getBoundingClientRect().width}))})"
+                        "   traces: (d.data || []).length, width: d.getBoundingClientRect().width,"
+                        "   section: ((d.closest('section') || {querySelector: () => null})"
+                        "     .querySelector('h2') || {}).textContent || ''}))})"
                     ),
                 )
                 state = json.loads(r["result"]["value"])
@@ -329,7 +331,14 @@ def test_demo_and_scenario_reports_render_offline(browser, tmp_path):
     _check(browser.load(out), out, 4)
     demo = tmp_path / "demo.html"
     assert main(["demo", "--json", "--report", str(demo)]) == 0
-    _check(browser.load(demo), demo, 6)
+    state = browser.load(demo)
+    _check(state, demo, 6)
+    # every section of the demo has a rendered plot, in its own section or a "<name>: ..." one
+    from fdikit.commands.demo import sections
+
+    titles = [p["section"].lower() for p in state["plots"] if p["svg"] >= 1]
+    bare = [n for n in sections() if not any(t == n or t.startswith(f"{n}:") for t in titles)]
+    assert bare == [], f"demo sections without a rendered plot: {bare}"
 
 
 def test_the_check_itself_fails_on_errors_and_network(browser, tmp_path):

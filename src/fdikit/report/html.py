@@ -94,8 +94,11 @@ def stacked_time_figure(
         Time, s.
     panels : sequence of dict
         Each ``{"title": str, "unit": str, "traces": [(name, y (T,)), ...]}`` and optionally
-        ``"thresholds": [(label, value), ...]`` (dashed horizontal lines) and ``"invalid":
-        [(t0, t1), ...]`` (intervals shaded in this panel only).
+        ``"ylabel"``, ``"thresholds": [(label, value), ...]`` (dashed horizontal lines),
+        ``"invalid": [(t0, t1), ...]`` (intervals shaded in this panel only), ``"range": (lo, hi)``
+        (the initial y range, in data units also on a log axis; a double click autoscales) and
+        ``"log": True`` (a logarithmic y axis; values <= 0 are not drawn). A trace name that an
+        earlier panel already has shares its legend entry (one click hides it in every panel).
     held : sequence of (t0, t1)
         Intervals shaded in every panel (samples the monitor held).
     events : sequence of (t, label)
@@ -140,7 +143,8 @@ def stacked_time_figure(
         "#17becf",
         "#d62728",
     ]
-    ci = 0
+    colours: dict[str, str] = {}  # one colour per trace name across the panels
+    shown: set[str] = set()
     for i, p in enumerate(panels):
         k = i + 1
         yname = "y" if k == 1 else f"y{k}"
@@ -154,25 +158,32 @@ def stacked_time_figure(
             },
             "zeroline": False,
         }
-        if p.get("range") is not None:
+        if p.get("log"):
+            layout[ax]["type"] = "log"
+            if p.get("range") is not None:  # plotly takes a log axis's range as log10 values
+                layout[ax]["range"] = [float(np.log10(v)) for v in p["range"]]
+        elif p.get("range") is not None:
             layout[ax]["range"] = list(p["range"])
         for name, y in p["traces"]:
             y = np.asarray(y, float)
             td, yd = minmax_decimate(t, y, max_points)
-            data.append(
-                {
-                    "type": "scatter",
-                    "mode": "lines",
-                    "name": str(name),
-                    "x": encode_array(td),
-                    "y": encode_array(yd, "f4"),
-                    "yaxis": yname,
-                    "line": {"width": 1, "color": palette[ci % 10]},
-                    "legendgroup": str(name),
-                }
-            )
-            ci += 1
+            trace = {
+                "type": "scatter",
+                "mode": "lines",
+                "name": str(name),
+                "x": encode_array(td),
+                "y": encode_array(yd, "f4"),
+                "yaxis": yname,
+                "line": {"width": 1, "color": colours.setdefault(str(name), palette[len(colours) % 10])},
+                "legendgroup": str(name),
+            }
+            if str(name) in shown:
+                trace["showlegend"] = False  # the same series in another panel: one legend entry
+            shown.add(str(name))
+            data.append(trace)
         for label, value in p.get("thresholds", ()):
+            if p.get("log") and not value > 0:
+                continue  # not on a logarithmic axis
             shapes.append(
                 {
                     "type": "line",
@@ -191,7 +202,8 @@ def stacked_time_figure(
                     "x": 1.0,
                     "xanchor": "right",
                     "yref": yname,
-                    "y": value,
+                    # shapes take data values on a log axis, annotations the log10 of them
+                    "y": float(np.log10(value)) if p.get("log") else value,
                     "yanchor": "bottom",
                     "text": html.escape(str(label)),
                     "showarrow": False,
@@ -320,8 +332,19 @@ def heatmap_figure(
         "title": {"text": html.escape(title)},
         "height": int(140 + 28 * len(y_labels)),
         "margin": {"l": 110, "r": 30, "t": 50, "b": 80},
-        "xaxis": {"title": {"text": html.escape(x_title)}, "side": "bottom", "type": "category"},
-        "yaxis": {"title": {"text": html.escape(y_title)}, "autorange": "reversed", "type": "category"},
+        # automargin: long row labels push the plot right instead of running under the axis title
+        "xaxis": {
+            "title": {"text": html.escape(x_title)},
+            "side": "bottom",
+            "type": "category",
+            "automargin": True,
+        },
+        "yaxis": {
+            "title": {"text": html.escape(y_title)},
+            "autorange": "reversed",
+            "type": "category",
+            "automargin": True,
+        },
     }
     return {"data": [trace], "layout": layout}
 

@@ -639,16 +639,26 @@ def run_campaign(runs: int = 200, *, nominal_runs: int | None = None, design_run
 
 def gp1_grid(snrs: Sequence[float] = (17.0, 20.0, 23.0), windows: Sequence[int] = (30, 40, 50), *,
              runs: int = 200, design_runs: int = 400, seed: int = 0, pfa: float = 1e-3, margin: float = 0.1,
-             t_detect: float = 7.0, batch: int = 1000, progress: bool = False) -> dict:
+             t_detect: float = 7.0, batch: int = 1000, progress: bool = False,
+             magnitudes: dict[str, float] | None = None, nominal_runs: int | None = None) -> dict:
     """Pd of G_P1 within ``t_detect`` for F1.2 and F2.2 against noise level and window (Fig. 15).
 
-    The threshold is designed afresh for every (SNR, W) from ``design_runs`` nominal runs.
+    The threshold is designed afresh for every (SNR, W) from ``design_runs`` nominal runs (for a
+    per-run false-alarm probability ``pfa``, hold Z = 40 as in Table III); every SNR reuses the same
+    seeds (common random numbers), so that the grid's cells differ by the noise level and the window
+    only. ``Pd`` is the fraction of the ``runs`` faulty stops whose first alarm comes at or before
+    ``t_detect`` s (the paper's 7 s of Fig. 10), ``Pf`` the fraction of ``nominal_runs`` (default
+    ``runs``) nominal stops with any alarm.
+
+    ``magnitudes``: one fixed relative size per class, e.g. ``{"F1.2": -0.05, "F2.2": -0.25}``
+    (missing classes and None: drawn per run inside the class, F1.2 -5..-10 %, F2.2 -20..-30 %).
 
     Returns
     -------
     dict
         ``snr_db``, ``W``, ``pd`` {fault: [[Pd per W] per SNR]}, ``pf`` [[per W] per SNR],
-        ``thresholds``.
+        ``thresholds``, ``magnitudes`` {fault: size or None (drawn)}, ``t_detect``, ``pfa``,
+        ``runs``, ``nominal_runs``, ``design_runs``.
 
     Examples
     --------
@@ -658,9 +668,14 @@ def gp1_grid(snrs: Sequence[float] = (17.0, 20.0, 23.0), windows: Sequence[int] 
     """
     from .residuals import ABSObserver, ParityR1
 
+    mags = {c: (None if magnitudes is None else magnitudes.get(c)) for c in ("F1.2", "F2.2")}
+    nominal_runs = runs if nominal_runs is None else int(nominal_runs)
+    if runs < 1 or nominal_runs < 1:
+        raise DataError(f"runs and nominal_runs must be >= 1, got {runs} and {nominal_runs}")
     out = {"snr_db": list(snrs), "W": list(windows), "pd": {"F1.2": [], "F2.2": []}, "pf": [],
-           "thresholds": []}
-    prog, info = _progress(progress, len(snrs) * (design_runs + 3 * runs), "G_P1 grid")
+           "thresholds": [], "magnitudes": mags, "t_detect": t_detect, "pfa": pfa, "runs": runs,
+           "nominal_runs": nominal_runs, "design_runs": design_runs}
+    prog, info = _progress(progress, len(snrs) * (design_runs + nominal_runs + 2 * runs), "G_P1 grid")
     with prog:
         adv = None
         if info is not None:
@@ -675,7 +690,9 @@ def gp1_grid(snrs: Sequence[float] = (17.0, 20.0, 23.0), windows: Sequence[int] 
                                 batch=batch, progress=adv)
             out["thresholds"].append([bank.thresholds[s.name] for s in specs])
             for ci, c in enumerate(("F0", "F1.2", "F2.2")):
-                stream = _simulate_residuals(c, None, runs, seed + 104729 * (ci + 1), snr, batch, gens, adv)
+                n = nominal_runs if c == "F0" else runs
+                stream = _simulate_residuals(c, mags.get(c), n, seed + 104729 * (ci + 1), snr, batch, gens,
+                                             adv)
                 ts = [bank.alarms(r)[1] for r in stream]
                 t = np.concatenate(ts)
                 row = np.mean(t <= t_detect, axis=0) if c != "F0" else np.mean(np.isfinite(t), axis=0)

@@ -166,7 +166,7 @@ def abs_detectability(fault: str, magnitude: float, *, snr_db: float | None = 23
     }
 
 
-def demo_summary() -> dict[str, Any]:
+def demo_summary(details: dict | None = None) -> dict[str, Any]:
     """``fdikit demo`` section: the I_w fault the paper's tests miss, the tau_m fault nobody can see.
 
     Designs the extended ABS tests on 300 nominal runs (pfa 1 % per test), runs 20 nominal stops,
@@ -174,6 +174,10 @@ def demo_summary() -> dict[str, Any]:
     so that the same tests firing in both shows the fault changes nothing), and reports which tests
     fired, the directional test's estimate of the I_w change, and the Neyman-Pearson bound of the
     tau_m fault (800 nominal runs).
+
+    ``details``, when given, receives ``bank`` (the designed tests) and ``cases``: per label, the
+    ``fault``, ``magnitude``, ``residuals`` (Signals of the 20 runs) and ``fired`` (runs, tests),
+    for the demo's report.
 
     Returns
     -------
@@ -193,6 +197,9 @@ def demo_summary() -> dict[str, Any]:
         res = simulate(None, Scenario(fault=fault, magnitude=mag), runs=20, seed=4)
         r = abs_residuals(res.y.concat_channels(res.u), gens)
         fired, _ = bank.alarms(r)
+        if details is not None:
+            details.setdefault("cases", {})[label] = {"fault": fault, "magnitude": mag, "residuals": r,
+                                                      "fired": fired}
         rates = {n: float(fired[:, j].mean()) for j, n in enumerate(bank.names)}
         row = {"fired_fraction": {k: v for k, v in rates.items() if v > 0} or "none"}
         if fault == "F4":
@@ -204,4 +211,6 @@ def demo_summary() -> dict[str, Any]:
     out["tau_m +15 % bound"] = (f"d' = {b['d_prime_whole_record_bound']:.2f} over the whole record: any "
                                 f"detector's Pd <= {b['pd_bound_whole_record']:.4f} at Pfa 1e-4")
     out["seconds"] = round(time.perf_counter() - t0, 2)
+    if details is not None:
+        details["bank"] = bank
     return out

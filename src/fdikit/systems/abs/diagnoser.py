@@ -651,8 +651,11 @@ def complete_campaign(runs: int = 200, *, nominal_runs: int | None = None, bank:
 _DEMO_CACHE: dict[str, ABSDiagnoser] = {}
 
 
-def demo_summary() -> dict[str, Any]:
+def demo_summary(details: dict | None = None) -> dict[str, Any]:
     """Design a small diagnoser (cached in memory) and diagnose one record of each detectable class.
+
+    ``details``, when given, receives ``diagnoser`` and ``records`` (the simulated record of each
+    case, in the order of ``cases``), for the demo's report.
 
     Returns
     -------
@@ -666,12 +669,15 @@ def demo_summary() -> dict[str, Any]:
     if "dg" not in _DEMO_CACHE:
         _DEMO_CACHE["dg"] = ABSDiagnoser.design(design_runs=100, runs=16, svm_per_size=3, seed=0)
     dg = _DEMO_CACHE["dg"]
-    cases = []
+    cases, records = [], []
     for f, m in (("F0", None), ("F1.2", -0.08), ("F2.2", -0.25), ("F3", -0.08), ("F4", -0.08)):
         rec = simulate(None, Scenario(fault=f, magnitude=m), seed=2026)
+        records.append(rec)
         d = dg.diagnose(rec)
         cases.append({"injected": f, "magnitude": m, "diagnosed": d["fault"], "fired": d["fired"],
                       "param": d["param"], "relative_change": d["relative_change"]})
+    if details is not None:
+        details.update(diagnoser=dg, records=records)
     rep = abs_tree_report(dg.tree)
     return {"go_path": rep["go_path"], "redundant": rep["redundant"], "listing": rep["listing"],
             "svm_error": dg.info["svm_error"], "cases": cases, "seconds": time.perf_counter() - t0}

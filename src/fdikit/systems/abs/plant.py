@@ -1112,8 +1112,11 @@ def summarize(res: ABSResult) -> dict[str, Any]:
     }
 
 
-def demo_summary() -> dict[str, Any]:
+def demo_summary(details: dict | None = None) -> dict[str, Any]:
     """A single short ABS stop (15 m/s, 8 s record, one noisy run) for ``fdikit demo``.
+
+    ``details``, when given, receives ``result``: the :class:`ABSResult` of the stop, with its true
+    states (``keep_states``), for the demo's report.
 
     Returns
     -------
@@ -1128,7 +1131,10 @@ def demo_summary() -> dict[str, Any]:
     (1.0, True)
     """
     sc = Scenario(v0=15.0, t_brake=0.2, t_end=8.0)
-    return summarize(simulate(None, sc, runs=1, seed=0))
+    res = simulate(None, sc, runs=1, seed=0, keep_states=details is not None)
+    if details is not None:
+        details["result"] = res
+    return summarize(res)
 
 
 def fault_scenarios(snr_db: float | None = 23.0, **kw) -> dict[str, Scenario]:

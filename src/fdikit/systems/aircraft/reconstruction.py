@@ -170,8 +170,11 @@ def plot_fig1(res: dict, path: str) -> None:
     plt.close(fig)
 
 
-def demo_summary() -> dict:
+def demo_summary(details: dict | None = None) -> dict:
     """Short aircraft reconstruction for ``fdikit demo`` (5 s simulated at h = 1e-5; ~2-3 s).
+
+    ``details``, when given, receives ``run``: the whole :func:`run_aircraft` result with its time
+    histories (``t``, ``f``, ``fhat``, ``fhat_nominal``), for the demo's report.
 
     Returns
     -------
@@ -180,7 +183,9 @@ def demo_summary() -> dict:
         ``rmse_ratio_nominal``, ``seconds``.
     """
     t0 = time.perf_counter()
-    r = run_aircraft(t_final=5.0, h=1e-5, settle=1.0, noise_std=None)
+    r = run_aircraft(t_final=5.0, h=1e-5, settle=1.0, noise_std=None, keep_signals=details is not None)
+    if details is not None:
+        details["run"] = r
     return {
         "name": "SMO fault reconstruction, aircraft (ng-tan-edwards-kuang)",
         "case": r["case"], "conditions": r["conditions"], "pbar": r["pbar"],

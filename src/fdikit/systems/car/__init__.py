@@ -85,11 +85,12 @@ __all__ = [
 ]
 
 
-def demo_summary() -> dict:
+def demo_summary(details: dict | None = None) -> dict:
     """Short passenger-car showcase for ``fdikit demo``: the linearisation at 20 m/s, a 2-second
     automated drive at 24 m/s in which a driver steps on the brake (a real brake-actuator fault the
     speed controller fights with the throttle, ng-chen-speyer Fig. 5), and the RAV4 fit if the data are
-    there."""
+    there. ``details``, when given, receives ``drive`` (the drive's simulation result) and
+    ``fault_onset_s``, for the demo's report."""
     import numpy as np
 
     from ...faults import Bias
@@ -98,6 +99,8 @@ def demo_summary() -> dict:
     s = lin.summary()
     res = simulate_drive("straight", 24.0, duration=1.2, dt=2.5e-3,
                          faults=[Bias("actuator:brake", 0.6, start=0.4)])
+    if details is not None:
+        details.update(drive=res, fault_onset_s=0.4)
     t, thr, v = res.u.t, res.u["throttle"][0], res.x["v_x"][0]
     drive = {"scenario": "straight at 24 m/s, +0.6 MPa brake from 0.4 s (driver's foot)",
              "throttle_before_deg": round(float(thr[t < 0.4].mean()), 2),

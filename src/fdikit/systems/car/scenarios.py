@@ -269,10 +269,16 @@ def nominal_drive(minutes: float = 10.0, *, speeds=(20.0, 24.0), kinds=("straigh
             "simulated_s": round(sum(g["seconds"] for g in segs), 2)}
 
 
-def demo_summary() -> dict:
-    """Short showcase for ``fdikit demo``: the brake-actuator scenario (paper Fig. 5), shortened."""
+def demo_summary(details: dict | None = None) -> dict:
+    """Short showcase for ``fdikit demo``: the brake-actuator scenario (paper Fig. 5), shortened.
+
+    ``details``, when given, receives what :func:`run_scenario` returns (``summary``, ``t``,
+    ``features``, ``probabilities``, ``inputs``, ``measurements``, ``events``), for the demo's report.
+    """
     t0 = time.perf_counter()
     out = run_scenario("brake_actuator_short")
+    if details is not None:
+        details.update(out)
     s = out["summary"]
     return {"scenario": s["description"], "detection_delay_s": s["detection_delay_s"],
             "isolated": s["isolated"], "false_announcements": s["false_announcements"],
