@@ -971,13 +971,16 @@ def _smo_step_py(h, A, B, C, Gl, Gn, rho, delta, SV, Smu, u, y, x, e, started, n
 _smo_step = njit(cache=True, inline="always")(_smo_step_py)
 
 
-def _status_py(e, SV, Smu, delta, level, Vprev, started):
-    """Sliding status of one observer after its step; updates ``Vprev[0]`` (``e^T Po e``).
+def _status_py(e, SV, Smu, delta, level, Vprev, started, settle_n):
+    """Sliding status of one observer after its step; updates ``Vprev`` (``[e^T Po e, hold]``).
 
     ``SLIDING`` while ``||nu|| / rho = ||e|| / (||e|| + delta) <= level`` (inside the boundary
     layer); otherwise ``NOT_SLIDING`` while the Lyapunov function ``e^T Po e`` (``Po = S^-1``)
     decreases (reaching) and ``SATURATED`` when it does not (the injection is at its cap and
-    cannot hold the error).
+    cannot hold the error). After a sample outside the layer, the status stays ``NOT_SLIDING``
+    for ``settle_n`` more samples inside it (``Vprev[1]`` counts them down): the reduced-order
+    error that a loss of sliding leaves decays only with the sliding motion, so ``fhat`` is the
+    equivalent injection again before it is the fault again.
     """
     p = e.shape[0]
     if p == 0:
@@ -994,6 +997,10 @@ def _status_py(e, SV, Smu, delta, level, Vprev, started):
     code = 0
     if ne > level * (ne + delta):
         code = 1 if (not started or V < Vprev[0]) else 2
+        Vprev[1] = settle_n
+    elif Vprev[1] > 0.0:
+        Vprev[1] -= 1.0
+        code = 1
     Vprev[0] = V
     return code
 
@@ -1003,7 +1010,8 @@ _status = njit(cache=True, inline="always")(_status_py)
 
 def _kernel_py(h, cascade, A1, B1, C1, Gl1, Gn1, rho1, del1, S1V, S1mu, Tv, r, Zsel, Af,
                A2, B2, C2, Gl2, Gn2, rho2, del2, S2V, S2mu, Wf,
-               U, Y, x1, e1, x2, e2, vf, started, out, implicit, level, a_lp, flp, V1p, V2p):
+               U, Y, x1, e1, x2, e2, vf, started, out, implicit, level, a_lp, flp, V1p, V2p,
+               settle_n):
     """Fixed-step integration of the primary and secondary (or single) observers.
 
     Per sample ``k``: primary step with ``y[k]`` -> ``nu`` (15)-(18), (24); ``v = T^T Po^-1 nu``
@@ -1033,7 +1041,7 @@ def _kernel_py(h, cascade, A1, B1, C1, Gl1, Gn1, rho1, del1, S1V, S1mu, Tv, r, Z
                 _smo_step(h, A1, B1, C1, Gl1, Gn1, rho1, del1, S1V, S1mu, u, Y[run, k],
                           x1[run], e1[run], st0, nu1, dx1, xt1, w1, wt1,
                           implicit)
-                c1 = _status(e1[run], S1V, S1mu, del1, level, V1p[run], st0)
+                c1 = _status(e1[run], S1V, S1mu, del1, level, V1p[run], st0, settle_n)
                 _mv(Tv, nu1, v, False)  # ng-tan-edwards-kuang, eq. (23)
                 for i in range(Zsel.shape[0]):
                     ybar[i] = v[Zsel[i]]  # ng-tan-edwards-kuang, eq. (27)
@@ -1055,7 +1063,7 @@ def _kernel_py(h, cascade, A1, B1, C1, Gl1, Gn1, rho1, del1, S1V, S1mu, Tv, r, Z
                 _smo_step(h, A2, B2, C2, Gl2, Gn2, rho2, del2, S2V, S2mu, u, Y[run, k],
                           x2[run], e2[run], st0, nu2, dx2, xt2, w2, wt2,
                           implicit)
-            c2 = _status(e2[run], S2V, S2mu, del2, level, V2p[run], st0)
+            c2 = _status(e2[run], S2V, S2mu, del2, level, V2p[run], st0, settle_n)
             started[run] = True
             for i in range(q):
                 acc = 0.0
@@ -1090,7 +1098,8 @@ class SlidingModeReconstructor(ResidualGenerator):
     ``sliding_status:primary`` and ``sliding_status:secondary``, per sample:
     ``0`` sliding (:data:`SLIDING`: the injection is inside its boundary layer, ``||nu|| <=
     level * rho``, so ``fhat`` is the equivalent injection), ``1`` not sliding
-    (:data:`NOT_SLIDING`: reaching, the error is outside the layer but falling) and ``2``
+    (:data:`NOT_SLIDING`: reaching, the error is outside the layer but falling; or recovering:
+    back in the layer for less than ``settle`` seconds after a loss) and ``2``
     saturated (:data:`SATURATED`: the injection is at its cap and the error is not falling: the
     gain is too small for the fault and ``fhat`` is clipped). A :class:`~fdikit.monitor.Decision`
     on ``sliding_status`` with ``level=1`` announces every loss of sliding as an event;
@@ -1123,6 +1132,10 @@ class SlidingModeReconstructor(ResidualGenerator):
         Boundary-layer level of the status: sliding while ``||nu|| <= level * rho`` (0 < level < 1).
     lpf_tau : float
         Time constant (s) of the first-order low-pass on ``fhat`` (0: none).
+    settle : float
+        After a loss of sliding, the status stays "not sliding" until the error has stayed inside
+        the boundary layer this long (s): the time the sliding motion needs to wash out what the
+        loss left (:func:`design_reconstructor` sets three time constants of its slowest mode).
     """
 
     cascade: bool
@@ -1142,6 +1155,7 @@ class SlidingModeReconstructor(ResidualGenerator):
     scheme: str = "implicit"
     level: float = 0.9
     lpf_tau: float = 0.0
+    settle: float = 0.0
 
     STATUS_NAMES = ("sliding_status", "sliding_status:primary", "sliding_status:secondary")
 
@@ -1153,6 +1167,7 @@ class SlidingModeReconstructor(ResidualGenerator):
         if not self.level < 1.0:
             raise DataError(f"level must be in (0, 1), got {self.level}")
         self.lpf_tau = _pos(self.lpf_tau, "lpf_tau", allow_zero=True)
+        self.settle = _pos(self.settle, "settle", allow_zero=True)
         self.u_names, self.y_names = list(self.u_names), list(self.y_names)
         m, py = len(self.u_names), len(self.y_names)
         for key, d in (("primary", self.primary), ("secondary", self.secondary)):
@@ -1258,7 +1273,7 @@ class SlidingModeReconstructor(ResidualGenerator):
             "Wf_shape": list(self.Wf.shape),
             "r": self.r, "dt": self.dt, "u_names": self.u_names, "y_names": self.y_names,
             "output_names": self.output_names, "scheme": self.scheme, "level": self.level,
-            "lpf_tau": self.lpf_tau, "info": plain(self.info),
+            "lpf_tau": self.lpf_tau, "settle": self.settle, "info": plain(self.info),
         }
 
     @classmethod
@@ -1293,7 +1308,8 @@ class SlidingModeReconstructor(ResidualGenerator):
             Wf=np.asarray(d["Wf"], float).reshape(q, -1), r=int(d["r"]),
             dt=float(d["dt"]), u_names=list(d["u_names"]), y_names=list(d["y_names"]),
             output_names=names, info=dict(d.get("info", {})), scheme=d["scheme"],
-            level=float(d.get("level", 0.9)), lpf_tau=float(d.get("lpf_tau", 0.0)))
+            level=float(d.get("level", 0.9)), lpf_tau=float(d.get("lpf_tau", 0.0)),
+            settle=float(d.get("settle", 0.0)))
 
     def error_transfer(self):
         """``G(s)`` of ng-tan-edwards-kuang eq. (40): ``xi`` -> reconstruction error ``f^ - f``.
@@ -1332,8 +1348,8 @@ class SlidingModeReconstructor(ResidualGenerator):
             "x1": np.zeros((runs, n1)), "e1": np.zeros((runs, p1)),
             "x2": np.zeros((runs, n2)), "e2": np.zeros((runs, p2)),
             "vf": np.zeros((runs, self.r)), "started": np.zeros(runs, dtype=np.bool_),
-            "flp": np.zeros((runs, self.n_faults)), "V1": np.zeros((runs, 1)),
-            "V2": np.zeros((runs, 1)), "k": np.zeros(1, dtype=np.int64),
+            "flp": np.zeros((runs, self.n_faults)), "V1": np.zeros((runs, 2)),
+            "V2": np.zeros((runs, 2)), "k": np.zeros(1, dtype=np.int64),
         }
 
     def _check(self, U: np.ndarray, Y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -1367,7 +1383,8 @@ class SlidingModeReconstructor(ResidualGenerator):
                 self.Zsel, self.Af, S["A"], S["B"], S["C"], S["Gl"], S["Gn"], float(S["rho"]),
                 float(S["delta"]), S["SV"], S["Smu"], self.Wf, U, Y,
                 st["x1"], st["e1"], st["x2"], st["e2"], st["vf"], st["started"], out,
-                self.scheme == "implicit", float(self.level), a_lp, st["flp"], st["V1"], st["V2"])
+                self.scheme == "implicit", float(self.level), a_lp, st["flp"], st["V1"], st["V2"],
+                float(np.ceil(self.settle / self.dt - 1e-9)) if self.settle > 0 else 0.0)
         st["k"][0] += Y.shape[1]
         return out
 
@@ -1641,6 +1658,7 @@ def design_reconstructor(
     accuracy: float = 1e-3,
     check: bool = True,
     check_horizon: float = 1.0,
+    settle: float | None = None,
 ) -> SlidingModeReconstructor:
     """Design a robust SMO fault reconstructor; single observer or cascade, chosen automatically.
 
@@ -1748,6 +1766,11 @@ def design_reconstructor(
         (``info["l2_bound_claimed"]`` is None).
     check_horizon : float
         Length (s) of the self-check runs (scored over their second half).
+    settle : float, optional
+        Seconds the error must stay inside the boundary layer after a loss of sliding before the
+        status says sliding again (default: three time constants of the slowest mode of the
+        sliding motion, ``info["sliding_settle"]``; a slow invariant zero makes it long, because
+        the reconstruction really takes that long to recover).
 
     Returns
     -------
@@ -1940,6 +1963,18 @@ def design_reconstructor(
     CG = g2.W @ A3b
     DG = g2.W @ Q2b
     details["G"] = (AG, BG, CG, DG)
+    # the sliding motion's slowest mode: how long a loss of sliding takes to wash out of fhat
+    ev_G = np.linalg.eigvals(AG) if AG.size else np.zeros(0)
+    slow_mode = float(np.min(-ev_G.real)) if ev_G.size else float("inf")
+    if settle is None:
+        settle_v = 3.0 / slow_mode if np.isfinite(slow_mode) and slow_mode > 0 else 0.0
+    else:
+        settle_v = _pos(settle, "settle", allow_zero=True)
+    info["sliding_settle"] = {"settle_s": settle_v, "slowest_sliding_mode": slow_mode,
+                              "sized": settle is None,
+                              "note": "after a loss of sliding the status stays 'not sliding' until the "
+                                      "error has stayed in the boundary layer settle_s seconds (three time "
+                                      "constants of the slowest eigenvalue of the sliding motion, eq. (40))"}
     info.update({"pbar": int(pbar), "r": int(r), "l2_bound": g2.gamma, "lmi_seconds": t_lmi,
                  "l2_bound_from": "xi, the input of the uncertainty filter xi~' = A_Omega xi~ + B_Omega xi",
                  "W_Tinv_Poinv": Wrec, "Po_bar": g2.Po, "gamma_o": g2.gamma_o, "solver": solver,
@@ -1962,7 +1997,7 @@ def design_reconstructor(
             Af=np.ascontiguousarray(Af), Wf=np.ascontiguousarray(Wf),
             r=int(r if case == "cascade" else 0), dt=float(dt), u_names=list(model.inputs),
             y_names=list(model.outputs), output_names=[f"fhat:{f}" for f in fnames], info=info,
-            details=details, scheme=scheme, level=level, lpf_tau=tau)
+            details=details, scheme=scheme, level=level, lpf_tau=tau, settle=settle_v)
 
     # self-check amplitudes: inside the reconstructible range
     f_chk = min(fault_bound, 0.5 * f_max) if np.isfinite(f_max) and f_max > 0 else fault_bound
