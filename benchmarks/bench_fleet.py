@@ -15,8 +15,10 @@ numba caches: a fleet service pays that once), giving
 * scaling efficiency 1 -> 2 workers = (T1 / T2) / 2                               (target >= 80 %);
 * the share of the task time spent loading and decoding (read_log: BLF + DBC + grid).
 
-Also the single-process cost of one RAV4 minute (load + decode, monitor run) for reference. The
-last line printed is one JSON object.
+Also, for reference and less sensitive to other work on the machine, the single-process cost of
+one RAV4 minute (load + decode, monitor run; median of 5) and of one whole fleet task in this
+process (:func:`fdikit.commands.fleet.process_log` on a generated log: load, decode, monitor,
+commit; median of 10). The last line printed is one JSON object.
 
 Run: ``python benchmarks/bench_fleet.py [N_LOGS]`` from the repository root.
 """
@@ -130,6 +132,17 @@ def main(argv: list[str]) -> int:
             runs.append(time.perf_counter() - b)
             loads.append(b - a)
         one_load, one_run = float(np.median(loads)), float(np.median(runs))
+        # one whole fleet task in this process (load + decode + monitor + commit), 10 logs
+        from fdikit.commands.fleet import plan, process_log
+
+        inproc = plan([str(logs)], cfg, tmp / "inproc")[:11]
+        process_log(inproc[0])
+        tasks_s = []
+        for task in inproc[1:]:
+            a = time.perf_counter()
+            process_log(task)
+            tasks_s.append(time.perf_counter() - a)
+        one_task = float(np.median(tasks_s))
         warm = tmp / "warm.blf"
         shutil.copy(paths[0], warm)
         rep = {w: _run(cfg, logs, tmp / f"out{w}", w, warm) for w in (1, 2)}
@@ -143,6 +156,9 @@ def main(argv: list[str]) -> int:
           f"({vh:.3f} vehicle-hours; {rep[1]['episodes']} episodes announced, {rep[1]['errors']} errors)")
     print(f"one RAV4 minute in process: load + decode {one_load * 1e3:.1f} ms, monitor "
           f"{one_run * 1e3:.1f} ms -> {60.0 / (one_load + one_run):.0f} vehicle-hours per core-hour")
+    print(f"one fleet task in process (a generated log, load + decode + monitor + commit): "
+          f"{one_task * 1e3:.1f} ms -> {60.0 / one_task:.0f} vehicle-hours per core-hour "
+          f"(target <= {60.0 / TARGET_VH_PER_CORE_H * 1e3:.0f} ms)")
     print(f"machine load average (1 min) before / after: {load0:.1f} / {os.getloadavg()[0]:.1f} "
           f"on {os.cpu_count()} cores (other processes share the cores)")
     for w, r in rep.items():
@@ -154,6 +170,7 @@ def main(argv: list[str]) -> int:
            "episodes": rep[1]["episodes"], "errors": rep[1]["errors"], "generate_s": round(gen_s, 2),
            "one_log_load_decode_ms": round(one_load * 1e3, 2), "one_log_monitor_ms": round(one_run * 1e3, 2),
            "one_log_vh_per_core_h": round(60.0 / (one_load + one_run), 1),
+           "one_task_in_process_ms": round(one_task * 1e3, 2),
            "wall_s": {str(w): round(r["wall_seconds"], 3) for w, r in rep.items()},
            "warmup_s": {str(w): round(r["warmup_s"], 2) for w, r in rep.items()},
            "vh_per_core_h": {str(w): round(v, 1) for w, v in thr.items()},

@@ -77,100 +77,269 @@ def _stuck_kernel(x, e, tol, inv_scale, has_e, nmin, out, anchor, pmin, pmax, n,
                 out[r, k] = n[r] * inv_scale
 
 
+#: Samples evaluated together by the window kernels: their accumulators stay in the L1 cache while
+#: the candidate change points are swept, one vectorisable loop over the samples per candidate.
+_BLOCK = 256
+#: Blocks shorter than this (streaming, one sample at a time) take the plain per-sample loop.
+_SCALAR_BELOW = 16
+
+
 @njit(cache=True)
+def _ring_history(buf, p0, h, out):  # pragma: no cover
+    """The last ``h`` samples of a ring buffer (next write at ``p0``), oldest first, into ``out[:h]``."""
+    W = buf.size
+    for i in range(h):
+        q = p0 - h + i
+        if q < 0:
+            q += W
+        out[i] = buf[q]
+
+
+@njit(cache=True, error_model="numpy")
 def _ramp_kernel(x, mu0, W, Lmin, vs_step, out_p, out_m, buf, pos, cnt):  # pragma: no cover
     """One-sided ramp GLRs (unscaled): x (R, T, C) -> out_p, out_m (R, T, C); ring buffer state.
     With ``vs_step`` the statistic is 0 unless the best ramp explains the window better than the
-    best step (``max_j ramp GLR > max_j step GLR``)."""
+    best step (``max_j ramp GLR > max_j step GLR``).
+
+    For every sample k the sums over the last ``L = 1 .. n`` samples (n = the window filled so
+    far, at most W) are accumulated backwards from the newest sample, ``s0 = sum r``, ``s1 = sum
+    tau r`` (``s1 += s0``), and the GLRs ``s1^2 / sum tau^2`` (ramp) and ``s0^2 / L`` (step) are
+    maximised over L. The maximum over the change point has no running form (every candidate
+    start moves differently), so the work is O(W) per sample; it is done for a block of samples
+    at once, the candidate L in the outer loop and the samples of the block in the inner one (no
+    dependency between them: the compiler vectorises it), each sample's sums taken in the same
+    order as one at a time, so the numbers are bitwise those of the per-sample loop.
+    """
     R, T, C = x.shape
+    den = np.empty(W + 1)
+    den[0] = 1.0
+    for L in range(1, W + 1):
+        den[L] = L * (L + 1.0) * (2.0 * L + 1.0) / 6.0
+    s0 = np.empty(_BLOCK)
+    s1 = np.empty(_BLOCK)
+    gp = np.empty(_BLOCK)
+    gm = np.empty(_BLOCK)
+    gs = np.empty(_BLOCK)
     for r in range(R):
         for c in range(C):
-            b = buf[r, c]
+            c0 = cnt[r, c]
+            p0 = pos[r, c]
+            h = min(c0, W - 1)  # the samples before this call that a window can still reach
+            xl = np.empty(h + T)
+            _ring_history(buf[r, c], p0, h, xl)
+            m = mu0[c]
             for k in range(T):
-                p = pos[r, c]
-                b[p] = x[r, k, c] - mu0[c]
-                p = (p + 1) % W
-                pos[r, c] = p
-                if cnt[r, c] < W:
-                    cnt[r, c] += 1
-                n = cnt[r, c]
-                s0 = 0.0
-                s1 = 0.0
-                gp = 0.0
-                gm = 0.0
-                gs = 0.0
-                i = p
-                for L in range(1, n + 1):
-                    i -= 1
-                    if i < 0:
-                        i += W
-                    s0 += b[i]
-                    s1 += s0  # sum over the last L samples of tau * r, tau = 1 .. L
-                    vs = s0 * s0 / L  # the step alternative: any length
-                    if vs > gs:
-                        gs = vs
-                    if L >= Lmin:
-                        den = L * (L + 1.0) * (2.0 * L + 1.0) / 6.0
-                        v = s1 * s1 / den
-                        if s1 > 0.0:
-                            if v > gp:
-                                gp = v
-                        elif v > gm:
-                            gm = v
-                if vs_step:  # a step from some sample explains the window better: not a drift
-                    if gp <= gs:
-                        gp = 0.0
-                    if gm <= gs:
-                        gm = 0.0
-                out_p[r, k, c] = gp
-                out_m[r, k, c] = gm
+                xl[h + k] = x[r, k, c] - m
+            for k0 in range(0, T, _BLOCK):
+                nb = min(_BLOCK, T - k0)
+                if nb < _SCALAR_BELOW:
+                    for j in range(nb):
+                        k = k0 + j
+                        n = min(c0 + k + 1, W)
+                        a = 0.0
+                        b = 0.0
+                        vp = 0.0
+                        vm = 0.0
+                        vg = 0.0
+                        for L in range(1, n + 1):
+                            a += xl[h + k - L + 1]
+                            b += a
+                            if vs_step:
+                                vs = a * a / L
+                                if vs > vg:
+                                    vg = vs
+                            if L >= Lmin:
+                                v = b * b / den[L]
+                                if b > 0.0:
+                                    if v > vp:
+                                        vp = v
+                                elif v > vm:
+                                    vm = v
+                        gp[j] = vp
+                        gm[j] = vm
+                        gs[j] = vg
+                else:
+                    s0[:nb] = 0.0
+                    s1[:nb] = 0.0
+                    gp[:nb] = 0.0
+                    gm[:nb] = 0.0
+                    gs[:nb] = 0.0
+                    for L in range(1, min(c0 + k0 + nb, W) + 1):
+                        js = max(0, L - c0 - 1 - k0)  # the block's samples whose window holds L samples
+                        n = nb - js
+                        xs = xl[h + k0 - L + 1 + js:]
+                        a_, b_, g_ = s0[js:], s1[js:], gs[js:]
+                        fl = float(L)
+                        if L >= Lmin:
+                            dn = den[L]
+                            p_, m_ = gp[js:], gm[js:]
+                            if vs_step:
+                                for j in range(n):
+                                    a = a_[j] + xs[j]
+                                    a_[j] = a
+                                    b = b_[j] + a
+                                    b_[j] = b
+                                    g_[j] = max(g_[j], a * a / fl)
+                                    v = b * b / dn
+                                    v1 = v if b > 0.0 else 0.0
+                                    p_[j] = max(p_[j], v1)
+                                    m_[j] = max(m_[j], v - v1)
+                            else:  # no step alternative: its GLR is not needed
+                                for j in range(n):
+                                    a = a_[j] + xs[j]
+                                    a_[j] = a
+                                    b = b_[j] + a
+                                    b_[j] = b
+                                    v = b * b / dn
+                                    v1 = v if b > 0.0 else 0.0
+                                    p_[j] = max(p_[j], v1)
+                                    m_[j] = max(m_[j], v - v1)
+                        elif vs_step:
+                            for j in range(n):
+                                a = a_[j] + xs[j]
+                                a_[j] = a
+                                b_[j] = b_[j] + a
+                                g_[j] = max(g_[j], a * a / fl)
+                        else:
+                            for j in range(n):
+                                a = a_[j] + xs[j]
+                                a_[j] = a
+                                b_[j] = b_[j] + a
+                for j in range(nb):
+                    vp = gp[j]
+                    vm = gm[j]
+                    if vs_step:  # a step from some sample explains the window better: not a drift
+                        if vp <= gs[j]:
+                            vp = 0.0
+                        if vm <= gs[j]:
+                            vm = 0.0
+                    out_p[r, k0 + j, c] = vp
+                    out_m[r, k0 + j, c] = vm
+            # the ring buffer as writing the samples one by one leaves it
+            for k in range(max(0, T - W), T):
+                buf[r, c, (p0 + k) % W] = xl[h + k]
+            pos[r, c] = (p0 + T) % W
+            cnt[r, c] = min(c0 + T, W)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _gain_kernel(x, s, mu0, W, Lmin, mg, gsc, out_p, out_m, est, bx, bs, pos, cnt):  # pragma: no cover
     """One-sided gain GLRs (unscaled): residuals x (R, T, C) against the signal s (R, T) -> out_p,
-    out_m, est (R, T, C); ring buffers bx (R, C, W), bs (R, W)."""
+    out_m, est (R, T, C); ring buffers bx (R, C, W), bs (R, W).
+
+    As :func:`_ramp_kernel`: per sample the sums ``a = sum r s`` and ``bb = sum s^2`` over the
+    last ``L`` samples are accumulated backwards from the newest one and ``a^2 / bb`` maximised
+    over L (``theta = a / bb`` at the first maximum), for a block of samples at once with the
+    samples in the inner, vectorised loop; bitwise the per-sample loop's numbers.
+    """
     R, T, C = x.shape
+    A = np.empty((C, _BLOCK))
+    G = np.empty((C, _BLOCK))
+    GM = np.empty((C, _BLOCK))
+    BE = np.empty((C, _BLOCK))
+    AB = np.empty((C, _BLOCK))
+    BB = np.empty((C, _BLOCK))
+    bb = np.empty(_BLOCK)
+    zone = np.empty(C)
+    for c in range(C):
+        zone[c] = mg * gsc[c]
     for r in range(R):
+        c0 = cnt[r]
+        p0 = pos[r]
+        h = min(c0, W - 1)
+        sl = np.empty(h + T)
+        xl = np.empty((C, h + T))
+        _ring_history(bs[r], p0, h, sl)
+        for c in range(C):
+            _ring_history(bx[r, c], p0, h, xl[c])
         for k in range(T):
-            p = pos[r]
-            bs[r, p] = s[r, k]
+            sl[h + k] = s[r, k]
             for c in range(C):
-                bx[r, c, p] = x[r, k, c] - mu0[c]
-            p = (p + 1) % W
-            pos[r] = p
-            if cnt[r] < W:
-                cnt[r] += 1
-            n = cnt[r]
+                xl[c, h + k] = x[r, k, c] - mu0[c]
+        for k0 in range(0, T, _BLOCK):
+            nb = min(_BLOCK, T - k0)
+            if nb < _SCALAR_BELOW:
+                for j in range(nb):
+                    k = k0 + j
+                    n = min(c0 + k + 1, W)
+                    for c in range(C):
+                        a = 0.0
+                        b2 = 0.0
+                        g = 0.0
+                        gm = 0.0
+                        best = -1.0
+                        th = 0.0
+                        for L in range(1, n + 1):
+                            i = h + k - L + 1
+                            a += xl[c, i] * sl[i]
+                            b2 += sl[i] * sl[i]
+                            if L >= Lmin and b2 > 0.0:
+                                v = a * a / b2
+                                if v > best:
+                                    best = v
+                                    th = a / b2
+                                if mg > 0.0 and abs(a) < zone[c] * b2:
+                                    continue  # |theta| below the indifference zone: not a fault
+                                if a > 0.0:
+                                    if v > g:
+                                        g = v
+                                elif v > gm:
+                                    gm = v
+                        out_p[r, k, c] = g
+                        out_m[r, k, c] = gm
+                        est[r, k, c] = th
+                continue
+            bb[:nb] = 0.0
+            A[:, :nb] = 0.0
+            G[:, :nb] = 0.0
+            GM[:, :nb] = 0.0
+            BE[:, :nb] = -1.0
+            AB[:, :nb] = 0.0
+            BB[:, :nb] = 1.0
+            for L in range(1, min(c0 + k0 + nb, W) + 1):
+                js = max(0, L - c0 - 1 - k0)
+                n = nb - js
+                i0 = h + k0 - L + 1 + js
+                ss = sl[i0:]
+                q_ = bb[js:]
+                for j in range(n):
+                    q_[j] = q_[j] + ss[j] * ss[j]
+                for c in range(C):
+                    xs = xl[c, i0:]
+                    a_ = A[c, js:]
+                    if L < Lmin:
+                        for j in range(n):
+                            a_[j] = a_[j] + xs[j] * ss[j]
+                        continue
+                    g_, gm_, be_, ab_, bb_ = G[c, js:], GM[c, js:], BE[c, js:], AB[c, js:], BB[c, js:]
+                    z = zone[c]
+                    for j in range(n):
+                        a = a_[j] + xs[j] * ss[j]
+                        a_[j] = a
+                        b2 = q_[j]
+                        ok = b2 > 0.0
+                        v = a * a / b2
+                        up = ok & (v > be_[j])  # the first maximum: the gain estimate's sums
+                        be_[j] = v if up else be_[j]
+                        ab_[j] = a if up else ab_[j]
+                        bb_[j] = b2 if up else bb_[j]
+                        # |theta| below the indifference zone: not a fault
+                        vg = v if (ok & ((mg <= 0.0) | (abs(a) >= z * b2))) else 0.0
+                        v1 = vg if a > 0.0 else 0.0
+                        g_[j] = max(g_[j], v1)
+                        gm_[j] = max(gm_[j], vg - v1)
             for c in range(C):
-                a = 0.0
-                bb = 0.0
-                g = 0.0
-                gm = 0.0
-                best = -1.0
-                th = 0.0
-                i = p
-                for L in range(1, n + 1):
-                    i -= 1
-                    if i < 0:
-                        i += W
-                    a += bx[r, c, i] * bs[r, i]
-                    bb += bs[r, i] * bs[r, i]
-                    if L >= Lmin and bb > 0.0:
-                        v = a * a / bb
-                        if v > best:
-                            best = v
-                            th = a / bb
-                        if mg > 0.0 and abs(a) < mg * gsc[c] * bb:
-                            continue  # |theta| below the indifference zone: not a fault
-                        if a > 0.0:
-                            if v > g:
-                                g = v
-                        elif v > gm:
-                            gm = v
-                out_p[r, k, c] = g
-                out_m[r, k, c] = gm
-                est[r, k, c] = th
+                for j in range(nb):
+                    out_p[r, k0 + j, c] = G[c, j]
+                    out_m[r, k0 + j, c] = GM[c, j]
+                    est[r, k0 + j, c] = AB[c, j] / BB[c, j] if BE[c, j] > -1.0 else 0.0
+        for k in range(max(0, T - W), T):
+            q = (p0 + k) % W
+            bs[r, q] = sl[h + k]
+            for c in range(C):
+                bx[r, c, q] = xl[c, h + k]
+        pos[r] = (p0 + T) % W
+        cnt[r] = min(c0 + T, W)
 
 
 @njit(cache=True)

@@ -37,6 +37,7 @@ from __future__ import annotations
 import concurrent.futures as cf
 import multiprocessing
 import os
+import sys
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from typing import Any
 
@@ -60,8 +61,35 @@ def chunk_bounds(n: int, chunk_size: int) -> list[tuple[int, int]]:
     return [(a, min(a + chunk_size, n)) for a in range(0, n, chunk_size)]
 
 
+#: glibc's allocator options (``mallopt`` parameter numbers) that :class:`Engine` applies in its
+#: workers when ``env`` names them, as the C library would read them at process start.
+_MALLOC_OPTIONS = {"MALLOC_TRIM_THRESHOLD_": -1, "MALLOC_TOP_PAD_": -2, "MALLOC_MMAP_THRESHOLD_": -3,
+                   "MALLOC_ARENA_MAX": -8}
+
+
 def _set_env(env: dict[str, str]) -> None:
+    """Set ``env`` in this (worker) process, and apply the glibc allocator options it names."""
     os.environ.update(env)
+    _apply_malloc_options(env)
+
+
+def _apply_malloc_options(env: dict[str, str]) -> None:
+    """``mallopt`` the ``MALLOC_*_`` options of ``env`` in this process (glibc only; elsewhere no-op).
+
+    glibc reads these variables once, when a process starts; a worker started before they were
+    set (a pool's initializer, a running Dask cluster) gets them here instead.
+    """
+    opts = {k: v for k, v in env.items() if k in _MALLOC_OPTIONS}
+    if not opts or not sys.platform.startswith("linux"):
+        return
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL("libc.so.6")
+        for k, v in opts.items():
+            libc.mallopt(_MALLOC_OPTIONS[k], int(v))
+    except (OSError, AttributeError, ValueError):  # not glibc, or a value that is no number
+        pass
 
 
 class Engine:
@@ -80,7 +108,10 @@ class Engine:
         Local pool: how often a task is resubmitted after its worker process died.
     env : dict, optional
         Environment variables set in every worker before it runs a task (e.g.
-        ``{"NUMBA_NUM_THREADS": "1"}`` so that one worker uses one core).
+        ``{"NUMBA_NUM_THREADS": "1"}`` so that one worker uses one core). glibc's allocator
+        options among them (``MALLOC_TRIM_THRESHOLD_``, ``MALLOC_MMAP_THRESHOLD_``,
+        ``MALLOC_TOP_PAD_``, ``MALLOC_ARENA_MAX``) are set before a LocalCluster's workers
+        start and applied with ``mallopt`` in the workers of a pool or a running cluster.
     preload : sequence of str
         Local pool: modules the fork server imports once for all its workers.
 
@@ -128,9 +159,26 @@ class Engine:
             except (OSError, TimeoutError) as exc:
                 raise DataError(f"cannot reach the Dask scheduler at {self.scheduler!r}: {exc}") from None
         else:
-            self.cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
-                                        host="127.0.0.1", dashboard_address="127.0.0.1:0", silence_logs=40,
-                                        env=self.env or None)
+            import dask
+
+            # glibc's MALLOC_* options take effect only when set before a process starts: the
+            # nannies set them before they spawn a worker (Dask's own default trims the heap at
+            # 64 kB, so a worker faults its memory in again for every task)
+            pre = dict(dask.config.get("distributed.nanny.pre-spawn-environ", None) or {})
+            mine = {k: v for k, v in self.env.items() if k in _MALLOC_OPTIONS}
+            pre.update(mine)
+            saved = {k: os.environ.get(k) for k in mine}
+            try:
+                with dask.config.set({"distributed.nanny.pre-spawn-environ": pre}):
+                    self.cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
+                                                host="127.0.0.1", dashboard_address="127.0.0.1:0",
+                                                silence_logs=40, env=self.env or None)
+            finally:  # the nannies set them in this process too: not for this process's children
+                for k, v in saved.items():
+                    if v is None:
+                        os.environ.pop(k, None)
+                    else:
+                        os.environ[k] = v
             self.client = Client(self.cluster)
         if self.env and self.scheduler:
             env = dict(self.env)

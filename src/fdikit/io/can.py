@@ -254,11 +254,20 @@ def resample_to_grid(t_src: np.ndarray, v_src: np.ndarray, grid: np.ndarray, *, 
     t_src = np.asarray(t_src, float)
     v_src = np.asarray(v_src, float)
     grid = np.asarray(grid, float)
-    out = np.full(grid.shape, np.nan)
-    ok = np.zeros(grid.shape, bool)
+    if t_src.size == 0:
+        return np.full(grid.shape, np.nan), np.zeros(grid.shape, bool)
+    if method not in ("linear", "previous"):
+        raise DataError(f"unknown resampling method {method!r}; use 'linear' or 'previous'")
+    plan = _resample_plan(t_src, grid, max_gap, method, period)
+    return _resample_apply(plan, v_src), plan[-1].copy()
+
+
+def _resample_plan(t_src: np.ndarray, grid: np.ndarray, max_gap: float, method: str,
+                   period: float | None) -> tuple:
+    """What :func:`resample_to_grid` computes from the times alone (non-empty ``t_src``): the
+    source indices and weights of every grid sample and the validity mask, shared by the signals
+    of one message (same time stamps)."""
     n = t_src.size
-    if n == 0:
-        return out, ok
     if period is None:
         period = float(np.median(np.diff(t_src))) if n > 1 else np.inf
     lim = max_gap * period
@@ -268,10 +277,7 @@ def resample_to_grid(t_src: np.ndarray, v_src: np.ndarray, grid: np.ndarray, *, 
     if method == "previous":
         ii = np.clip(i, 0, n - 1)
         ok = (i >= 0) & (grid - t_src[ii] <= lim)
-        out[ok] = v_src[ii[ok]]
-        return out, ok
-    if method != "linear":
-        raise DataError(f"unknown resampling method {method!r}; use 'linear' or 'previous'")
+        return ("previous", ii[ok], ok)
     i0 = np.clip(i, 0, max(n - 2, 0))
     i1 = np.minimum(i0 + 1, n - 1)
     span = t_src[i1] - t_src[i0]
@@ -279,9 +285,20 @@ def resample_to_grid(t_src: np.ndarray, v_src: np.ndarray, grid: np.ndarray, *, 
     ok = inside & ((span <= lim) | exact)
     with np.errstate(invalid="ignore", divide="ignore"):
         w = np.where(span > 0, (grid - t_src[i0]) / np.where(span > 0, span, 1.0), 0.0)
-    val = v_src[i0] + w * (v_src[i1] - v_src[i0])
-    out[ok] = val[ok]
-    return out, ok
+    return ("linear", i0[ok], i1[ok], w[ok], ok)
+
+
+def _resample_apply(plan: tuple, v_src: np.ndarray) -> np.ndarray:
+    """The resampled values of one signal by a plan of :func:`_resample_plan` (NaN where invalid)."""
+    ok = plan[-1]
+    out = np.full(ok.shape, np.nan)
+    if plan[0] == "previous":
+        out[ok] = v_src[plan[1]]
+        return out
+    _, i0, i1, w, _ = plan
+    a = v_src[i0]
+    out[ok] = a + w * (v_src[i1] - a)
+    return out
 
 
 # ---------------------------------------------------------------------------------- reading

@@ -40,6 +40,11 @@ from pathlib import Path
 
 import numpy as np
 
+try:  # ISA-L's inflate: the same bytes as zlib's, about twice as fast (a dependency of asammdf)
+    from isal import isal_zlib as _isal_zlib
+except ImportError:  # pragma: no cover - isal comes with asammdf
+    _isal_zlib = None
+
 __all__ = ["FramePayloads", "decode_message", "decode_message_reference", "read_blf_table", "set_signal",
            "write_blf_table"]
 
@@ -157,6 +162,10 @@ def _object_chain(buf: np.ndarray) -> np.ndarray | None:
     return cand[keep]
 
 
+_LOBJ = int.from_bytes(b"LOBJ", "little")
+#: ``_LOW_BYTES[n]``: the mask of the first ``n`` bytes of a little-endian 8-byte word (n = 0 .. 8).
+_LOW_BYTES = np.array([(1 << (8 * i)) - 1 for i in range(9)], dtype=np.uint64)
+
 #: One CAN_MESSAGE / CAN_MESSAGE2 object with a version-1 header: python-can's structs laid end to end.
 _CAN_V1 = np.dtype([("sig", "S4"), ("hsize", "<u2"), ("hver", "<u2"), ("size", "<u4"), ("type", "<u4"),
                     ("tflags", "<u4"), ("client", "<u2"), ("over", "<u2"), ("ticks", "<u8"),
@@ -170,8 +179,12 @@ def _uniform_can(buf: np.ndarray) -> np.ndarray | None:
     if n == 0:
         return None
     rec = buf[: n * _CAN_V1.itemsize].view(_CAN_V1)
-    if not ((rec["sig"] == b"LOBJ").all() and (rec["size"] == _CAN_V1.itemsize).all()
-            and (rec["hver"] == 1).all() and np.isin(rec["type"], (_CAN_MESSAGE, _CAN_MESSAGE2)).all()):
+    # the header words as integers (one pass each, no string comparison): b"LOBJ", header version
+    # 1 (the high half of the second word), object size 48, type CAN_MESSAGE or CAN_MESSAGE2
+    w = buf[: n * _CAN_V1.itemsize].view("<u4").reshape(n, _CAN_V1.itemsize // 4)
+    typ = w[:, 3]
+    if not (np.all(w[:, 0] == _LOBJ) and np.all((w[:, 1] >> 16) == 1) and np.all(w[:, 2] == _CAN_V1.itemsize)
+            and np.all((typ == _CAN_MESSAGE) | (typ == _CAN_MESSAGE2))):
         return None
     rest = buf[n * _CAN_V1.itemsize:].tobytes()
     # what python-can does with the bytes after the last whole object: nothing, unless an object
@@ -179,6 +192,34 @@ def _uniform_can(buf: np.ndarray) -> np.ndarray | None:
     if rest.find(b"LOBJ", 0, 8) != -1 or len(rest) >= 8:
         return None
     return rec
+
+
+def _inflate(body: bytes) -> bytes:
+    """A zlib stream inflated as ``zlib.decompressobj().decompress`` inflates it (python-can's way).
+
+    A complete stream has one inflation, so the faster ISA-L inflater (``isal``, installed with
+    asammdf) is used when it reads the stream to its end; anything else (no isal, an error, a
+    stream that stops early) is inflated by zlib itself, so partial and failing streams behave
+    exactly as before.
+    """
+    if _isal_zlib is not None:
+        try:
+            d = _isal_zlib.decompressobj()
+            out = d.decompress(body)
+            if d.eof:
+                return out
+        except Exception:  # isal's own error type: let zlib decide (and raise its zlib.error)
+            pass
+    return zlib.decompressobj().decompress(body)
+
+
+def _tick_times(flags: np.ndarray, ticks: np.ndarray, start: float) -> np.ndarray:
+    """Object times, s: ``ticks / 1e5`` (flag 1, 10 us ticks) or ``ticks / 1e9`` (ns), plus the start."""
+    t = ticks.astype(float)
+    ten_us = flags == 1
+    if not ten_us.any():
+        return t / 1e9 + start
+    return np.where(ten_us, t / 1e5, t / 1e9) + start
 
 
 def read_blf_table(path) -> tuple[np.ndarray, np.ndarray, FramePayloads, dict[str, int]] | None:
@@ -227,7 +268,7 @@ def read_blf_table(path) -> tuple[np.ndarray, np.ndarray, FramePayloads, dict[st
                 chunks.append(body)
             elif method == 2:
                 try:
-                    chunks.append(zlib.decompressobj().decompress(body))
+                    chunks.append(_inflate(body))
                 except zlib.error:
                     return None
             else:
@@ -240,12 +281,18 @@ def read_blf_table(path) -> tuple[np.ndarray, np.ndarray, FramePayloads, dict[st
         ticks = rec["ticks"]
         if ticks.size and int(ticks.max()) >= 2**53:
             return None
-        tf = rec["tflags"]
-        ts = np.where(tf == 1, ticks.astype(float) / 1e5, ticks.astype(float) / 1e9) + start
+        ts = _tick_times(rec["tflags"], ticks, start)
         keep = (rec["cflags"] & 0x80) == 0
-        length = np.minimum(rec["dlc"][keep], 8).astype(np.int64)
-        mat = np.where(np.arange(8) < length[:, None], rec["data"][keep], 0).astype(np.uint8)
-        return ts[keep], rec["id"][keep].astype(np.int64) & 0x1FFFFFFF, FramePayloads(mat, length), header
+        length = np.minimum(rec["dlc"], 8).astype(np.int64)
+        # the 8 data bytes of every object as one little-endian word (bytes 40..47), the bytes past
+        # the frame's length cleared
+        data = buf[: rec.size * _CAN_V1.itemsize].view("<u8").reshape(rec.size, -1)[:, 5]
+        ids = rec["id"].astype(np.int64) & 0x1FFFFFFF
+        if not keep.all():  # remote frames are not data
+            ts, ids, length, data = ts[keep], ids[keep], length[keep], data[keep]
+        data = data & _LOW_BYTES[length] if (length < 8).any() else data
+        mat = np.ascontiguousarray(data, dtype="<u8").view(np.uint8).reshape(-1, 8)
+        return ts, ids, FramePayloads(mat, length), header
     objs = _object_chain(buf)
     if objs is None:
         return None
@@ -267,7 +314,7 @@ def read_blf_table(path) -> tuple[np.ndarray, np.ndarray, FramePayloads, dict[st
         return None
     # python-can: float(Decimal(ticks) * factor) + start, factor 1e-5 when flags == 1 else 1e-9;
     # dividing an exact integer by an exact 1e5 / 1e9 rounds the same exact quotient correctly
-    ts = np.where(flags_t == 1, ticks.astype(float) / 1e5, ticks.astype(float) / 1e9) + start
+    ts = _tick_times(flags_t, ticks, start)
     cflags = buf[body + 2]
     dlc = buf[body + 3].astype(np.int64)
     can_id = _u(buf, body + 4, "<u4", 4).astype(np.int64)
@@ -315,18 +362,28 @@ def _network_start(sig) -> int:
     return 8 * (sig.start // 8) + (7 - sig.start % 8)
 
 
-def _raw_bits(sig, mat: np.ndarray) -> np.ndarray | None:
-    """Raw unsigned bits of ``sig`` from every payload row, uint64; None when not one 8-byte window."""
+def _raw_bits(sig, mat: np.ndarray, words: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray | None:
+    """Raw unsigned bits of ``sig`` from every payload row, uint64; None when not one 8-byte window.
+
+    ``words``: the payloads (8 bytes, zero past each frame's length) read as one little- and one
+    big-endian word per frame; the window of bytes ``b0 .. b0 + 7`` (zero past byte 7) is then a
+    shift of them, with no copy of the matrix.
+    """
     n = int(sig.length)
     if not 1 <= n <= 64:
         return None
     seq = _network_start(sig)
     b0 = seq // 8
     off = seq - 8 * b0
+    mask = np.uint64((1 << n) - 1)
+    if words is not None and b0 <= 7 and off + n <= 64:
+        le, be = words
+        if sig.byte_order == "little_endian":
+            return (le >> np.uint64(8 * b0 + off)) & mask
+        return ((be << np.uint64(8 * b0)) >> np.uint64(64 - off - n)) & mask
     if off + n > 64 or b0 + 8 > mat.shape[1]:
         return None
     window = np.ascontiguousarray(mat[:, b0:b0 + 8])
-    mask = np.uint64((1 << n) - 1)
     if sig.byte_order == "little_endian":
         return (window.view("<u8").ravel() >> np.uint64(off)) & mask
     return (window.view(">u8").ravel().astype(np.uint64) >> np.uint64(64 - off - n)) & mask
@@ -418,13 +475,17 @@ def decode_message(msg, snames: Sequence[str], payloads: Sequence[bytes] | Frame
     out = np.full((len(pay), len(sigs)), np.nan)
     n_bad = np.zeros(len(sigs), int)
     mat = pay.matrix
-    if mat.shape[1] < msg.length + 8:
-        mat = np.pad(mat, ((0, 0), (0, msg.length + 8 - mat.shape[1])))
+    words = None
+    if mat.shape[1] == 8:  # classic CAN: every window of a signal in bytes 0..7 is a shift of these
+        words = (mat.view("<u8").reshape(-1).astype(np.uint64, copy=False),
+                 mat.view(">u8").reshape(-1).astype(np.uint64))
     for c, sig in enumerate(sigs):
         end = _network_start(sig) + int(sig.length)
         if end > 8 * msg.length:
             return decode_message_reference(msg, snames, pay)
-        raw = _raw_bits(sig, mat)
+        if (words is None or _network_start(sig) // 8 > 7) and mat.shape[1] < msg.length + 8:
+            mat = np.pad(mat, ((0, 0), (0, msg.length + 8 - mat.shape[1])))
+        raw = _raw_bits(sig, mat, words)
         with np.errstate(all="ignore"):  # NaN / inf IEEE patterns convert as Python converts them
             vals = None if raw is None else _scaled(sig, raw)
         if vals is None:

@@ -56,9 +56,10 @@ from .can import (
     _load_dbc,
     _norm_unit,
     _read_frame_table,
+    _resample_apply,
+    _resample_plan,
     _resolve,
     convert_units,
-    resample_to_grid,
 )
 from .decode import FramePayloads, decode_message
 from .timebase import TimeOrigin, origin_of_float, times_to_seconds
@@ -350,13 +351,28 @@ def series_to_grid(
     counts = counts or {}
     clean: dict[str, tuple[np.ndarray, np.ndarray, int, int]] = {}
     period: dict[str, float] = {}
+    # the signals of one message share their time stamps (one array): what depends on the times
+    # alone (checks, period, interpolation indices and weights, gap count) is computed once per
+    # array; each entry keeps its array alive, so an id is never reused while the dict lives
+    by_time: dict[int, dict[str, Any]] = {}
+    checked: dict[int, tuple[Any, np.ndarray]] = {}
     for n in names:
-        t, v = series[n]
-        t, v, n_dup, n_conf = _clean_series(n, t, v, where)
+        t_in, v = series[n]
+        hit = checked.get(id(t_in))
+        if hit is not None and hit[0] is t_in:  # times already checked: no same-time samples
+            t, v, n_dup, n_conf = hit[1], np.asarray(v, float), 0, 0
+        else:
+            t, v, n_dup, n_conf = _clean_series(n, t_in, v, where)
+            if n_dup == n_conf == 0 and t.size == np.size(t_in):
+                checked[id(t_in)] = (t_in, t)
         if t.size == 0:
             raise DataError(f"{where}: signal {n!r} has no samples")
         clean[n] = (t, v, n_dup, n_conf)
-        period[n] = float(np.median(np.diff(t))) if t.size > 1 else np.inf
+        shared = by_time.get(id(t))
+        if shared is None or shared["t"] is not t:
+            per = float(np.median(np.diff(t))) if t.size > 1 else np.inf
+            shared = by_time[id(t)] = {"t": t, "period": per}
+        period[n] = shared["period"]
     if rate is None:
         fastest = min(period.values())
         if not np.isfinite(fastest) or fastest <= 0:
@@ -404,9 +420,14 @@ def series_to_grid(
         if target != src_unit:
             v = convert_units(v, src_unit, target, channel=n)
         fin = np.isfinite(v)
-        vals, ok = resample_to_grid(t, np.where(fin, v, 0.0), grid, max_gap=max_gap, method=method,
-                                    period=period[n])
-        ok &= ~_touches_bad(t, fin, grid, method)  # an interpolation that uses a bad sample is bad
+        all_fin = bool(fin.all())
+        shared = by_time[id(t)]
+        if "plan" not in shared:
+            shared["plan"] = _resample_plan(t, grid, max_gap, method, period[n])
+        vals = _resample_apply(shared["plan"], v if all_fin else np.where(fin, v, 0.0))
+        ok = shared["plan"][-1].copy()
+        if not all_fin:
+            ok &= ~_touches_bad(t, fin, grid, method)  # an interpolation that uses a bad sample is bad
         with np.errstate(invalid="ignore", over="ignore"):
             ok &= np.isfinite(vals)
         # a grid time a rounding error (<= 1 ns) outside the samples (times made relative by a
@@ -431,7 +452,7 @@ def series_to_grid(
             n, src_unit, target, int(t.size),
             float((t.size - 1) / span_s) if t.size > 1 and span_s > 0 else float("nan"),
             period[n], float(t[0]), float(t[-1]),
-            int(np.sum(np.diff(t) > max_gap * period[n])), int((~ok).sum()),
+            _n_gaps(shared, max_gap), int((~ok).sum()),
             n_nonfinite=int((~np.isfinite(v)).sum()),
             n_undecodable=int(counts.get(n, {}).get("n_undecodable", 0)),
             n_duplicates=n_dup, n_conflicts=n_conf, longest_constant=longest,
@@ -440,6 +461,13 @@ def series_to_grid(
                         time_origin=time_origin)
     out.reasons = reasons
     return out
+
+
+def _n_gaps(shared: dict[str, Any], max_gap: float) -> int:
+    """Source intervals longer than ``max_gap`` periods, once per time axis."""
+    if "n_gaps" not in shared:
+        shared["n_gaps"] = int(np.sum(np.diff(shared["t"]) > max_gap * shared["period"]))
+    return shared["n_gaps"]
 
 
 def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
