@@ -106,6 +106,11 @@ class FrameGridder:
     channel : str, optional
         Keep only frames of this bus; without it, a requested message seen on two buses is refused
         (frames of two buses are never mixed into one signal), as in the batch loader.
+    max_jump : float
+        Longest interval (s) between two frames that the gridder bridges with grid samples
+        (default one hour). A later frame is refused with a DataError naming it, as a corrupt clock:
+        one garbled time stamp would otherwise make the gridder emit the whole interval, 3.6e5
+        samples per hour at 100 Hz. Frames after it are judged against the last accepted one.
 
     Examples
     --------
@@ -124,7 +129,7 @@ class FrameGridder:
     """
 
     def __init__(self, dbc: Any, signals: Sequence[str], rate: float, *, max_gap: float = 3.0,
-                 method: str = "linear", channel: str | None = None):
+                 method: str = "linear", channel: str | None = None, max_jump: float = 3600.0):
         if isinstance(signals, str) or not signals:
             raise DataError("signals must be a non-empty list of 'MESSAGE.SIGNAL' names")
         self.signals = [str(s) for s in signals]
@@ -138,6 +143,13 @@ class FrameGridder:
             raise DataError(f"max_gap must be a positive number of source periods, got {max_gap!r}")
         if method not in ("linear", "previous"):
             raise DataError(f"unknown resampling method {method!r}; use 'linear' or 'previous'")
+        try:
+            max_jump = float(max_jump)
+        except (TypeError, ValueError):
+            raise DataError(f"max_jump must be a positive number of seconds, got {max_jump!r}") from None
+        if not (math.isfinite(max_jump) and max_jump > 0):
+            raise DataError(f"max_jump must be a positive number of seconds, got {max_jump!r}")
+        self.max_jump = max_jump
         self.rate, self.max_gap, self.method, self.channel = rate, float(max_gap), method, channel
         db = _load_dbc(dbc)
         self._by_id: dict[int, list[tuple[str, Any, str]]] = {}
@@ -231,6 +243,10 @@ class FrameGridder:
             raise DataError(f"frame {self.frames}: non-finite time stamp")
         if self._t_last is not None and t < self._t_last:
             raise DataError(f"frame {self.frames}: time goes backwards ({self._t_last!r} s then {t!r} s)")
+        if self._t_last is not None and t - self._t_last > self.max_jump:
+            raise DataError(f"frame {self.frames}: time stamp {t!r} s is {t - self._t_last:.6g} s after the "
+                            f"previous frame ({self._t_last!r} s), more than max_jump = {self.max_jump:g} s: "
+                            "a corrupt clock; the frame is refused")
         if self.channel is not None and bus is not None and str(bus) != str(self.channel):
             self.frames += 1
             self._t_last = t
