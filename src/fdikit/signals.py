@@ -7,6 +7,7 @@ optional units) travel with the values so that stages pick their inputs by name.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable, Sequence
 from typing import Any
 
@@ -22,6 +23,11 @@ def check_time(t: np.ndarray, *, name: str = "t") -> np.ndarray:
     t = np.asarray(t, dtype=float)
     if t.ndim != 1:
         raise DataError(f"time vector {name!r} must be 1-D, got shape {t.shape}")
+    # fast path: strictly increasing (a comparison with NaN is false) with finite ends is finite
+    # throughout; t[k] > t[k-1] is t[k] - t[k-1] > 0 for floats (no temporaries but one bool array)
+    if t.size == 0 or (math.isfinite(t[0]) and math.isfinite(t[-1])
+                       and (t.size == 1 or bool(np.greater(t[1:], t[:-1]).all()))):
+        return t
     bad = np.flatnonzero(~np.isfinite(t))
     if bad.size:
         raise DataError(f"time vector {name!r} has a non-finite value at sample {bad[0]}")
@@ -224,6 +230,31 @@ class Signals:
             self.units + other.units,
             check=False,
             t0=self.t0,
+        )
+
+    @staticmethod
+    def join_channels(parts: Sequence[Signals]) -> Signals:
+        """The channels of every part in turn (same time grid and runs), joined in one copy:
+        ``parts[0].concat_channels(parts[1]).concat_channels(parts[2])...`` without the copies of
+        the growing intermediate results."""
+        parts = list(parts)
+        if not parts:
+            raise DataError("nothing to join")
+        first = parts[0]
+        if len(parts) == 1:
+            return first
+        for other in parts[1:]:
+            if first.t.shape != other.t.shape or not np.array_equal(first.t, other.t):
+                raise DataError("cannot join channels of signals on different time grids")
+            if first.runs != other.runs:
+                raise DataError(f"cannot join signals with {first.runs} and {other.runs} runs")
+        return Signals(
+            first.t,
+            np.concatenate([p.values for p in parts], axis=2),
+            [n for p in parts for n in p.names],
+            [u for p in parts for u in p.units],
+            check=False,
+            t0=first.t0,
         )
 
     # ------------------------------------------------------------------ pandas edges

@@ -135,6 +135,67 @@ def _loglik_umg_parallel(x, low, high, std, point, logw, out):  # pragma: no cov
 
 
 @njit(cache=True)
+def _loglik_umg_shared_stream(r, x, ulow, uhigh, ustd, upoint, ulogw, uoff, jmap, out):  # pragma: no cover
+    """As :func:`_loglik_umg_stream`, each distinct component of a channel evaluated once: the
+    components ``uoff[c]..uoff[c+1]-1`` of channel ``c`` are distinct ``(low, high, std)``, and
+    hypothesis ``j`` reads component ``jmap[j, c]``; its sum runs over the channels in order from
+    0.0, as in :func:`_loglik_umg_stream` (bitwise the same)."""
+    T, C = x.shape[1], x.shape[2]
+    H = jmap.shape[0]
+    vals = np.empty(ulow.shape[0])
+    for k in range(T):
+        for c in range(C):
+            xc = x[r, k, c]
+            for e in range(uoff[c], uoff[c + 1]):
+                vals[e] = umg_component_logpdf(xc, ulow[e], uhigh[e], ustd[e], upoint[e], ulogw[e])
+        for j in range(H):
+            acc = 0.0
+            for c in range(C):
+                acc += vals[jmap[j, c]]
+            out[r, k, j] = acc
+
+
+@njit(cache=True)
+def _loglik_umg_shared(x, ulow, uhigh, ustd, upoint, ulogw, uoff, jmap, out):  # pragma: no cover
+    """:func:`_loglik_umg` with the components shared between hypotheses evaluated once."""
+    for r in range(x.shape[0]):
+        _loglik_umg_shared_stream(r, x, ulow, uhigh, ustd, upoint, ulogw, uoff, jmap, out)
+
+
+@njit(cache=True, parallel=True)
+def _loglik_umg_shared_parallel(x, ulow, uhigh, ustd, upoint, ulogw, uoff, jmap, out):  # pragma: no cover
+    """As :func:`_loglik_umg_shared`, streams in parallel threads."""
+    for r in prange(x.shape[0]):
+        _loglik_umg_shared_stream(r, x, ulow, uhigh, ustd, upoint, ulogw, uoff, jmap, out)
+
+
+def _shared_components(low: np.ndarray, high: np.ndarray, std: np.ndarray, point: np.ndarray,
+                       logw: np.ndarray) -> tuple[np.ndarray, ...]:
+    """The distinct components of every channel (equal ``low``, ``high``, ``std`` and ``point``
+    give bitwise equal log densities): ``(low, high, std, point, logw)`` of them, flat, channel by
+    channel, the offset of each channel's and ``jmap`` (H, C), the one hypothesis j reads."""
+    H, C = low.shape
+    keys: list = []
+    uoff = np.zeros(C + 1, np.int64)
+    jmap = np.zeros((H, C), np.int64)
+    for c in range(C):
+        seen: dict = {}
+        for j in range(H):
+            key = (low[j, c].tobytes(), high[j, c].tobytes(), std[j, c].tobytes(), bool(point[j, c]),
+                   logw[j, c].tobytes())
+            if key not in seen:
+                seen[key] = len(keys)
+                keys.append((j, c))
+            jmap[j, c] = seen[key]
+        uoff[c + 1] = len(keys)
+    jj = np.array([k[0] for k in keys], np.int64)
+    cc = np.array([k[1] for k in keys], np.int64)
+    flat = [np.ascontiguousarray(a[jj, cc], dtype=float) for a in (low, high, std)]
+    return (*flat, np.ascontiguousarray(point[jj, cc], dtype=np.bool_),
+            np.ascontiguousarray(logw[jj, cc], dtype=float), uoff, jmap)
+
+
+@njit(cache=True)
 def umg_table_add(x, c, tab, g0, inv_h, nG, toff, low, high, std, point, logw, ll, h0,
                   h1):  # pragma: no cover - compiled
     """Add the log density of component ``c`` at ``x`` of hypotheses ``h0..h1-1`` to ``ll``: linear
@@ -481,6 +542,24 @@ def _first_nonfinite(x):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
+def _first_nonfinite_serial(x):  # pragma: no cover - compiled
+    """As :func:`_first_nonfinite`, without the thread launch (one run: nothing to share)."""
+    R, T, C = x.shape
+    first = np.full(R, -1, np.int64)
+    for r in range(R):
+        done = False
+        for k in range(T):
+            for c in range(C):
+                if not np.isfinite(x[r, k, c]):
+                    first[r] = k * C + c
+                    done = True
+                    break
+            if done:
+                break
+    return first
+
+
+@njit(cache=True)
 def _probabilities_row(L, gmat, out, n):  # pragma: no cover - compiled
     """Row n: exp of the log posteriors (0 below exp's range, as exp itself gives), then group sums."""
     H = L.shape[1]
@@ -512,6 +591,10 @@ def _probabilities_parallel(L, gmat, out):  # pragma: no cover - compiled
 #: Work (samples x components) above which a call shares the streams among threads; below it the
 #: thread start-up costs more than it saves (a streaming step).
 PARALLEL_MIN_WORK = 4096
+#: Log posteriors above which :meth:`MHSSPT._outputs` shares its rows among threads: one exp per
+#: value is ~10 ns, so below this (a one-run minute of 3000 samples is 3.3e4) waking the threads
+#: costs more than the whole serial pass.
+PARALLEL_MIN_OUTPUTS = 1 << 18
 
 
 class MHSSPT(ResidualProcessor):
@@ -603,8 +686,10 @@ class MHSSPT(ResidualProcessor):
             point = np.stack([d._point for d in self.densities])
             logw = np.log(np.where(point, 1.0, st[1] - st[0]))
             self._umg = (*st, point, logw)
+            self._umg_shared = (self._umg, _shared_components(*self._umg))
         else:
             self._umg = None
+            self._umg_shared = None
         self.tabulate = None if tabulate is None else float(tabulate)
         self._table = None
         self.table_error = 0.0
@@ -632,7 +717,12 @@ class MHSSPT(ResidualProcessor):
             _loglik_table(x3, *self._table, *self._umg, out)
         else:
             par = x3.shape[0] > 1 and x3.size > PARALLEL_MIN_WORK
-            (_loglik_umg_parallel if par else _loglik_umg)(x3, *self._umg, out)
+            src, shared = getattr(self, "_umg_shared", None) or (None, None)
+            if src is not self._umg:  # restored without __init__, or densities replaced
+                shared = _shared_components(*self._umg)
+                self._umg_shared = (self._umg, shared)
+            # the components shared between hypotheses once (bitwise _loglik_umg)
+            (_loglik_umg_shared_parallel if par else _loglik_umg_shared)(x3, *shared, out)
         return out.reshape((*x.shape[:-1], len(self.hypotheses)))
 
     _state_attrs = ("_logF", "_k")
@@ -661,13 +751,16 @@ class MHSSPT(ResidualProcessor):
         H = logF.shape[-1]
         L = np.ascontiguousarray(logF.reshape(-1, H))
         out = np.empty((L.shape[0], H + len(self._gidx)))
-        kern = _probabilities_parallel if L.size > PARALLEL_MIN_WORK else _probabilities
+        kern = _probabilities_parallel if L.size > PARALLEL_MIN_OUTPUTS else _probabilities
         kern(L, self._gmat, out)
         return out.reshape((*logF.shape[:-1], out.shape[1]))
 
     def _check_finite(self, x: np.ndarray) -> None:
         """Refuse a non-finite input, naming the first one (run, then sample, then channel)."""
-        first = _first_nonfinite(x) if x.size > PARALLEL_MIN_WORK else None
+        if x.size <= PARALLEL_MIN_WORK:
+            first = None
+        else:
+            first = (_first_nonfinite if x.shape[0] > 1 else _first_nonfinite_serial)(x)
         if first is not None and (first < 0).all():
             return
         bad = ~np.isfinite(x)

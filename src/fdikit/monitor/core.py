@@ -363,6 +363,18 @@ def _settling_time(g: Any, dt: float, horizon: float) -> float | None:
     return float(min((above[-1] + 1) * dt, horizon))
 
 
+def _own_inputs(p: Any) -> list[str] | None:
+    """The channels a processor's batch ``run`` reads, when that is known: ``input_names`` of a
+    processor whose ``run`` is fdikit's own (they read ``signals.index(self.input_names)`` only);
+    None for any other (it gets the whole pool)."""
+    names = getattr(p, "input_names", None)
+    run = getattr(type(p), "run", None)
+    mod = getattr(run, "__module__", "") or ""
+    if names is None or not isinstance(p, ResidualProcessor) or not mod.startswith("fdikit."):
+        return None
+    return list(names)
+
+
 class Monitor:
     """A chain: residual generators -> residual processors -> decision, with one bad-data policy.
 
@@ -637,9 +649,7 @@ class Monitor:
             # generators see the ideal grid, which is what they were designed for
             gen_in = Signals(np.arange(T) * dt, signals.values, signals.names, signals.units, check=False)
         res = [g.run(gen_in) for g in self.generators]
-        r = res[0]
-        for s in res[1:]:
-            r = r.concat_channels(s)
+        r = Signals.join_channels(res)
         r = Signals(t, r.values, r.names, r.units, check=False)
         status = np.zeros((signals.runs, T), np.int8)
         n_w = min(self._warm_samples(dt), T) if (self.warmup and dt is not None) else 0
@@ -660,13 +670,56 @@ class Monitor:
         return MonitorResult(r, st, events, np.ones((signals.runs, T), bool), [], status, [], cleared)
 
     def _processors(self, r: Signals) -> Signals:
-        """The processors' outputs over a record of residuals (fresh processors)."""
-        pool = r
+        """The processors' outputs over a record of residuals (fresh processors).
+
+        Every processor sees the pool of the residuals and the outputs of the processors before
+        it. The pool is kept as its parts (no copy of the growing pool per processor): a
+        processor of fdikit's own, which reads its ``input_names`` only, gets just those channels
+        (gathered in one copy; the same values as from the joined pool); any other gets the
+        joined pool."""
+        parts = [r]
+        where: dict[str, tuple[int, int]] = {}  # name -> (part, column)
+
+        def add(s: Signals) -> None:
+            if any(n in where for n in s.names):  # what joining the pool would refuse
+                names = [n for p in parts for n in p.names]
+                dup = sorted({n for n in names if names.count(n) > 1})
+                raise DataError(f"duplicated channel names: {dup}")
+            for i, n in enumerate(s.names):
+                where[n] = (len(parts) - 1, i)
+
+        add(r)
         for p in self.processors:
-            pool = pool.concat_channels(p.run(pool))
+            names = _own_inputs(p)
+            if names is not None and all(n in where for n in names):
+                pool = self._gather(parts, where, names, r)
+            else:
+                pool = Signals.join_channels(parts)
+            parts.append(p.run(pool))
+            add(parts[-1])
         if not self.stat_names:
             return Signals(r.t, np.zeros((r.runs, r.n_samples, 0)), [], check=False)
-        return pool.select(self.stat_names)
+        if all(n in where for n in self.stat_names):
+            return self._gather(parts, where, self.stat_names, r)
+        return Signals.join_channels(parts).select(self.stat_names)
+
+    @staticmethod
+    def _gather(parts: list[Signals], where: dict[str, tuple[int, int]], names: Sequence[str],
+                r: Signals) -> Signals:
+        """Channels ``names`` of the pool ``parts`` as one new (contiguous) Signals."""
+        names = list(names)
+        vals = np.empty((r.runs, r.n_samples, len(names)))
+        units = []
+        j = 0
+        while j < len(names):  # runs of consecutive columns of one part in one copy each
+            a, i = where[names[j]]
+            e = j + 1
+            while e < len(names) and where[names[e]] == (a, i + e - j):
+                e += 1
+            vals[:, :, j:e] = parts[a].values[:, :, i:i + e - j]
+            units += parts[a].units[i:i + e - j]
+            j = e
+        return Signals(r.t, vals, names, units, check=False, t0=r.t0)
 
     def _batch_invalid(self, sel: np.ndarray, t: np.ndarray, dt: float | None) -> str | None:
         """The reason of the first invalid sample of a finite record (max_abs, range, rate, spike)."""

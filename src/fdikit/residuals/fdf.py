@@ -1108,6 +1108,87 @@ def _run_kernel(xi, v, ptr, col, val, out):  # pragma: no cover - compiled
             xi[i, a] = z[a]
 
 
+#: Rows of ``[[C, Dv], [A, Bv]]`` advanced together by :func:`_run_kernel_chunked`.
+CHUNK = 4
+
+
+def _row_chunks(ptr: np.ndarray, col: np.ndarray, val: np.ndarray) -> tuple[np.ndarray, ...]:
+    """The compressed rows regrouped for :func:`_run_kernel_chunked`: rows of equal length in
+    chunks of :data:`CHUNK`, their terms interleaved (term ``e`` of lane ``w`` at ``CHUNK e + w``,
+    each row's terms in their own order); a chunk's unused lanes multiply zeros into the dummy
+    row ``n_rows``. Returns ``(length, offset, col, val, row)`` per chunk (``col`` unsigned; rows
+    of no terms are in no chunk: they stay 0)."""
+    nr = ptr.size - 1
+    lens = np.diff(ptr)
+    c_len, c_off, c_col, c_val, c_row = [], [0], [], [], []
+    for n in np.unique(lens):
+        if n == 0:
+            continue
+        rows = np.flatnonzero(lens == n)
+        for s in range(0, rows.size, CHUNK):
+            ch = rows[s:s + CHUNK]
+            cc = np.zeros((n, CHUNK), np.int64)
+            cv = np.zeros((n, CHUNK))
+            rr = np.full(CHUNK, nr, np.int64)
+            for w, r in enumerate(ch):
+                cc[:, w], cv[:, w], rr[w] = col[ptr[r]:ptr[r + 1]], val[ptr[r]:ptr[r + 1]], r
+            c_len.append(n)
+            c_col.append(cc.ravel())
+            c_val.append(cv.ravel())
+            c_row.append(rr)
+            c_off.append(c_off[-1] + cc.size)
+
+    def cat(a: list, dt: type) -> np.ndarray:
+        return np.ascontiguousarray(np.concatenate(a), dtype=dt) if a else np.zeros(0, dt)
+
+    return (np.asarray(c_len, np.int64), np.asarray(c_off, np.int64), cat(c_col, np.uint64),
+            cat(c_val, np.float64), cat(c_row, np.int64))
+
+
+@njit(cache=True)
+def _run_kernel_chunked(xi, v, c_len, c_off, c_col, c_val, c_row, out):  # pragma: no cover - compiled
+    """As :func:`_run_kernel` (bitwise: every row sums the same terms in the same order from 0.0),
+    with :data:`CHUNK` rows of equal length advanced together (independent sums the processor
+    overlaps, and no loop exit per row): v (R, T, m), out (R, T, q), xi (R, nf) in place."""
+    nf, m = xi.shape[1], v.shape[2]
+    q = out.shape[2]
+    z = np.empty(nf + m)
+    res = np.zeros(q + nf + 1)  # rows of no terms stay 0; the last is the unused lanes' dummy
+    for i in range(v.shape[0]):
+        for a in range(nf):
+            z[a] = xi[i, a]
+        for k in range(v.shape[1]):
+            for j in range(m):
+                z[nf + j] = v[i, k, j]
+            for g in range(c_len.shape[0]):
+                # views and unsigned columns: indices the compiler knows are not negative (no
+                # wrap-around test per term)
+                n = c_len[g]
+                cg = c_col[c_off[g]:c_off[g] + 4 * n]
+                vg = c_val[c_off[g]:c_off[g] + 4 * n]
+                a0 = 0.0
+                a1 = 0.0
+                a2 = 0.0
+                a3 = 0.0
+                for e in range(n):
+                    a0 += vg[4 * e] * z[cg[4 * e]]
+                    a1 += vg[4 * e + 1] * z[cg[4 * e + 1]]
+                    a2 += vg[4 * e + 2] * z[cg[4 * e + 2]]
+                    a3 += vg[4 * e + 3] * z[cg[4 * e + 3]]
+                w = 4 * g
+                res[c_row[w]] = a0
+                res[c_row[w + 1]] = a1
+                res[c_row[w + 2]] = a2
+                res[c_row[w + 3]] = a3
+            o = out[i, k]
+            for a in range(q):
+                o[a] = res[a]
+            for a in range(nf):
+                z[a] = res[q + a]
+        for a in range(nf):
+            xi[i, a] = z[a]
+
+
 class FaultDetectionFilter(ResidualGenerator):
     """Runtime of a :class:`FilterDesign`: batch ``run`` and streaming ``reset``/``step``.
 
@@ -1139,6 +1220,7 @@ class FaultDetectionFilter(ResidualGenerator):
         self._Bv = np.ascontiguousarray(np.hstack([design.Bu, design.By]), dtype=float)
         self._Dv = np.ascontiguousarray(np.hstack([design.Du, design.Dy]), dtype=float)
         self._rows = _sparse_rows(np.block([[self._C, self._Dv], [self._A, self._Bv]]))
+        self._chunks = _row_chunks(*self._rows)
         self.reset(1)
 
     _state_attrs = ("_xi",)
@@ -1159,15 +1241,27 @@ class FaultDetectionFilter(ResidualGenerator):
         """Residuals over a record (all runs at once, compiled time recursion)."""
         u, y = self._inputs(signals)
         if signals.n_samples > 1:
-            dts = np.diff(signals.t)
-            if np.max(np.abs(dts - self.design.dt)) > 1e-6 * self.design.dt:
-                raise ModelError(f"signals are sampled at {signals.dt:g} s but the filter was designed "
-                                 f"for dt = {self.design.dt:g} s")
+            self._check_dt(np.diff(signals.t), signals)
         self.reset(signals.runs)
         v = np.ascontiguousarray(np.concatenate([u, y], axis=2), dtype=float)
-        out = np.empty((signals.runs, signals.n_samples, len(self.output_names)))
-        _run_kernel(self._xi, v, *self._rows, out)
-        return Signals(signals.t, out, self.output_names, check=False)
+        return Signals(signals.t, self._run_values(v), self.output_names, check=False)
+
+    def _check_dt(self, dts: np.ndarray, signals: Signals) -> None:
+        """Refuse a record (sample steps ``dts``) not sampled at the design's ``dt``."""
+        if np.max(np.abs(dts - self.design.dt)) > 1e-6 * self.design.dt:
+            raise ModelError(f"signals are sampled at {signals.dt:g} s but the filter was designed "
+                             f"for dt = {self.design.dt:g} s")
+
+    def _run_values(self, v: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """Residuals (R, T, q) of the inputs ``v = [u, y]`` (R, T, m, contiguous float), from the
+        current state (advanced to the end), into ``out`` when given (contiguous)."""
+        if out is None:
+            out = np.empty((v.shape[0], v.shape[1], len(self.output_names)))
+        chunks = getattr(self, "_chunks", None)
+        if chunks is None:  # an object restored without __init__
+            chunks = self._chunks = _row_chunks(*self._rows)
+        _run_kernel_chunked(self._xi, v, *chunks, out)
+        return out
 
 
 # ---------------------------------------------------------------------------------- internal form

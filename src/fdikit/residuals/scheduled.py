@@ -10,6 +10,7 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
+from numba import njit
 
 from ..base.stage import ResidualGenerator
 from ..errors import DataError
@@ -117,9 +118,49 @@ class ScheduledFilter(ResidualGenerator):
         R = [f._step(u, y) for f in self.filters]
         return self._blend(R, self.scale * y[:, self._iv])
 
-    def run(self, signals: Signals) -> Signals:
-        R = [f.run(signals).values for f in self.filters]
+    def _plain_filters(self) -> bool:
+        """True when every filter is a plain :class:`FaultDetectionFilter` (its batch run is
+        :meth:`FaultDetectionFilter._run_values` of its inputs)."""
+        return all(type(f).run is FaultDetectionFilter.run and type(f)._inputs is ResidualGenerator._inputs
+                   for f in self.filters)
+
+    def _variable(self, signals: Signals) -> np.ndarray:
         v = signals.values[:, :, signals.index([self.variable])[0]]
-        if self._iv is not None:
-            v = self.scale * v
-        return Signals(signals.t, self._blend(R, v), self.output_names, check=False)
+        return self.scale * v if self._iv is not None else v
+
+    def run(self, signals: Signals) -> Signals:
+        if not self._plain_filters():
+            R = [f.run(signals).values for f in self.filters]
+            return Signals(signals.t, self._blend(R, self._variable(signals)), self.output_names, check=False)
+        # the filters read the same channels: their inputs gathered once, their residuals into
+        # one array, blended in one compiled pass (the arithmetic of _blend)
+        f0 = self.filters[0]
+        u, y = f0._inputs(signals)
+        if signals.n_samples > 1:
+            dts = np.diff(signals.t)
+            for f in self.filters:
+                f._check_dt(dts, signals)
+        v = self._variable(signals)
+        uy = np.ascontiguousarray(np.concatenate([u, y], axis=2), dtype=float)
+        R = np.empty((len(self.filters), signals.runs, signals.n_samples, len(self.output_names)))
+        for k, f in enumerate(self.filters):
+            f.reset(signals.runs)
+            f._run_values(uy, R[k])
+        W = np.ascontiguousarray(self._weights(v))
+        out = np.empty(R.shape[1:])
+        _blend_kernel(R, W, out)
+        return Signals(signals.t, out, self.output_names, check=False)
+
+
+@njit(cache=True)
+def _blend_kernel(R, W, out):  # pragma: no cover - compiled
+    """out = sum_k W[..., k] R[k], summed from 0.0 in the order of k (as :meth:`ScheduledFilter._blend`):
+    R (K, runs, T, q), W (runs, T, K), out (runs, T, q)."""
+    K = R.shape[0]
+    for i in range(R.shape[1]):
+        for t in range(R.shape[2]):
+            for c in range(R.shape[3]):
+                acc = 0.0
+                for k in range(K):
+                    acc += W[i, t, k] * R[k, i, t, c]
+                out[i, t, c] = acc
