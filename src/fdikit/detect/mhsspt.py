@@ -522,40 +522,33 @@ def _mhsspt_recursion_parallel(loglik, logF, log1mp, logp_pi, logq, log1mq, out)
         _mhsspt_recursion_stream(r, loglik, logF, log1mp, logp_pi, logq, log1mq, out)
 
 
+@njit(cache=True)
+def _first_nonfinite_run(x, r):  # pragma: no cover - compiled
+    """The first (sample, channel) of run r of x (R, T, C) that is not finite, as k * C + c; -1 if none."""
+    T, C = x.shape[1], x.shape[2]
+    for k in range(T):
+        for c in range(C):
+            if not np.isfinite(x[r, k, c]):
+                return k * C + c
+    return -1
+
+
 @njit(cache=True, parallel=True)
 def _first_nonfinite(x):  # pragma: no cover - compiled
-    """Per run, the first (sample, channel) of x (R, T, C) that is not finite, as k * C + c; -1 if
-    none. One parallel pass without temporaries (a bulk call checks ~1e7 values)."""
-    R, T, C = x.shape
-    first = np.full(R, -1, np.int64)
-    for r in prange(R):
-        done = False
-        for k in range(T):
-            for c in range(C):
-                if not np.isfinite(x[r, k, c]):
-                    first[r] = k * C + c
-                    done = True
-                    break
-            if done:
-                break
+    """Per run, :func:`_first_nonfinite_run`: one parallel pass without temporaries (a bulk call
+    checks ~1e7 values)."""
+    first = np.full(x.shape[0], -1, np.int64)
+    for r in prange(x.shape[0]):
+        first[r] = _first_nonfinite_run(x, r)
     return first
 
 
 @njit(cache=True)
 def _first_nonfinite_serial(x):  # pragma: no cover - compiled
     """As :func:`_first_nonfinite`, without the thread launch (one run: nothing to share)."""
-    R, T, C = x.shape
-    first = np.full(R, -1, np.int64)
-    for r in range(R):
-        done = False
-        for k in range(T):
-            for c in range(C):
-                if not np.isfinite(x[r, k, c]):
-                    first[r] = k * C + c
-                    done = True
-                    break
-            if done:
-                break
+    first = np.full(x.shape[0], -1, np.int64)
+    for r in range(x.shape[0]):
+        first[r] = _first_nonfinite_run(x, r)
     return first
 
 
