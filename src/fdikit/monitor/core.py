@@ -202,6 +202,12 @@ class Decision:
             return None
         return self.size_channels.get(channel, self.size_channels.get(self.hypothesis(channel)))
 
+    @property
+    def channels(self) -> list[str]:
+        """Every channel :meth:`events` reads: the alarm channels, then the size channels."""
+        sizes = [self.size_channel(c) for c in self.alarm_channels]
+        return list(dict.fromkeys([*self.alarm_channels, *(c for c in sizes if c is not None)]))
+
     def clear_samples(self, dt: float) -> int:
         """``clear_after`` in samples of period ``dt``."""
         return max(1, round(self.clear_after / dt)) if dt > 0 else 1
@@ -227,17 +233,24 @@ class Decision:
         if dt is None:
             dt = float(np.median(np.diff(t))) if t.size > 1 else 1.0
         n_clear = self.clear_samples(dt)
-        runs, T = stats.values.shape[:2]
+        runs = stats.values.shape[0]
         onsets, cleared = [], []  # (run, k, hypothesis, a, value, size) / (..., onset index)
         for run in range(runs):
-            J = np.arange(T) if status is None else np.flatnonzero(np.asarray(status[run]) == _OK)
-            if J.size == 0:
-                continue
-            V = stats.values[run][J][:, idx]  # (P, A)
+            # the judged samples J (None: all of them, no copy through an index)
+            J = None
+            if status is not None:
+                ok = np.asarray(status[run]) == _OK
+                if not ok.all():
+                    J = np.flatnonzero(ok)
+                    if J.size == 0:
+                        continue
+            V = stats.values[run][:, idx]  # (P, A): the alarm columns only, then the judged rows
+            if J is not None:
+                V = V[J]
             with np.errstate(invalid="ignore"):
                 on = V >= self.level
                 low = V < self.low_level
-            pos = np.arange(J.size)
+            pos = np.arange(V.shape[0])
             for a, ch in enumerate(self.alarm_channels):
                 on_pos = np.flatnonzero(on[:, a])
                 if on_pos.size == 0:
@@ -251,14 +264,14 @@ class Decision:
                     if i == on_pos.size:
                         break
                     o = on_pos[i]
-                    k = int(J[o])
+                    k = int(o if J is None else J[o])
                     size = None if sidx[a] is None else float(stats.values[run, k, sidx[a]])
                     onsets.append((run, k, self.hypothesis(ch), a, float(V[o, a]), size))
                     j = np.searchsorted(hits, o, "right")
                     if j == hits.size:
                         break
                     c = hits[j]
-                    kc = int(J[c])
+                    kc = int(c if J is None else J[c])
                     cleared.append((run, kc, self.hypothesis(ch), a, float(V[c, a]), len(onsets) - 1))
                     p = c
         order = sorted(range(len(onsets)), key=lambda i: onsets[i][:4])
@@ -664,10 +677,22 @@ class Monitor:
         st = Signals(t, st_vals, self.stat_names, check=False)
         events, cleared = [], []
         if self.decision is not None:
-            pool = r.concat_channels(st)
+            pool = self._decision_pool(r, st)
             for e in self.decision.events(t, pool, status=status, dt=dt if dt else 1.0):
                 (cleared if e.kind == "cleared" else events).append(e)
         return MonitorResult(r, st, events, np.ones((signals.runs, T), bool), [], status, [], cleared)
+
+    def _decision_pool(self, r: Signals, st: Signals) -> Signals:
+        """The channels the decision reads, from the residuals and statistics (gathered, not the
+        whole pool joined); the joined pool where a name is missing, which names it."""
+        names = getattr(self.decision, "channels", None)
+        if names is None:  # a decision of another kind: the whole pool
+            return r.concat_channels(st)
+        where = {n: (0, i) for i, n in enumerate(r.names)}
+        where.update({n: (1, i) for i, n in enumerate(st.names)})
+        if len(where) == r.n_channels + st.n_channels and all(n in where for n in names):
+            return self._gather([r, st], where, names, r)
+        return r.concat_channels(st)
 
     def _processors(self, r: Signals) -> Signals:
         """The processors' outputs over a record of residuals (fresh processors).
