@@ -286,6 +286,24 @@ def _schemas():
 _MADE_DIRS: set[Path] = set()
 
 
+@functools.lru_cache(maxsize=1)
+def _empty_events() -> bytes:
+    """The Parquet file of a log without events (the same bytes for every such log: most logs of
+    a healthy fleet), serialised once per process."""
+    import pyarrow as pa
+
+    return _serialise(pa.Table.from_pylist([], schema=_schemas()[1]))
+
+
+def _serialise(table) -> bytes:
+    """A small table as a plain Parquet file in memory (see :func:`_commit`)."""
+    import pyarrow.parquet as pq
+
+    buf = io.BytesIO()
+    pq.write_table(table, buf, compression="none", write_statistics=False, use_dictionary=False)
+    return buf.getvalue()
+
+
 def _commit(table, final: Path, *, small: bool = True) -> None:
     """Write a Parquet file under a hidden temporary name beside ``final`` and rename it into place.
 
@@ -293,6 +311,7 @@ def _commit(table, final: Path, *, small: bool = True) -> None:
     column statistics or dictionary pages -- a plain Parquet file that every reader reads, at a
     third of the cost of the default writer for a table of a few rows -- and written with one
     system call; a large one (``--stats``) goes through pyarrow's writer with its defaults.
+    ``table`` may also be the bytes of a Parquet file, written as they are.
     """
     import pyarrow.parquet as pq
 
@@ -302,15 +321,14 @@ def _commit(table, final: Path, *, small: bool = True) -> None:
     tmp = final.parent / f".tmp-{uuid.uuid4().hex}-{final.name}"
     try:
         if small:
-            buf = io.BytesIO()
-            pq.write_table(table, buf, compression="none", write_statistics=False, use_dictionary=False)
+            data = table if isinstance(table, bytes) else _serialise(table)
             try:
                 fh = open(tmp, "xb")
             except FileNotFoundError:  # the directory was removed since: make it again
                 final.parent.mkdir(parents=True, exist_ok=True)
                 fh = open(tmp, "xb")
             with fh:
-                fh.write(buf.getbuffer())
+                fh.write(data)
         else:
             final.parent.mkdir(parents=True, exist_ok=True)
             pq.write_table(table, tmp)
@@ -390,7 +408,7 @@ def process_log(task: LogTask) -> dict:
         events, stats_table = [], None
     t3 = time.perf_counter()
     out = Path(task.out)
-    _commit(pa.Table.from_pylist(events, schema=events_schema),
+    _commit(pa.Table.from_pylist(events, schema=events_schema) if events else _empty_events(),
             _part_dir(out, "events", task.vehicle) / f"{task.part}.parquet")
     if task.stats:
         if stats_table is None:
