@@ -1,10 +1,10 @@
 """The issue-19 speed-ups of the monitor chain give the numbers of the code they replaced, bitwise.
 
 Kept here as references: the compressed-row filter kernel (one row after the other), the scheduled
-filter's run (each filter on its own, blended by numpy), the MHSSPT's log-likelihood kernel (every
-hypothesis' components evaluated), the time-vector check and the monitor's processor pool (copied
-whole after every processor). Compared on random data and on the real RAV4 minute (skipped when
-it is absent).
+filter's run (each filter on its own, blended by numpy; the reference of the fused bank pass too),
+the MHSSPT's log-likelihood kernel (every hypothesis' components evaluated), the time-vector check
+and the monitor's processor pool (copied whole after every processor). Compared on random data
+and on the real RAV4 minute (skipped when it is absent).
 """
 
 from __future__ import annotations
@@ -440,3 +440,154 @@ def test_processor_output_colliding_with_the_pool_is_still_refused():
     with pytest.raises(DataError) as old:
         _ref_processors(mon, sig)
     assert str(new.value) == str(old.value)
+
+
+# ---------------------------------------------------------------------------------- the fused bank
+def _bank_case(rng, K, *, same_pattern, in_y=False, nf=12):
+    """K random designs reading the same channels; with ``same_pattern`` they share one nonzero
+    pattern, except one input entry that half of them lack (a term the bank must skip)."""
+    y_names = ["y0", "speed", "y2"] if in_y else ["y0", "y1", "y2"]
+    designs = [_random_design(rng, nf, 1, 3, 4, density=0.4, u_names=["steer"], y_names=y_names)
+               for _ in range(K)]
+    if same_pattern:
+        base = designs[0]
+        for j, d in enumerate(designs):
+            for name in ("A", "Bu", "By", "C", "Du", "Dy"):
+                M = getattr(base, name)
+                setattr(d, name, np.where(M != 0.0, rng.normal(size=M.shape), 0.0))
+            d.A *= 0.9 / max(1e-9, np.abs(np.linalg.eigvals(d.A)).max(initial=0.0) + 1e-9)
+            if j % 2:
+                d.Bu[:] = 0.0  # the steer column: a partial column of the bank
+            else:
+                d.Bu[0, 0] = 1.5
+    g = ScheduledFilter(np.sort(rng.uniform(5, 30, K)) + np.arange(K), designs, variable="speed",
+                        scale=0.5 if in_y else 1.0)
+    for f in g.filters:
+        f.x0 = rng.normal(size=nf)
+    return g
+
+
+def _bank_signals(rng, g, T=300, runs=2):
+    names = [*g.u_names, *g.y_names]
+    vals = rng.normal(size=(runs, T, len(names)))
+    vals[:, :, names.index("speed")] = rng.uniform(0, 70, (runs, T))
+    return Signals(np.arange(T) * 0.02, vals, names)
+
+
+def _new_and_ref(g, sig):
+    new = g.run(sig).values
+    states = [f._xi.copy() for f in g.filters]
+    ref = _ref_scheduled_run(g, sig).values
+    return new, states, ref, [f._xi for f in g.filters]
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_bank_pass_is_bitwise_the_per_filter_run(seed, monkeypatch):
+    rng = np.random.default_rng(300 + seed)
+    from fdikit.residuals import scheduled
+
+    calls = []
+    kernel = scheduled._run_bank_kernel
+
+    def spy(*a):
+        calls.append(kernel(*a))
+        return calls[-1]
+
+    monkeypatch.setattr(scheduled, "_run_bank_kernel", spy)
+    K = 1 + seed % 4
+    g = _bank_case(rng, K, same_pattern=bool(seed % 2), in_y=seed >= 3)
+    sig = _bank_signals(rng, g, runs=1 + seed % 3)
+    new, states, ref, ref_states = _new_and_ref(g, sig)
+    assert calls == [True]  # the fused pass ran (no fallback)
+    assert np.array_equal(new, ref)
+    assert all(np.array_equal(a, b) for a, b in zip(states, ref_states))
+    # streaming on from the batch's end state is the reference's streaming
+    g.run(sig)
+    nu = len(g.u_names)
+    more = rng.normal(size=(sig.runs, 20, nu + len(g.y_names)))
+    cont = np.stack([g.step(more[:, k, :nu], more[:, k, nu:]) for k in range(20)], axis=1)
+    _ref_scheduled_run(g, sig)
+    ref_cont = np.stack([g.step(more[:, k, :nu], more[:, k, nu:]) for k in range(20)], axis=1)
+    assert np.array_equal(cont, ref_cont)
+
+
+def test_bank_weights_at_the_edges_are_the_numpy_weights():
+    rng = np.random.default_rng(310)
+    for K in (1, 2, 4):
+        g = _bank_case(rng, K, same_pattern=True)
+        sig = _bank_signals(rng, g, T=40, runs=1)
+        v = sig.values.copy()
+        pts = g.speeds
+        edge = [pts[0], pts[-1], np.nextafter(pts[0], -1), np.nextafter(pts[-1], 99), -0.0, 0.0, -5.0, 1e300,
+                np.inf, -np.inf, np.nan, *pts, *(0.5 * (pts[:-1] + pts[1:]))]
+        v[0, :len(edge), sig.index("speed")[0]] = edge
+        sig = Signals(sig.t, v, sig.names, check=False)
+        new, _, ref, _ = _new_and_ref(g, sig)
+        assert np.array_equal(new, ref, equal_nan=True)
+        assert np.isnan(new[0, 10]).all() == (K > 1)  # a NaN speed blends NaN weights (K > 1)
+
+
+def test_bank_falls_back_on_a_nonfinite_value_a_filter_skips():
+    from fdikit.residuals import scheduled
+
+    rng = np.random.default_rng(320)
+    g = _bank_case(rng, 4, same_pattern=True)
+    bank = g._bank_structure()
+    assert bank[-1].size == 1  # the steer column: two filters read it, two skip it
+    sig = _bank_signals(rng, g, T=200, runs=2)
+    for bad in (np.nan, np.inf):
+        v = sig.values.copy()
+        v[1, 120, sig.index("steer")[0]] = bad
+        s = Signals(sig.t, v, sig.names, check=False)
+        xi = np.zeros((2, 12, 4))
+        assert not scheduled._run_bank_kernel(xi, s.values, np.asarray(s.index(["steer", "y0", "y1", "y2"])),
+                                              s.index("speed")[0], False, 1.0, g.speeds, 4, *bank,
+                                              np.empty((2, 200, 4)))
+        with np.errstate(invalid="ignore"):
+            new, states, ref, ref_states = _new_and_ref(g, s)
+        assert np.array_equal(new, ref, equal_nan=True)
+        assert np.isfinite(new[0]).all()  # the other run is untouched
+        assert all(np.array_equal(a, b, equal_nan=True) for a, b in zip(states, ref_states))
+    # a non-finite value every filter reads (no skipped term) stays in the fused pass, as NaN
+    v = sig.values.copy()
+    v[0, 50, sig.index("y0")[0]] = np.nan
+    s = Signals(sig.t, v, sig.names, check=False)
+    new, _, ref, _ = _new_and_ref(g, s)
+    assert np.array_equal(new, ref, equal_nan=True)
+
+
+def test_bank_not_used_where_it_does_not_apply_and_follows_new_filters():
+    rng = np.random.default_rng(330)
+    g5 = _bank_case(rng, 5, same_pattern=False)  # more filters than lanes
+    assert g5._bank_structure() is None
+    sig = _bank_signals(rng, g5)
+    new, _, ref, _ = _new_and_ref(g5, sig)
+    assert np.array_equal(new, ref)
+    designs = [_random_design(rng, nf, 1, 3, 4, u_names=["steer"], y_names=["y0", "y1", "y2"])
+               for nf in (5, 7)]
+    g2 = ScheduledFilter([10.0, 20.0], designs)  # different orders
+    assert g2._bank_structure() is None
+    new, _, ref, _ = _new_and_ref(g2, _bank_signals(rng, g2))
+    assert np.array_equal(new, ref)
+    # the cached bank follows a replaced filter
+    g = _bank_case(rng, 3, same_pattern=False)
+    sig = _bank_signals(rng, g)
+    g.run(sig)
+    g.filters[1] = FaultDetectionFilter(_random_design(rng, 12, 1, 3, 4, u_names=["steer"],
+                                                       y_names=["y0", "y1", "y2"]))
+    new, _, ref, _ = _new_and_ref(g, sig)
+    assert np.array_equal(new, ref)
+
+
+def test_rav4_fleet_bank_is_bitwise_the_per_filter_run(rav4_cfg):
+    from fdikit.monitor.config import build_monitor, load_config, map_channels, read_log
+
+    cfg = load_config(rav4_cfg)
+    g = build_monitor(cfg).generators[0]
+    sig = map_channels(cfg, read_log(cfg, DATA / "drive.blf"))
+    assert g._bank_structure() is not None
+    new = g.run(sig).values
+    states = [f._xi.copy() for f in g.filters]
+    ref = _ref_scheduled_run(g, g.monitor_channels(sig)).values
+    assert np.array_equal(new, ref)
+    assert all(np.array_equal(a, f._xi) for a, f in zip(states, g.filters))
