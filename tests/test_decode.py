@@ -152,3 +152,120 @@ def test_written_blf_reads_back_with_python_can(tmp_path):
     assert np.array_equal(t0, t1) and np.array_equal(i0, ids) and np.array_equal(i1, ids)
     assert [bytes(x) for x in d0] == data and [d1[k] for k in range(n)] == data
     assert np.max(np.abs(t0 - ts)) < 1e-6  # nanosecond ticks from a millisecond start time
+
+
+# ---------------------------------------------------------------------------------- on-demand BLF path
+def _loaded_state(s):
+    """Everything a loader returns, for bitwise comparison (floats by their bytes, info by repr)."""
+    return (s.t.tobytes(), s.values.tobytes(), s.valid.tobytes(), s.names, s.units, repr(s.t0),
+            repr(s.time_origin), s.reasons, repr(s.info), s.source.n_records)
+
+
+def _via_frames(path, dbc, signals, rate=None, **kw):
+    """The reference: python-can's frames (fdikit.io.can._read_frames) into frames_to_signals."""
+    from fdikit.io.formats import SourceReport, frames_to_signals
+
+    ts, ids, data = _read_frames(Path(path))
+    src, where = SourceReport("blf", str(path), ts.size), f"BLF file {Path(path).name!r}"
+    return frames_to_signals(ts, ids, data, dbc, signals, rate, source=src, where=where, **kw)
+
+
+def _gappy_blf(tmp_path, seed=0):
+    """A generated BLF of the RAV4 messages: jittered rates, a gap, short payloads, other ids."""
+    db = _load_dbc(DBC)
+    rng = np.random.default_rng(seed)
+    ts, ids, data = [], [], []
+    for name, period in (("KINEMATICS", 0.01), ("SPEED", 0.02), ("WHEEL_SPEEDS", 0.012),
+                         ("STEER_ANGLE_SENSOR", 0.0125)):
+        msg = db.get_message_by_name(name)
+        t = np.arange(0.0, 20.0, period) + rng.uniform(0, 1e-3)
+        t = t[(t < 7.0) | (t > 7.4)] if name == "SPEED" else t  # a gap longer than max_gap periods
+        t += rng.normal(0, 2e-4, t.size)
+        pay = [rng.integers(0, 256, 8, dtype=np.uint8).tobytes() for _ in t]
+        if name == "STEER_ANGLE_SENSOR":  # stuck stretches (longest_constant) and short frames (NaN)
+            pay = [pay[(k // 50) * 50] for k in range(len(pay))]
+            for k in rng.integers(0, len(pay), 15):
+                pay[k] = pay[k][:1]
+        ts.append(t)
+        ids.append(np.full(t.size, msg.frame_id))
+        data += pay
+    ts, ids = np.concatenate(ts), np.concatenate(ids)
+    extra = rng.uniform(0, 20, 3000)  # frames of other messages, among them an extended id
+    ts, ids = np.r_[ts, extra], np.r_[ids, rng.choice([0x3B7, 0x18DAF110, 0x7E8], extra.size)]
+    data += [rng.integers(0, 256, rng.integers(0, 9), dtype=np.uint8).tobytes() for _ in extra]
+    order = np.argsort(ts, kind="stable")
+    ts = 1.7e9 + ts[order]
+    return write_blf_table(tmp_path / f"gappy{seed}.blf", ts, ids[order], [data[k] for k in order],
+                           container_bytes=40_000)
+
+
+ALL_OPTIONS = [{}, {"span": "log"}, {"method": "previous"}, {"units": "si", "max_gap": 1.5},
+               {"span": "log", "method": "previous", "stuck_after": 0.3}]
+
+
+@pytest.mark.parametrize("kw", ALL_OPTIONS)
+def test_on_demand_blf_path_equals_python_can_frames(tmp_path, kw):
+    """read_log on a BLF (frames read on demand, channels of a message resampled together) gives
+    bit for bit what python-can's frames give through frames_to_signals: values, grid, flags, t0,
+    time origin, invalid reasons and every SignalQuality field."""
+    sig = ["STEER_ANGLE_SENSOR.STEER_ANGLE", "SPEED.SPEED", "KINEMATICS.YAW_RATE",
+           "STEER_ANGLE_SENSOR.STEER_FRACTION", "WHEEL_SPEEDS.WHEEL_SPEED_FL", "KINEMATICS.ACCEL_Y",
+           "WHEEL_SPEEDS.WHEEL_SPEED_RR"]
+    paths = [_gappy_blf(tmp_path, 0), _gappy_blf(tmp_path, 1)] + ([BLF] if BLF.exists() else [])
+    for p in paths:
+        assert decode.read_blf_frames(p) is not None  # the on-demand path is the one tested
+        for rate in (50.0, None):
+            new = read_log(p, DBC, sig, rate, **kw)
+            ref = _via_frames(p, DBC, sig, rate, **kw)
+            assert _loaded_state(new) == _loaded_state(ref), (p, rate)
+    gappy = read_log(paths[0], DBC, sig, 50.0, **kw)
+    assert gappy.reasons and not gappy.valid.all()  # the generated log exercises the gap path
+    assert gappy.info["STEER_ANGLE_SENSOR.STEER_ANGLE"].n_undecodable > 0
+
+
+def test_on_demand_blf_frames_equal_the_table(tmp_path):
+    paths = [_gappy_blf(tmp_path, 2)] + ([BLF] if BLF.exists() else [])
+    for p in paths:
+        ts, ids, pay, header = read_blf_table(p)
+        frames = decode.read_blf_frames(p)
+        assert frames.n_frames == ts.size and frames.header == header and frames.times_ordered()
+        assert np.array_equal(frames.times(), ts) and np.array_equal(frames.ids, ids)
+        for fid in np.unique(ids):
+            idx = frames.select(int(fid))
+            assert np.array_equal(idx, np.flatnonzero(ids == fid))
+            assert np.array_equal(frames.times(idx), ts[idx])
+            sub, ref = frames.payloads(idx), pay.take(idx)
+            assert np.array_equal(sub.matrix, ref.matrix) and np.array_equal(sub.lengths, ref.lengths)
+
+
+def test_on_demand_blf_time_going_back_is_the_same_error(tmp_path):
+    rng = np.random.default_rng(4)
+    n = 3000
+    ts = 1.7e9 + np.r_[0.0, np.cumsum(rng.uniform(1e-4, 2e-3, n - 1))]  # starts on a millisecond
+    ts[1000], ts[1001] = ts[1001], ts[1000]  # two frames swapped: time goes back at frame 1001
+    ids = rng.choice([0xB4, 0x25], n)
+    data = [rng.integers(0, 256, 8, dtype=np.uint8).tobytes() for _ in range(n)]
+    p = write_blf_table(tmp_path / "back.blf", ts, ids, data)
+    assert not decode.read_blf_frames(p).times_ordered()
+    from fdikit.errors import DataError
+
+    with pytest.raises(DataError) as new:
+        read_log(p, DBC, ["SPEED.SPEED"], 50.0)
+    with pytest.raises(DataError) as ref:
+        _via_frames(p, DBC, ["SPEED.SPEED"], 50.0)
+    assert str(new.value) == str(ref.value) and "frame 1001" in str(new.value)
+
+
+def test_longest_constant_rows_equals_per_row():
+    from fdikit.io.formats import _longest_constant, _longest_constant_rows
+
+    rng = np.random.default_rng(6)
+    for n in (1, 2, 3, 10, 200):
+        t = np.cumsum(rng.uniform(0.001, 0.1, n))
+        v = rng.integers(0, 3, (4, n)).astype(float)
+        v[1] = 7.0  # constant all along
+        v[2, rng.integers(0, n, 3)] = np.nan
+        v[3] = np.arange(n)  # never constant
+        got = _longest_constant_rows(t, v)
+        want = [_longest_constant(t, row) for row in v]
+        assert got.tobytes() == np.array(want).tobytes()

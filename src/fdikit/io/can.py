@@ -289,15 +289,16 @@ def _resample_plan(t_src: np.ndarray, grid: np.ndarray, max_gap: float, method: 
 
 
 def _resample_apply(plan: tuple, v_src: np.ndarray) -> np.ndarray:
-    """The resampled values of one signal by a plan of :func:`_resample_plan` (NaN where invalid)."""
+    """The resampled values of one signal (or of each row of ``v_src``, shape (k, N)) by a plan of
+    :func:`_resample_plan` (NaN where invalid)."""
     ok = plan[-1]
-    out = np.full(ok.shape, np.nan)
+    out = np.full(v_src.shape[:-1] + ok.shape, np.nan)
     if plan[0] == "previous":
-        out[ok] = v_src[plan[1]]
+        out[..., ok] = v_src[..., plan[1]]
         return out
     _, i0, i1, w, _ = plan
-    a = v_src[i0]
-    out[ok] = a + w * (v_src[i1] - a)
+    a = v_src[..., i0]
+    out[..., ok] = a + w * (v_src[..., i1] - a)
     return out
 
 
@@ -366,21 +367,57 @@ def _read_frame_table(path: Path):
         ts, ids, data = _read_frames(path)
         return ts, ids, FramePayloads.from_bytes(data)
     ts, ids, payloads, header = table
+    _blf_integrity(path, header, len(ts))
+    return ts, ids, payloads
+
+
+def _blf_integrity(path: Path, header: dict[str, int], n: int) -> None:
+    """:func:`_read_frames`' BLF checks on a frame table of ``n`` frames (file size, object count)."""
     size = path.stat().st_size
     if header["file_size"] and header["file_size"] != size:
         raise DataError(f"BLF file {str(path)!r} is truncated or padded: its header says "
                         f"{header['file_size']} bytes, the file has {size} bytes "
-                        f"({len(ts)} frames readable of {header['object_count']})")
-    if header["object_count"] and len(ts) < header["object_count"]:
+                        f"({n} frames readable of {header['object_count']})")
+    if header["object_count"] and n < header["object_count"]:
         raise DataError(f"BLF file {str(path)!r} is truncated: its header counts "
-                        f"{header['object_count']} objects, only {len(ts)} frames could be read")
-    if not len(ts):
+                        f"{header['object_count']} objects, only {n} frames could be read")
+    if not n:
         raise DataError(f"CAN log {str(path)!r} holds no CAN frames (empty or not a log)")
-    return ts, ids, payloads
 
 
-#: Parsed DBC files by (path, modification time, size): a fleet decodes thousands of logs with one DBC.
-_DBC_CACHE: dict[tuple[str, int, int], Any] = {}
+def _read_blf_frames(path: Path):
+    """The frames of a BLF log read on demand (:class:`fdikit.io.decode.BlfFrames`) after
+    :func:`_read_frames`' integrity checks, or ``None`` when the file is not the usual layout
+    (then :func:`_read_frame_table` reads it)."""
+    from .decode import read_blf_frames
+
+    if not (path.is_file() and path.suffix.lower() == ".blf"):
+        return None
+    try:
+        frames = read_blf_frames(path)
+    except (ValueError, IndexError, struct.error, OSError):  # unusual layout: the table reader decides
+        return None
+    if frames is not None:
+        _blf_integrity(path, frames.header, frames.n_frames)
+    return frames
+
+
+#: Parsed DBC files by (device, inode, modification time, size): a fleet decodes thousands of logs
+#: with one DBC.
+_DBC_CACHE: dict[tuple[int, int, int, int], Any] = {}
+#: Resolved signal lists of the cached DBCs, by (DBC cache key, signal names).
+_RESOLVED: dict[tuple[tuple[int, int, int, int], tuple[str, ...]], list] = {}
+
+
+def _dbc_key(dbc: Any) -> tuple[int, int, int, int] | None:
+    """The cache key of a DBC path (None: not a path, or it cannot be stat'ed)."""
+    if not isinstance(dbc, str | os.PathLike):
+        return None
+    try:
+        st = os.stat(dbc)
+    except (OSError, ValueError):
+        return None
+    return (st.st_dev, st.st_ino, st.st_mtime_ns, st.st_size)
 
 
 def _load_dbc(dbc: Any):
@@ -388,21 +425,40 @@ def _load_dbc(dbc: Any):
 
     if not isinstance(dbc, str | os.PathLike):
         return dbc  # an already loaded cantools Database
+    key = _dbc_key(dbc)
+    if key is not None and key in _DBC_CACHE:
+        return _DBC_CACHE[key]
     p = Path(dbc)
     if not p.exists():
         raise DataError(f"DBC file {str(p)!r} does not exist")
-    st = p.stat()
-    key = (str(p.resolve()), st.st_mtime_ns, st.st_size)
-    if key in _DBC_CACHE:
-        return _DBC_CACHE[key]
     try:
         db = cantools.database.load_file(str(p), strict=False)
     except Exception as exc:  # cantools raises several parse error types
         raise DataError(f"cannot parse DBC {str(p)!r}: {type(exc).__name__}: {exc}") from None
-    if len(_DBC_CACHE) >= 8:
-        _DBC_CACHE.pop(next(iter(_DBC_CACHE)))
-    _DBC_CACHE[key] = db
+    if key is not None:
+        if len(_DBC_CACHE) >= 8:
+            old = next(iter(_DBC_CACHE))
+            _DBC_CACHE.pop(old)
+            for k in [k for k in _RESOLVED if k[0] == old]:
+                del _RESOLVED[k]
+        _DBC_CACHE[key] = db
     return db
+
+
+def _load_resolved(dbc: Any, signals: Sequence[str]):
+    """``(db, _resolve(db, signals))``, the resolution cached with a DBC loaded from a path."""
+    key = _dbc_key(dbc)
+    if key is not None and key in _DBC_CACHE:
+        hit = _RESOLVED.get((key, tuple(signals)))
+        if hit is not None:
+            return _DBC_CACHE[key], hit
+    db = _load_dbc(dbc)
+    resolved = _resolve(db, signals)
+    if key is not None and _DBC_CACHE.get(key) is db:
+        if len(_RESOLVED) >= 64:
+            _RESOLVED.pop(next(iter(_RESOLVED)))
+        _RESOLVED[(key, tuple(signals))] = resolved
+    return db, resolved
 
 
 def _resolve(db, signals: Sequence[str]):

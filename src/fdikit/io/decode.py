@@ -12,6 +12,10 @@ Two halves, both exact replacements of the per-frame path (python-can's ``BLFRea
   bit for bit. Anything unusual (a parse error, an unknown compression or header version, a
   CAN FD 64 object, an object smaller than its fields) returns ``None`` and the caller reads
   the file with python-can, so every corrupt-file error message stays as it was.
+  :func:`read_blf_frames` is the on-demand form for the usual layout (48-byte CAN messages end
+  to end, no remote frame): ids and the time-order check for every frame, read in place, and
+  times and payloads only for the frames of the requested messages (:class:`BlfFrames`, equal
+  to the same rows of the table).
 * :func:`decode_message` decodes the requested signals of one DBC message from all its frames
   at once: each signal's bits are cut out of an 8-byte window of the payload matrix read as one
   little- or big-endian ``uint64`` (a shift and a mask), sign-extended, reinterpreted as IEEE
@@ -45,8 +49,8 @@ try:  # ISA-L's inflate: the same bytes as zlib's, about twice as fast (a depend
 except ImportError:  # pragma: no cover - isal comes with asammdf
     _isal_zlib = None
 
-__all__ = ["FramePayloads", "decode_message", "decode_message_reference", "read_blf_table", "set_signal",
-           "write_blf_table"]
+__all__ = ["BlfFrames", "FramePayloads", "decode_message", "decode_message_reference", "read_blf_frames",
+           "read_blf_table", "set_signal", "write_blf_table"]
 
 
 # ---------------------------------------------------------------------------------- payload matrix
@@ -170,6 +174,11 @@ _LOW_BYTES = np.array([(1 << (8 * i)) - 1 for i in range(9)], dtype=np.uint64)
 _CAN_V1 = np.dtype([("sig", "S4"), ("hsize", "<u2"), ("hver", "<u2"), ("size", "<u4"), ("type", "<u4"),
                     ("tflags", "<u4"), ("client", "<u2"), ("over", "<u2"), ("ticks", "<u8"),
                     ("chan", "<u2"), ("cflags", "u1"), ("dlc", "u1"), ("id", "<u4"), ("data", "u1", (8,))])
+#: The first header word of a version-1 object with the header size masked out: b"LOBJ", version 1.
+_SIG_VER_MASK, _SIG_VER1 = np.uint64(0xFFFF0000FFFFFFFF), np.uint64(_LOBJ | (1 << 48))
+#: The second header word of a 48-byte CAN_MESSAGE / CAN_MESSAGE2 object (size, type).
+_SIZE_TYPES = (np.uint64(_CAN_V1.itemsize | (_CAN_MESSAGE << 32)),
+               np.uint64(_CAN_V1.itemsize | (_CAN_MESSAGE2 << 32)))
 
 
 def _uniform_can(buf: np.ndarray) -> np.ndarray | None:
@@ -179,19 +188,28 @@ def _uniform_can(buf: np.ndarray) -> np.ndarray | None:
     if n == 0:
         return None
     rec = buf[: n * _CAN_V1.itemsize].view(_CAN_V1)
-    # the header words as integers (one pass each, no string comparison): b"LOBJ", header version
-    # 1 (the high half of the second word), object size 48, type CAN_MESSAGE or CAN_MESSAGE2
-    w = buf[: n * _CAN_V1.itemsize].view("<u4").reshape(n, _CAN_V1.itemsize // 4)
-    typ = w[:, 3]
-    if not (np.all(w[:, 0] == _LOBJ) and np.all((w[:, 1] >> 16) == 1) and np.all(w[:, 2] == _CAN_V1.itemsize)
-            and np.all((typ == _CAN_MESSAGE) | (typ == _CAN_MESSAGE2))):
+    # the header as two little-endian words per object (one strided pass each, no string
+    # comparison): b"LOBJ" and header version 1 (the header size bits masked out), then object
+    # size 48 and type CAN_MESSAGE or CAN_MESSAGE2
+    w = _words(buf, n)
+    if not np.all((w[:, 0] & _SIG_VER_MASK) == _SIG_VER1):
         return None
+    second = w[:, 1]
+    first = second[0]
+    if first not in _SIZE_TYPES or not np.all(second == first):  # one type (the usual log), else either
+        if not np.all((second == _SIZE_TYPES[0]) | (second == _SIZE_TYPES[1])):
+            return None
     rest = buf[n * _CAN_V1.itemsize:].tobytes()
     # what python-can does with the bytes after the last whole object: nothing, unless an object
     # starts there (then the general walk decides) or no signature is found with > 8 bytes left
     if rest.find(b"LOBJ", 0, 8) != -1 or len(rest) >= 8:
         return None
     return rec
+
+
+def _words(buf: np.ndarray, n: int) -> np.ndarray:
+    """The first ``n`` 48-byte objects of ``buf`` as little-endian 8-byte words, shape (n, 6)."""
+    return buf[: n * _CAN_V1.itemsize].view("<u8").reshape(n, _CAN_V1.itemsize // 8)
 
 
 def _inflate(body: bytes) -> bytes:
@@ -214,34 +232,21 @@ def _inflate(body: bytes) -> bytes:
 
 
 def _tick_times(flags: np.ndarray, ticks: np.ndarray, start: float) -> np.ndarray:
-    """Object times, s: ``ticks / 1e5`` (flag 1, 10 us ticks) or ``ticks / 1e9`` (ns), plus the start."""
-    t = ticks.astype(float)
+    """Object times, s: ``ticks / 1e5`` (flag 1, 10 us ticks) or ``ticks / 1e9`` (ns), plus the start.
+
+    ``ticks`` are below 2**53 (exact in float64; converted through int64, which gives the same
+    floats as uint64 and is faster).
+    """
+    t = ticks.view(np.int64).astype(float) if ticks.dtype == np.uint64 else ticks.astype(float)
     ten_us = flags == 1
     if not ten_us.any():
         return t / 1e9 + start
     return np.where(ten_us, t / 1e5, t / 1e9) + start
 
 
-def read_blf_table(path) -> tuple[np.ndarray, np.ndarray, FramePayloads, dict[str, int]] | None:
-    """The CAN data frames of a BLF file as a table, or ``None`` when python-can should read it.
-
-    Parameters
-    ----------
-    path : path-like
-
-    Returns
-    -------
-    ts : ndarray, shape (N,)
-        Frame times, s (absolute, as python-can gives them).
-    ids : ndarray of int64, shape (N,)
-        Arbitration ids (29-bit).
-    payloads : FramePayloads
-    header : dict
-        ``file_size`` and ``object_count`` from the file header.
-
-    Error frames and remote frames are left out, as :func:`fdikit.io.can._read_frames` leaves
-    them out.
-    """
+def _inflated(path) -> tuple[np.ndarray, float, dict[str, int]] | None:
+    """The object stream of a BLF file (log containers inflated and joined), its start time and
+    header counts; ``None`` for anything unusual (python-can then reads the file)."""
     from can.io.blf import systemtime_to_timestamp
 
     raw = Path(path).read_bytes()
@@ -275,7 +280,115 @@ def read_blf_table(path) -> tuple[np.ndarray, np.ndarray, FramePayloads, dict[st
                 return None
         pos += osize + osize % 4
     buf = np.frombuffer(b"".join(chunks), np.uint8)
-    header = {"file_size": int(hdr[10]), "object_count": int(hdr[12])}
+    return buf, start, {"file_size": int(hdr[10]), "object_count": int(hdr[12])}
+
+
+class BlfFrames:
+    """The frames of a BLF file of 48-byte classic CAN messages, read on demand (internal).
+
+    What every frame needs (arbitration ids, the check that time never goes back) is read from
+    the inflated objects in place; times and payloads only for the frames asked for
+    (:meth:`times`, :meth:`payloads`), equal bit for bit to the same rows of
+    :func:`read_blf_table`'s table. Built by :func:`read_blf_frames`.
+
+    Attributes
+    ----------
+    n_frames : int
+    header : dict
+        ``file_size`` and ``object_count`` from the file header.
+    """
+
+    __slots__ = ("_flags", "_ordered", "_ticks", "_words", "header", "ids", "n_frames", "start")
+
+    def __init__(self, buf: np.ndarray, rec: np.ndarray, start: float, header: dict[str, int]):
+        self._words = _words(buf, rec.size)
+        self.start = start
+        self.header = header
+        self.n_frames = int(rec.size)
+        self._ticks = rec["ticks"]
+        self._flags = rec["tflags"]
+        tk = self._ticks
+        self._ordered = not np.any(tk[1:] < tk[:-1])
+        #: Arbitration ids (29-bit), uint32, shape (n_frames,).
+        self.ids = rec["id"] & np.uint32(0x1FFFFFFF)
+
+    def max_ticks(self) -> int:
+        """The largest time stamp in ticks."""
+        return int(self._ticks[-1] if self._ordered else self._ticks.max())
+
+    def has_remote(self) -> bool:
+        """Whether any frame is a remote frame (which the frame table leaves out)."""
+        return bool(np.any(self._words[:, 4] & np.uint64(0x80 << 16)))
+
+    def times_ordered(self) -> bool:
+        """True when the frame times are finite and never decrease (told from the integer ticks:
+        one tick unit and non-decreasing ticks give non-decreasing correctly rounded times);
+        False when the ticks cannot tell (then check :meth:`times` itself)."""
+        return (self._ordered and bool(np.isfinite(self.start))
+                and bool(np.all(self._flags == self._flags[0])))
+
+    def times(self, idx=None) -> np.ndarray:
+        """Frame times, s (absolute, as python-can gives them), of the frames ``idx`` (default all)."""
+        if idx is None:
+            return _tick_times(self._flags, self._ticks, self.start)
+        return _tick_times(self._flags[idx], self._ticks[idx], self.start)
+
+    def select(self, frame_id: int) -> np.ndarray:
+        """Indices of the frames with arbitration id ``frame_id``."""
+        if not 0 <= frame_id <= 0x1FFFFFFF:
+            return np.zeros(0, np.intp)
+        return np.flatnonzero(self.ids == np.uint32(frame_id))
+
+    def payloads(self, idx) -> FramePayloads:
+        """The payloads of the frames ``idx`` (bytes past each frame's length cleared)."""
+        ctl, data = self._words[idx, 4], self._words[idx, 5]  # channel, flags, dlc, id | the data bytes
+        length = np.minimum((ctl >> np.uint64(24)) & np.uint64(0xFF), np.uint64(8)).astype(np.int64)
+        if (length < 8).any():
+            data = data & _LOW_BYTES[length]
+        return FramePayloads(data.view(np.uint8).reshape(-1, 8), length)
+
+
+def read_blf_frames(path) -> BlfFrames | None:
+    """The frames of a BLF file as a :class:`BlfFrames`, or ``None`` when it is not the usual
+    layout (every object a 48-byte CAN message, no remote frame, ticks below 2**53): then
+    :func:`read_blf_table` (or python-can) reads it."""
+    got = _inflated(path)
+    if got is None:
+        return None
+    buf, start, header = got
+    rec = _uniform_can(buf)  # the structured view of the objects, checked
+    if rec is None:
+        return None
+    frames = BlfFrames(buf, rec, start, header)
+    if frames.has_remote() or frames.max_ticks() >= 2**53:
+        return None
+    return frames
+
+
+def read_blf_table(path) -> tuple[np.ndarray, np.ndarray, FramePayloads, dict[str, int]] | None:
+    """The CAN data frames of a BLF file as a table, or ``None`` when python-can should read it.
+
+    Parameters
+    ----------
+    path : path-like
+
+    Returns
+    -------
+    ts : ndarray, shape (N,)
+        Frame times, s (absolute, as python-can gives them).
+    ids : ndarray of int64, shape (N,)
+        Arbitration ids (29-bit).
+    payloads : FramePayloads
+    header : dict
+        ``file_size`` and ``object_count`` from the file header.
+
+    Error frames and remote frames are left out, as :func:`fdikit.io.can._read_frames` leaves
+    them out.
+    """
+    got = _inflated(path)
+    if got is None:
+        return None
+    buf, start, header = got
     rec = _uniform_can(buf)
     if rec is not None:
         ticks = rec["ticks"]
@@ -286,7 +399,7 @@ def read_blf_table(path) -> tuple[np.ndarray, np.ndarray, FramePayloads, dict[st
         length = np.minimum(rec["dlc"], 8).astype(np.int64)
         # the 8 data bytes of every object as one little-endian word (bytes 40..47), the bytes past
         # the frame's length cleared
-        data = buf[: rec.size * _CAN_V1.itemsize].view("<u8").reshape(rec.size, -1)[:, 5]
+        data = _words(buf, rec.size)[:, 5]
         ids = rec["id"].astype(np.int64) & 0x1FFFFFFF
         if not keep.all():  # remote frames are not data
             ts, ids, length, data = ts[keep], ids[keep], length[keep], data[keep]
@@ -479,6 +592,8 @@ def decode_message(msg, snames: Sequence[str], payloads: Sequence[bytes] | Frame
     if mat.shape[1] == 8:  # classic CAN: every window of a signal in bytes 0..7 is a shift of these
         words = (mat.view("<u8").reshape(-1).astype(np.uint64, copy=False),
                  mat.view(">u8").reshape(-1).astype(np.uint64))
+    bits = 8 * pay.lengths
+    short_bits = int(bits.min()) if bits.size else 0
     for c, sig in enumerate(sigs):
         end = _network_start(sig) + int(sig.length)
         if end > 8 * msg.length:
@@ -490,7 +605,10 @@ def decode_message(msg, snames: Sequence[str], payloads: Sequence[bytes] | Frame
             vals = None if raw is None else _scaled(sig, raw)
         if vals is None:
             return decode_message_reference(msg, snames, pay)
-        ok = end <= 8 * pay.lengths  # cantools' allow_truncated rule; excess bytes are ignored
+        if end <= short_bits:  # every payload holds the signal
+            out[:, c] = vals
+            continue
+        ok = end <= bits  # cantools' allow_truncated rule; excess bytes are ignored
         out[ok, c] = vals[ok]
         n_bad[c] = int((~ok).sum())
     return out, n_bad
