@@ -166,30 +166,45 @@ def test_self_check_needs_design_details(paper):
 
 
 def test_recovery_after_a_loss_is_not_called_sliding():
-    """Gains 5x too small on the benchmark's system 31 (zero at -0.012): after the injection
+    """Gains too small on the benchmark's system 31 (zero at -0.012): after the injection
     saturates, the secondary re-enters its layer while fhat is still far off (0.05-0.27 for a unit
-    step). The status must not say sliding until the sliding motion has washed that out."""
+    step). The status must not say sliding until the sliding motion has washed that out.
+
+    How small the gains must be for the secondary to re-enter its layer within the 3 s depends on
+    the LMI solution (5x did with the solvers of 2026-11; with cvxpy 1.9 / Clarabel 0.11 the
+    design at 5x stays saturated and only 8x re-enters): the first of the factors below whose
+    design without the hold (``settle=0``) shows the silent error is the scenario."""
     import warnings
 
     A, M, C, Q = random_fault_system(31, "rd2_zero")
     rec = design_reconstructor(_model(A, M, C, Q), hinf_check=False, check=False)
-    kw = dict(rho=rec.info["gains"]["rho"] / 5, rho2=rec.info["gains"]["rho2"] / 5, hinf_check=False,
-              check=False)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # the gains are too small, and the design says so
-        under = design_reconstructor(_model(A, M, C, Q), **kw)
-        no_hold = design_reconstructor(_model(A, M, C, Q), settle=0.0, **kw)
-    st = under.info["sliding_settle"]
-    assert st["sized"] and st["settle_s"] == pytest.approx(3.0 / st["slowest_sliding_mode"])
-    assert 0.005 < st["slowest_sliding_mode"] < 0.02  # the invariant zero
     t = np.arange(round(3.0 / H) + 1) * H
     f = np.where(t >= 0.5, 1.0, 0.0)[:, None]
     Y = simulate_plant(A, M, C, f, H)
-    for r, silent_expected in ((no_hold, True), (under, False)):
+
+    def silent_samples(r):
         fh, s = integrate_observers(r, np.zeros((1, t.size, 0)), Y, return_status=True)
         bad = (np.abs(fh[0, :, 0] - f[:, 0]) > 0.05) & (t >= 1.0)
-        silent = int(np.count_nonzero(bad & (s[0, :, 0] == SLIDING)))
-        assert (silent > 1000) == silent_expected, silent
+        return int(np.count_nonzero(bad & (s[0, :, 0] == SLIDING)))
+
+    tried = {}
+    for factor in (5, 8, 12):
+        kw = dict(rho=rec.info["gains"]["rho"] / factor, rho2=rec.info["gains"]["rho2"] / factor,
+                  hinf_check=False, check=False)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # the gains are too small, and the design says so
+            no_hold = design_reconstructor(_model(A, M, C, Q), settle=0.0, **kw)
+        tried[factor] = silent_samples(no_hold)
+        if tried[factor] > 1000:
+            break
+    assert tried[factor] > 1000, f"no factor re-enters the layer with fhat still off: {tried}"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        under = design_reconstructor(_model(A, M, C, Q), **kw)
+    st = under.info["sliding_settle"]
+    assert st["sized"] and st["settle_s"] == pytest.approx(3.0 / st["slowest_sliding_mode"])
+    assert 0.005 < st["slowest_sliding_mode"] < 0.02  # the invariant zero
+    assert silent_samples(under) <= 1000, (factor, tried)
     # the hold survives a save and a reload
     back = SlidingModeReconstructor.from_dict(under.to_dict())
     assert back.settle == under.settle
