@@ -228,6 +228,25 @@ def _loglik_table(x, tab, g0, inv_h, nG, toff, low, high, std, point, logw, out)
 
 
 @njit(cache=True)
+def _emit(o, P, lf, gmat, probs):  # pragma: no cover - compiled
+    """One sample's outputs of a fused table kernel: the normalised posteriors the update just
+    formed, then the group sums (``probs``: no second exp per hypothesis), or the log posteriors."""
+    H = lf.shape[0]
+    if probs:
+        for j in range(H):
+            o[j] = P[j]
+        for g in range(gmat.shape[0]):
+            acc = 0.0
+            for e in range(gmat.shape[1]):
+                if gmat[g, e] >= 0:
+                    acc += o[gmat[g, e]]
+            o[H + g] = acc
+    else:
+        for j in range(H):
+            o[j] = lf[j]
+
+
+@njit(cache=True)
 def _mhsspt_table_stream(r, x, tab, g0, inv_h, nG, toff, dens, point, logF, log1mp, logp_pi, logq, log1mq,
                          gmat, probs, out):  # pragma: no cover - compiled
     """Stream ``r``: tabulated log likelihoods and the recursion for all its samples. ``out``
@@ -257,19 +276,7 @@ def _mhsspt_table_stream(r, x, tab, g0, inv_h, nG, toff, dens, point, logF, log1
             else:
                 umg_table_add(xc, c, tab, g0, inv_h, nG, toff, low, high, std, point, logw, ll, 0, H)
         mhsspt_update(lf, ll, phi, P, 0, H, log1mp, logp_pi, logq, log1mq)
-        o = out[r, k]
-        if probs:  # the normalised posteriors the update just formed (no second exp per hypothesis)
-            for j in range(H):
-                o[j] = P[j]
-            for g in range(gmat.shape[0]):
-                acc = 0.0
-                for e in range(gmat.shape[1]):
-                    if gmat[g, e] >= 0:
-                        acc += o[gmat[g, e]]
-                o[H + g] = acc
-        else:
-            for j in range(H):
-                o[j] = lf[j]
+        _emit(out[r, k], P, lf, gmat, probs)
 
 
 @njit(cache=True)
@@ -508,18 +515,7 @@ def _mhsspt_cubic_stream(r, x, coef, g0, inv_h, nG, coff, ulow, uhigh, ustd, upo
                 acc += vals[jmap[j, c]]
             ll[j] = acc
         mhsspt_update(lf, ll, phi, P, 0, H, log1mp, logp_pi, logq, log1mq)
-        if mode == 2:
-            for j in range(H):
-                o[j] = P[j]
-            for g in range(gmat.shape[0]):
-                acc = 0.0
-                for e in range(gmat.shape[1]):
-                    if gmat[g, e] >= 0:
-                        acc += o[gmat[g, e]]
-                o[H + g] = acc
-        else:
-            for j in range(H):
-                o[j] = lf[j]
+        _emit(o, P, lf, gmat, mode == 2)
 
 
 @njit(cache=True)
