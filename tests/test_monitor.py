@@ -87,6 +87,12 @@ def test_batch_equals_streaming_and_detects(plant):
         assert 304 <= ev.k <= 310
     # before the fault the residuals are small: no alarm
     assert not batch.statistics.values[:, :300].any()
+    # the stages are fixed (the streaming plan is built from them): a stage swapped in place would
+    # run in batch but not in streaming, so it is refused; a changed chain is a new Monitor
+    with pytest.raises(TypeError):
+        mon.processors[0] = Hold(["r:pos1", "r:pos2"], 0.5, Z=5)
+    with pytest.raises(TypeError):
+        mon.generators[0] = gen
 
 
 def test_hold_mean_time_to_false_alarm():

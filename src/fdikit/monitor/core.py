@@ -489,8 +489,11 @@ class Monitor:
         warmup: float | None = None,
         max_abs: float | None = 1e12,
     ):
-        self.generators = list(generators)
-        self.processors = list(processors)
+        # tuples: the channel plan and the per-sample entry points below are built from these
+        # stages, so a stage swapped in place would run in batch but not in streaming; a changed
+        # chain is a new Monitor
+        self.generators = tuple(generators)
+        self.processors = tuple(processors)
         self.decision = decision
         self.validate = validate
         if on_invalid not in ("raise", "hold"):
