@@ -269,3 +269,24 @@ def test_longest_constant_rows_equals_per_row():
         got = _longest_constant_rows(t, v)
         want = [_longest_constant(t, row) for row in v]
         assert got.tobytes() == np.array(want).tobytes()
+
+
+def test_inflate_paths_give_zlib_bytes_and_fall_back_on_a_wrong_size():
+    """libdeflate (with the container's stated size), ISA-L and zlib give the same bytes; a stated
+    size that does not match, or a truncated stream, goes to the slower paths and behaves as zlib
+    itself (a truncated stream gives what zlib's decompressobj gives)."""
+    import zlib
+
+    from fdikit.io import decode
+
+    rng = np.random.default_rng(5)
+    data = rng.integers(0, 40, 200_000).astype(np.uint8).tobytes()
+    body = zlib.compress(data, 6)
+    assert decode._libdeflate is not None  # a dependency of fdikit
+    assert decode._inflate(body, len(data)) == data
+    for wrong in (len(data) - 1, len(data) + 7, 0, None):
+        assert decode._inflate(body, wrong) == data
+    cut = body[: len(body) // 2]
+    assert decode._inflate(cut, len(data)) == zlib.decompressobj().decompress(cut)
+    with pytest.raises(zlib.error):
+        decode._inflate(b"\x78\x9c" + b"\xff" * 40, 1000)

@@ -20,7 +20,7 @@ import pyarrow.parquet as pq
 import pytest
 
 from fdikit.commands import fleet
-from fdikit.commands.fleet import batch_size, is_done, plan, process_log, process_logs, run_fleet
+from fdikit.commands.fleet import batch_size, batches, is_done, plan, process_log, process_logs, run_fleet
 from fdikit.io.decode import read_blf_table, write_blf_table
 from fdikit.monitor.config import load_config, run_design
 
@@ -60,8 +60,15 @@ def _summaries(out):
 
 def test_batch_size():
     assert batch_size(0, 2) == 1 and batch_size(1, 1) == 1
-    assert batch_size(200, 2) == 6 and batch_size(200, 1) == 8 and batch_size(10**6, 4) == 8
-    assert batch_size(50, 8) == 1  # more workers than batches could feed: one log per task
+    assert batch_size(200, 2) == 16 and batch_size(200, 1) == 16 and batch_size(10**6, 4) == 16
+    assert batch_size(12, 1) == 12  # one worker: nobody to balance against
+    assert batch_size(50, 8) == 2 and batch_size(20, 8) == 1  # the end of a run: small tasks
+    # guided: every log once, in order, sizes never growing, the last tasks one log each
+    for n, w in ((200, 2), (1000, 4), (37, 3), (5, 2)):
+        b = batches(list(range(n)), w)
+        assert [x for t in b for x in t] == list(range(n))
+        sizes = [len(t) for t in b]
+        assert sizes == sorted(sizes, reverse=True) and max(sizes) <= 16 and sizes[-w:] == [1] * w
 
 
 def test_batch_commits_every_log_and_equals_one_task_per_log(fleet_dir, tmp_path):

@@ -4,8 +4,8 @@ LOGS are directories (searched recursively for log files: BLF, ASC, candump, MDF
 glob patterns (``"fleet/**/*.blf"``) or list files (``.txt`` / ``.lst`` / ``.list``: one path per
 line, relative to the list file, ``#`` comments). Every log is read and decoded, run through the
 monitor built from the config's artifacts, and its results written and committed on its own; a
-task is a batch of a few logs (:func:`batch_size`: about 16 tasks per worker, at most 8 logs
-each), which the worker processes in turn. The tasks run on local processes (default,
+task is a batch of a few logs (:func:`batch_size`: up to 16, fewer towards the end of the run),
+which the worker processes in turn. The tasks run on local processes (default,
 ``--processes N``), on a local Dask cluster (``--workers N``) or on a running Dask cluster
 (``--scheduler ADDRESS``); see :class:`fdikit.evaluate.Engine`.
 
@@ -63,7 +63,7 @@ from urllib.parse import quote
 from ..errors import DataError, FdikitError
 from ._output import print_json
 
-__all__ = ["LogTask", "batch_size", "discover", "plan", "process_log", "process_logs", "register"]
+__all__ = ["LogTask", "batch_size", "batches", "discover", "plan", "process_log", "process_logs", "register"]
 
 _LIST_SUFFIXES = (".txt", ".lst", ".list")
 #: Threads per worker process: one, so that N workers use N cores (numba, BLAS). And the C
@@ -451,16 +451,41 @@ def process_logs(tasks: list[LogTask], retry_errors: bool = False) -> list[dict]
     return rows
 
 
+#: The most logs in one fleet task: a task's dispatch and its result's trip cost about a log's
+#: commit on a LocalCluster, so 16 logs spread it to a few percent of a log each.
+MAX_BATCH = 16
+
+
 def batch_size(n_logs: int, n_workers: int) -> int:
-    """Logs per fleet task: about 16 tasks per worker (the last ones balance the load), 1 to 8 logs
-    each (a task's dispatch costs about as much as a few percent of a log).
+    """Logs in the next fleet task when ``n_logs`` remain: a quarter of each worker's share, 1 to
+    :data:`MAX_BATCH` (guided scheduling: large tasks while much remains, smaller ones towards the
+    end, so that the workers finish together, the last tasks one log each); one worker has
+    nobody to wait for and takes :data:`MAX_BATCH` throughout.
 
     Examples
     --------
-    >>> batch_size(200, 2), batch_size(200, 1), batch_size(10, 2), batch_size(100000, 64)
-    (6, 8, 1, 8)
+    >>> batch_size(200, 2), batch_size(200, 1), batch_size(20, 2), batch_size(3, 2), batch_size(5, 1)
+    (16, 16, 3, 1, 5)
     """
-    return max(1, min(8, n_logs // (16 * max(1, n_workers))))
+    if n_workers <= 1:
+        return max(1, min(MAX_BATCH, n_logs))
+    return max(1, min(MAX_BATCH, -(-n_logs // (4 * n_workers))))
+
+
+def batches(todo: list, n_workers: int) -> list[list]:
+    """The logs ``todo`` cut into fleet tasks of :func:`batch_size` logs each, in order.
+
+    Examples
+    --------
+    >>> [len(b) for b in batches(list(range(40)), 2)]
+    [5, 5, 4, 4, 3, 3, 2, 2, 2, 2, 1, 1, 1, 1, 1, 1, 1, 1]
+    """
+    out, i = [], 0
+    while i < len(todo):
+        k = batch_size(len(todo) - i, n_workers)
+        out.append(todo[i:i + k])
+        i += k
+    return out
 
 
 # ---------------------------------------------------------------------------------- the command
@@ -488,10 +513,8 @@ def run_fleet(tasks: list[LogTask], engine, *, retry_errors: bool = False, progr
     with prog:
         task_id = prog.add_task(f"{info[0]} ({len(todo)} logs)", total=info[1]) if info else None
         if todo:
-            k = batch_size(len(todo), engine.n_workers)
-            batches = [todo[a:a + k] for a in range(0, len(todo), k)]
             fn = functools.partial(process_logs, retry_errors=retry_errors) if retry_errors else process_logs
-            for _, batch in engine.map_unordered(fn, batches):
+            for _, batch in engine.map_unordered(fn, batches(todo, engine.n_workers)):
                 rows.extend(batch)
                 if task_id is not None:
                     prog.advance(task_id, len(batch))

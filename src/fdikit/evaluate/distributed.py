@@ -114,12 +114,19 @@ class Engine:
         start and applied with ``mallopt`` in the workers of a pool or a running cluster.
     preload : sequence of str
         Local pool: modules the fork server imports once for all its workers.
+    profile : bool
+        LocalCluster: keep Dask's statistical profiler in the workers (the dashboard's profile
+        page). Off by default: it samples the task thread's stack every 10 ms, and every sample
+        takes the interpreter lock from the running task -- a fifth of a fleet task's time on the
+        RAV4 minute (benchmarks/bench_fleet.py: 26.7 -> 21.7 ms per log on one worker). A running
+        cluster (``scheduler``) keeps its own setting (``distributed.worker.profile.enabled``).
 
     Use it as a context manager: the pool or cluster is shut down on exit.
     """
 
     def __init__(self, workers: int | None = None, *, scheduler: str | None = None, dask: bool = False,
-                 retries: int = 3, env: dict[str, str] | None = None, preload: Sequence[str] = ()):
+                 retries: int = 3, env: dict[str, str] | None = None, preload: Sequence[str] = (),
+                 profile: bool = False):
         if workers is not None and (not isinstance(workers, int) or workers < 1):
             raise DataError(f"workers must be a positive number of processes, got {workers!r}")
         self.scheduler = scheduler
@@ -128,6 +135,7 @@ class Engine:
         self.retries = int(retries)
         self.env = dict(env or {})
         self.preload = tuple(preload)
+        self.profile = bool(profile)
         self._pool: cf.ProcessPoolExecutor | None = None
         self.client = None
         self.cluster = None
@@ -169,7 +177,8 @@ class Engine:
             pre.update(mine)
             saved = {k: os.environ.get(k) for k in mine}
             try:
-                with dask.config.set({"distributed.nanny.pre-spawn-environ": pre}):
+                with dask.config.set({"distributed.nanny.pre-spawn-environ": pre,
+                                      "distributed.worker.profile.enabled": self.profile}):
                     self.cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
                                                 host="127.0.0.1", dashboard_address="127.0.0.1:0",
                                                 silence_logs=40, env=self.env or None)
