@@ -44,6 +44,22 @@ def _draws(start, stop, seed):
     return np.array([np.random.default_rng([seed, i]).normal(size=3) for i in range(start, stop)])
 
 
+def _has_profiler(dask_worker):
+    return "profile" in dask_worker.periodic_callbacks
+
+
+def test_localcluster_workers_run_without_dask_profiler_unless_asked(cluster):
+    """Dask's statistical profiler takes the interpreter lock from the running task every 10 ms:
+    off in the workers of our LocalCluster by default (Engine(profile=False)), on when asked; the
+    setting does not leak into this process's Dask config."""
+    import dask
+
+    assert not any(cluster.client.run(_has_profiler).values())
+    with Engine(1, dask=True, env=ENV, profile=True) as eng:
+        assert all(eng.client.run(_has_profiler).values())
+    assert dask.config.get("distributed.worker.profile.enabled") is True
+
+
 def test_chunk_bounds():
     assert chunk_bounds(7, 3) == [(0, 3), (3, 6), (6, 7)]
     assert chunk_bounds(0, 3) == []
