@@ -66,6 +66,52 @@ def check_finite(values: np.ndarray, names: Sequence[str], *, what: str = "signa
     raise DataError(f"{what} channel {names[c]!r} has a non-finite value ({v[tuple(idx)]}) at {where}")
 
 
+#: Column names taken as the time column of a DataFrame (lower case, stripped).
+_TIME_NAMES = {"t", "time", "timestamp", "times", "time_s", "t_s", "time [s]", "time(s)", "timestamp_ns",
+               "time_ns", "timestamp_us", "time_us", "stamp", "seconds"}
+#: Decimal exponent of each numeric time unit.
+_TIME_EXP = {"s": 0, "ms": 3, "us": 6, "ns": 9}
+
+
+def _pandas_time(raw, name, time_unit: str) -> tuple[np.ndarray, float]:
+    """Seconds from the first sample, and the origin ``t0``, of a pandas time index or column."""
+    import pandas as pd
+
+    where = "the index" if name == "index" else f"time column {name!r}"
+    dtype = raw.dtype
+    if pd.api.types.is_datetime64_any_dtype(dtype):
+        nat = np.asarray(pd.isna(raw))
+        if nat.any():
+            raise DataError(f"{where} has a missing time (NaT) at row {int(np.argmax(nat))}")
+        ns = pd.DatetimeIndex(raw).as_unit("ns").asi8
+        if ns.size == 0:
+            return np.zeros(0), 0.0
+        return (ns - ns[0]) / 1e9, float(ns[0]) / 1e9
+    if pd.api.types.is_timedelta64_dtype(dtype):
+        return pd.TimedeltaIndex(raw).as_unit("ns").asi8 / 1e9, 0.0
+    if not pd.api.types.is_numeric_dtype(dtype) or pd.api.types.is_bool_dtype(dtype):
+        raise DataError(f"{where} has dtype {dtype}, not numbers or datetimes; convert it (pd.to_datetime "
+                        "for date strings) or name the time column with time=")
+    v = np.asarray(raw)
+    if v.size == 0:
+        return np.zeros(0, float), 0.0
+    first = abs(float(v[0]))
+    unit = time_unit
+    if unit == "auto":
+        unit = "ns" if first >= 1e17 else "us" if first >= 1e14 else "ms" if first >= 1e11 else "s"
+    scale = 10.0 ** _TIME_EXP[unit]
+    if np.issubdtype(v.dtype, np.integer):
+        if (unit != "s" or first >= 1e6):   # exact integer differences, then one division
+            d = v.astype(np.int64) - np.int64(v[0]) if v.dtype != np.uint64 else \
+                (v - v[0]).astype(np.int64)
+            return d / scale, float(v[0]) / scale
+        return v.astype(float), 0.0
+    v = v.astype(float)
+    if unit != "s" or first >= 1e6:   # an absolute or scaled clock: rebase to its first sample
+        return (v - v[0]) / scale, float(v[0]) / scale
+    return v, 0.0
+
+
 class Signals:
     """Named, time-aligned signals for one or many runs.
 
@@ -108,6 +154,14 @@ class Signals:
         t0: float = 0.0,
     ):
         t = check_time(t)
+        if np.ma.isMaskedArray(values):   # a masked entry is a missing sample, never its hidden value
+            mask = np.ma.getmaskarray(values)
+            if check and mask.any():
+                idx = np.argwhere(mask)[0].tolist()
+                raise DataError(f"values are masked at index {idx} ({int(mask.sum())} masked entries); pass "
+                                "check=False to keep them as missing samples (NaN, which a Monitor flags as "
+                                "invalid), or fill them")
+            values = np.ma.filled(np.ma.asarray(values, dtype=float), np.nan)
         v = np.asarray(values, dtype=float)
         if v.ndim == 1:
             v = v[:, None]
@@ -269,16 +323,104 @@ class Signals:
         return pd.DataFrame(self.values.reshape(-1, self.n_channels), index=idx, columns=self.names)
 
     @classmethod
-    def from_pandas(cls, df, time: str | None = None, units: Sequence[str] | None = None) -> Signals:
-        """Build from a DataFrame indexed by time (or with a ``time`` column)."""
-        if time is not None:
+    def from_pandas(cls, df, time: str | None = None, units: Sequence[str] | None = None, *,
+                    time_unit: str = "auto") -> Signals:
+        """Build from a :class:`pandas.DataFrame` with a time index or a time column.
+
+        Parameters
+        ----------
+        df : pandas.DataFrame
+            One run: rows are samples, columns channels. Or the (run, t) MultiIndex frame that
+            :meth:`to_pandas` writes for many runs.
+        time : str, optional
+            The time column's name, or ``"index"`` to take the index as time even when it is a
+            plain row count. Default: the index when it is a time index (datetime, timedelta or
+            numbers that are not row numbers); else the one column named like a time
+            (``t``, ``time``, ``timestamp``, ``time_s``, ...; any case); else refused.
+        units : sequence of str, optional
+            Channel units.
+        time_unit : {"auto", "s", "ms", "us", "ns"}
+            Unit of a numeric time. ``"auto"``: seconds, unless the first timestamp is an absolute
+            clock, whose unit follows from its magnitude as in the log readers (>= 1e17 ns,
+            >= 1e14 us, >= 1e11 ms).
+
+        Datetime clocks (``datetime64``, timezone-aware or not) and absolute numeric clocks
+        (first time >= 1e6 s) are rebased to start at 0, their origin kept in ``t0`` (s since the
+        UNIX epoch for datetimes); integer clocks are converted from exact integer differences.
+
+        Raises
+        ------
+        DataError
+            No time found (a RangeIndex and no time-like column), a time column that is not
+            numeric or datetime, or time not increasing (from the constructor).
+
+        Examples
+        --------
+        >>> import pandas as pd
+        >>> df = pd.DataFrame({"time": [0.0, 0.1, 0.2], "y": [1.0, 2.0, 3.0]})
+        >>> s = Signals.from_pandas(df)
+        >>> s.names, s.t.tolist()
+        (['y'], [0.0, 0.1, 0.2])
+        >>> ix = pd.to_datetime(["2026-01-01 00:00:00.0", "2026-01-01 00:00:00.5"])
+        >>> s = Signals.from_pandas(pd.DataFrame({"y": [1.0, 2.0]}, index=ix))
+        >>> s.t.tolist(), s.t0
+        ([0.0, 0.5], 1767225600.0)
+        """
+        import pandas as pd
+
+        if time_unit not in _TIME_EXP and time_unit != "auto":
+            raise DataError(f"time_unit must be 'auto' or one of {list(_TIME_EXP)}, got {time_unit!r}")
+        if isinstance(df.index, pd.MultiIndex):
+            return cls._from_run_frame(df, units)
+        if time is None:
+            idx = df.index
+            row_numbers = isinstance(idx, pd.RangeIndex) or (
+                pd.api.types.is_integer_dtype(idx.dtype) and idx.name is None
+                and np.array_equal(np.asarray(idx), np.arange(len(idx))))
+            if not row_numbers:
+                time = "index"
+            else:
+                like = [c for c in df.columns if str(c).strip().lower() in _TIME_NAMES]
+                if len(like) != 1:
+                    raise DataError(
+                        f"the DataFrame's index is row numbers, not time, and "
+                        f"{'no column' if not like else f'{len(like)} columns ({like})'} is named like a "
+                        f"time; pass time='<column>' (columns: {list(df.columns)[:20]}), or "
+                        "time='index' to take the row numbers as seconds")
+                time = like[0]
+        if time == "index":
+            raw = df.index
+        else:
             if time not in df.columns:
                 raise DataError(f"time column {time!r} not in {list(df.columns)}")
-            t = df[time].to_numpy(float)
+            raw = df[time]
             df = df.drop(columns=[time])
-        else:
-            t = df.index.to_numpy(float)
-        return cls(t, df.to_numpy(float), [str(c) for c in df.columns], units)
+        t, t0 = _pandas_time(raw, time, time_unit)
+        bad = [str(c) for c in df.columns if not (pd.api.types.is_numeric_dtype(df[c].dtype)
+                                                  or pd.api.types.is_bool_dtype(df[c].dtype))]
+        if bad:
+            raise DataError(f"columns {bad} are not numeric (dtype {df[bad[0]].dtype}); select the signal "
+                            "columns, or convert them")
+        vals = df.to_numpy(dtype=float, na_value=np.nan)
+        return cls(t, vals, [str(c) for c in df.columns], units, t0=t0)
+
+    @classmethod
+    def _from_run_frame(cls, df, units) -> Signals:
+        """The (run, t) MultiIndex frame of :meth:`to_pandas`, back to runs."""
+        names = list(df.index.names)
+        if len(names) != 2 or names[0] != "run":
+            raise DataError(f"a MultiIndex frame must be indexed by (run, t) as to_pandas writes it, got "
+                            f"{names}")
+        runs = df.index.get_level_values(0).unique()
+        first = df.xs(runs[0], level=0)
+        t = first.index.to_numpy(float)
+        parts = []
+        for r in runs:
+            part = df.xs(r, level=0)
+            if not np.array_equal(part.index.to_numpy(float), t):
+                raise DataError(f"run {r!r} has another time axis than run {runs[0]!r}")
+            parts.append(part.to_numpy(dtype=float, na_value=np.nan))
+        return cls(t, np.stack(parts), [str(c) for c in df.columns], units)
 
     def equals(self, other: Signals, *, atol: float = 0.0) -> bool:
         """Same names, time and values (within ``atol``)."""

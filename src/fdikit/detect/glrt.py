@@ -497,6 +497,11 @@ def _design_channel(m: np.ndarray, pfa: float, per, unit: float | None, dt: floa
                        ci=block_rate_ci(m > q, b, level=level, n_boot=n_boot, seed=seed),
                        note=(f"empirical quantile of {n} samples ({n_eff:.0f} effective, autocorrelation "
                              f"time {tau:.3g} samples, bootstrap blocks of {b})"))
+            if events < 1:   # min_events = 0 below one expected alarm: the data show no rate this small
+                out.update(method="max", note=(
+                    f"{events:.3g} effective false alarms expected in {n} samples ({n_eff:.0f} effective): "
+                    f"the threshold lies at the top of the data, and no rate below ~1/{n_eff:.0f} per "
+                    "sample is shown by them"))
             return out
     else:  # per unit of operating time: alarm onsets per `unit` seconds
         p = pfa * dt / unit  # onsets per sample
@@ -525,6 +530,11 @@ def _design_channel(m: np.ndarray, pfa: float, per, unit: float | None, dt: floa
                        ci=(lo * rate_unit, hi * rate_unit),
                        note=(f"empirical: {int(on.sum())} alarm onsets in {n * dt / unit:.3g} units of "
                              f"{unit:g} s (bootstrap blocks of {b} samples)"))
+            if events < 1:   # min_events = 0 below one expected alarm: the data show no rate this small
+                out.update(method="max", note=(
+                    f"{events:.3g} false alarms expected in {n * dt / unit:.3g} units of {unit:g} s: the "
+                    f"threshold lies at the top of the data, and no rate below ~1 per {n * dt / unit:.3g} "
+                    "units is shown by them"))
             return out
         # the tail: marginal GPD times the ratio of onsets to exceedances (the inverse mean length of
         # an exceedance episode), measured at the highest level with >= min_events onsets (episodes
@@ -713,7 +723,12 @@ def design_threshold(
             dt = float((nominal.t[-1] - nominal.t[0]) / (nominal.n_samples - 1))
         single = False
     else:
-        g = np.asarray(nominal, float)
+        if np.ma.isMaskedArray(nominal) and np.ma.getmaskarray(nominal).any():
+            where = np.argwhere(np.ma.getmaskarray(nominal))[0].tolist()
+            raise DataError(f"nominal data hold {int(np.ma.count_masked(nominal))} masked entries (the "
+                            f"first at index {where}); a threshold is designed on complete records: pass "
+                            "the unmasked runs or segments")
+        g = np.asarray(np.ma.getdata(nominal) if np.ma.isMaskedArray(nominal) else nominal, float)
         single = g.ndim in (1, 2)
         if g.ndim == 1:  # one residual over time: one record
             g = g[None, :, None]
@@ -741,6 +756,11 @@ def design_threshold(
     if pfa < 0 or not np.isfinite(pfa) or (kind != "time" and pfa >= 1):
         raise DataError(f"target false-alarm {'rate' if kind == 'time' else 'probability'} must be in "
                         f"[0, {'inf' if kind == 'time' else '1'}), got {pfa}")
+    if kind != "run" and g.shape[1] == 1 and g.shape[0] > 1 and not isinstance(nominal, _Signals):
+        raise DataError(f"nominal array of shape {np.shape(nominal)} is {g.shape[0]} runs of ONE sample "
+                        f"each, and a target per {per} is judged over time; for one record of one channel "
+                        f"pass a 1-D array ({g.shape[0]},) or shape (1, {g.shape[0]}); for channels over "
+                        "time, shape (1, T, channels)")
     if method not in ("auto", "empirical", "gpd"):
         raise DataError(f"method must be 'auto', 'empirical' or 'gpd', got {method!r}")
     if int(Z) != Z or Z < 1:
@@ -756,6 +776,14 @@ def design_threshold(
                         "with dt), or runs as a (runs, T) array")
     if absolute:
         g = np.abs(g)
+    flat = g.reshape(-1, g.shape[2])
+    const = np.nonzero(np.all(flat == flat[:1], axis=0))[0]
+    if const.size:
+        c = int(const[0])
+        raise DataError(f"nominal statistic {names[c]!r} is constant ({'|x| = ' if absolute else ''}"
+                        f"{flat[0, c]:g}) over all {flat.shape[0]} samples: a threshold above it would "
+                        "alarm on any change, and no false-alarm rate can be estimated; check the channel "
+                        "(a disconnected or saturated signal?) or leave it out")
     from numpy.lib.stride_tricks import sliding_window_view
 
     R, T, C = g.shape

@@ -6,7 +6,8 @@ statistic exceeds the threshold at samples k-Z+1, ..., k. ``Z = 1`` is a plain t
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import reprlib
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 
@@ -46,15 +47,18 @@ class Hold(ResidualProcessor):
 
     Parameters
     ----------
-    inputs : sequence of str
-        Channels to test (residuals or test statistics).
-    threshold : float or sequence of float
-        One threshold for all channels or one per channel (> 0 when ``absolute``).
-    Z : int
-        Number of consecutive exceedances required (>= 1).
-    absolute : bool
+    inputs : str or sequence of str
+        Channels to test (residuals or test statistics); one name is one channel.
+    threshold : float, sequence of float, or ThresholdDesign
+        One threshold for all channels or one per channel (> 0 when ``absolute``), or the result
+        of :func:`~fdikit.detect.design_threshold` (its thresholds, and its ``Z`` and ``absolute``
+        unless given here; a design for another number of channels is refused).
+    Z : int, optional
+        Number of consecutive exceedances required (>= 1). Default: the design's, else 1.
+    absolute : bool, optional
         Compare ``|x|`` (default, :data:`ABSOLUTE_DEFAULT`, the same as
         :func:`~fdikit.detect.design_threshold`'s) or the signed ``x`` with the threshold.
+        Default: the design's, else :data:`ABSOLUTE_DEFAULT`.
 
     Outputs one alarm channel per input, named ``"<input>:alarm"``, valued 0.0 or 1.0.
 
@@ -68,15 +72,22 @@ class Hold(ResidualProcessor):
     [[0.0, 0.0, 1.0, 0.0, 0.0, 1.0]]
     """
 
-    def __init__(self, inputs: Sequence[str], threshold, Z: int = 1, *, absolute: bool = ABSOLUTE_DEFAULT):
+    def __init__(self, inputs: str | Sequence[str], threshold, Z: int | None = None, *,
+                 absolute: bool | None = None):
+        if isinstance(inputs, str):   # one channel, not its characters
+            inputs = [inputs]
         self.input_names = [str(s) for s in inputs]
         if not self.input_names:
             raise DataError("Hold needs at least one input channel")
+        if isinstance(threshold, Mapping) and "threshold" in threshold:   # a ThresholdDesign
+            threshold, Z, absolute = self._from_design(threshold, Z, absolute)
+        Z = 1 if Z is None else Z
+        absolute = ABSOLUTE_DEFAULT if absolute is None else absolute
         try:
             thr = np.asarray(threshold, float)
         except (TypeError, ValueError):
-            raise DataError(f"Hold: threshold must be a number or one number per channel, got {threshold!r}"
-                            ) from None
+            raise DataError(f"Hold: threshold must be a number, one number per channel or a ThresholdDesign, "
+                            f"got {type(threshold).__name__} {reprlib.repr(threshold)}") from None
         if thr.ndim > 1 or (thr.ndim == 1 and thr.size not in (1, len(self.input_names))):
             raise DataError(f"Hold: {thr.size} thresholds given for {len(self.input_names)} channels "
                             f"{self.input_names}; give one threshold, or one per channel")
@@ -94,6 +105,20 @@ class Hold(ResidualProcessor):
         self._count = np.zeros((1, len(self.input_names)), int)
 
     _state_attrs = ("_count",)
+
+    def _from_design(self, design: Mapping, Z, absolute) -> tuple:
+        """Thresholds, hold and sign rule of a :func:`~fdikit.detect.design_threshold` result."""
+        thr = np.atleast_1d(np.asarray(design["threshold"], float))
+        if thr.size not in (1, len(self.input_names)):
+            raise DataError(f"Hold: the threshold design is for {thr.size} channels "
+                            f"{list(design.get('channels', []))}, the Hold has {len(self.input_names)} "
+                            f"inputs {self.input_names}")
+        for key, given in (("Z", Z), ("absolute", absolute)):
+            if given is not None and key in design and design[key] != given:
+                raise DataError(f"Hold: {key} = {given!r} differs from the threshold design's "
+                                f"{key} = {design[key]!r}; its rate holds only for the design's rule")
+        return (thr, design.get("Z", 1) if Z is None else Z,
+                design.get("absolute", ABSOLUTE_DEFAULT) if absolute is None else absolute)
 
     def to_dict(self) -> dict:
         """Configuration as plain data (see :mod:`fdikit.base.artifacts`)."""

@@ -81,6 +81,7 @@ from typing import Any
 import numpy as np
 
 from ..base.artifacts import load_artifact, moved, read_manifest, save_artifact
+from ..base.paths import config_path
 from ..errors import DataError
 from ..signals import Signals
 from .core import Decision, Monitor
@@ -187,7 +188,7 @@ def load_config(path: str | Path) -> MonitorConfig:
     """
     path = Path(path)
     try:
-        raw = tomllib.loads(path.read_text())
+        raw = tomllib.loads(path.read_text(encoding="utf-8-sig"))   # a BOM (Windows editors) is not TOML
     except FileNotFoundError:
         raise DataError(f"{path}: no such config file") from None
     except IsADirectoryError:
@@ -297,7 +298,8 @@ def load_config(path: str | Path) -> MonitorConfig:
         raise DataError(f"config: [log].time_unit must be one of {list(TIME_UNITS)}, got "
                         f"{log['time_unit']!r}")
     return MonitorConfig(path=path, name=mon.get("name", path.stem),
-                         artifacts=(path.parent / mon.get("artifacts", "designs")).resolve(),
+                         artifacts=config_path(path.parent, mon.get("artifacts", "designs"),
+                                                    where=f"{path}: [monitor].artifacts"),
                          on_invalid=on_invalid, channels=chans, generators=stages["generators"],
                          processors=stages["processors"], log=log, design=dict(raw.get("design", {})),
                          decision=dec, runtime=runtime)
@@ -366,7 +368,10 @@ def design_hash(cfg: MonitorConfig) -> str:
     for sec, key in refs:
         tab = cfg.design.get(sec)
         if isinstance(tab, dict) and isinstance(tab.get(key), str):
-            f = cfg.path.parent / tab[key]
+            try:
+                f = config_path(cfg.path.parent, tab[key], where=f"[design.{sec}].{key}")
+            except DataError:
+                f = cfg.path.parent / tab[key]
             h.update(f"\0{sec}.{key}\0".encode())
             try:
                 h.update(hashlib.sha256(f.read_bytes()).digest())
@@ -550,7 +555,8 @@ def read_log(cfg: MonitorConfig, path: str | Path) -> Signals:
     if fmt == "can" and not dbc:
         raise DataError(f"{cfg.path}: a CAN log needs [log].dbc")
     _supported(io.read_log, list(kw), "log reader (fdikit.io.read_log)")
-    return io.read_log(path, cfg.path.parent / dbc if dbc else None, sources, cfg.log.get("rate"), **kw)
+    dbc_path = config_path(cfg.path.parent, dbc, where=f"{cfg.path}: [log].dbc") if dbc else None
+    return io.read_log(path, dbc_path, sources, cfg.log.get("rate"), **kw)
 
 
 def map_channels(cfg: MonitorConfig, log: Signals) -> Signals:

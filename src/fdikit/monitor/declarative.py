@@ -60,6 +60,7 @@ from typing import Any
 
 import numpy as np
 
+from ..base.paths import config_path
 from ..errors import DataError, ModelError
 from ..model import LinearFaultModel, linearize
 from ..signals import Signals
@@ -220,7 +221,7 @@ def plant_from_config(design: Mapping[str, Any], base_dir: str | Path = ".", *,
                             "states/inputs/outputs")
     else:
         if "file" in spec:
-            path = (base / spec["file"]).resolve()
+            path = config_path(base, spec["file"], where=f"[{where}.plant].file")
             try:
                 with np.load(path, allow_pickle=False) as z:
                     mats = {k: z[k] for k in z.files}
@@ -347,7 +348,7 @@ def noise_from_config(design: Mapping[str, Any], model: LinearFaultModel, base_d
     if "nominal_log" in spec:
         from ..io import read_log
 
-        path = (Path(base_dir) / spec["nominal_log"]).resolve()
+        path = config_path(base_dir, spec["nominal_log"], where=f"[{where}.noise].nominal_log")
         log = read_log(path, **({"time": spec["time"]} if "time" in spec else {}))
         missing = [y for y in model.outputs if y not in log.names]
         if missing:
