@@ -130,3 +130,25 @@ def test_monitor_config_artifacts_under_home_and_with_a_bom(tmp_path, monkeypatc
     cfg.write_bytes(b"\xef\xbb\xbf" + text.encode())      # a byte-order mark, as Windows editors write
     c = load_config(cfg)
     assert c.artifacts == (tmp_path / "home" / "x").resolve()
+
+
+def test_svm_test_names_that_collide_are_refused():
+    from fdikit.isolate import SVMIsolator
+    from sklearn.svm import SVC
+
+    rng = np.random.default_rng(6)
+    X = np.r_[rng.normal(0, 1, (40, 2)), rng.normal(5, 1, (40, 2)), rng.normal(-5, 1, (40, 2))]
+    lab = np.array(["nominal"] * 40 + ["fw_af"] * 40 + ["fwa_f"] * 40)
+    with pytest.raises(DataError, match=r"'fw_af' and 'fwa_f' both give the test name 'S_fwaf'"):
+        SVMIsolator(pipeline=SVC()).fit(X, lab)
+    iso = SVMIsolator(pipeline=SVC(), test_names={"fw_af": "S_a", "fwa_f": "S_b"}).fit(X, lab)
+    assert {"S_a", "S_b"} <= set(iso.outcomes(X))
+
+
+def test_windowed_isolator_names_a_missing_nominal_label():
+    from fdikit.isolate import WindowedIsolator
+
+    r = np.random.default_rng(7).normal(size=(600, 3))
+    lab = np.array(["NF"] * 300 + ["f1"] * 300)
+    with pytest.raises(DataError, match="label 'nominal' .* not found"):
+        WindowedIsolator(window=5, pfa=0.1).fit(r, lab)

@@ -147,6 +147,9 @@ class WindowedIsolator:
         for k in change:
             clean[k:k + self.window] = False
         clean[:self.window] = False
+        if not np.any(lab == self.nominal):
+            raise DataError(f"label {self.nominal!r} (the nominal class) not found in the labels "
+                            f"{sorted(set(lab.tolist()))[:12]}; pass nominal='<your nominal label>'")
         nom = clean & (lab == self.nominal)
         n_nom = int(nom.sum())
         need = int(np.ceil(10.0 / self.pfa))

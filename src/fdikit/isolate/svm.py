@@ -287,7 +287,18 @@ class SVMIsolator:
         self.search_ = est if isinstance(est, GridSearchCV) else None
         self.estimator_ = est.best_estimator_ if isinstance(est, GridSearchCV) else est
         self.classes_ = np.asarray(self.estimator_.classes_)
+        self._check_test_names()
         return self
+
+    def _check_test_names(self) -> None:
+        """Two classes whose tests share a name would lose one outcome: refused, naming both."""
+        seen: dict[str, Any] = {}
+        for c in self.classes_:
+            name = self.test_name(c)
+            if name in seen:
+                raise DataError(f"classes {str(seen[name])!r} and {str(c)!r} both give the test name {name!r} (the "
+                                "default drops underscores); name the tests with test_names={label: name}")
+            seen[name] = c
 
     def _fitted(self) -> None:
         if not hasattr(self, "estimator_"):
