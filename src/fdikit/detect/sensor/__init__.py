@@ -25,6 +25,11 @@ can honestly support).
 Batch (:meth:`run`) and streaming (:meth:`reset` + :meth:`step`) run the same compiled kernel on
 the same state, so they give identical numbers; the state is declared in ``_state_attrs``
 (checkpoint and restore), and a non-finite sample is refused before any state changes.
+
+One module per detector, each with its compiled kernel and its design function: :mod:`.stuck`,
+:mod:`.drift`, :mod:`.gain`, :mod:`.intermittent`; shared by them: :mod:`.base` (plumbing, the
+ring-buffer window), :mod:`.combine` (the combination over a signature) and :mod:`.calibrate`
+(thresholds from nominal data). Every name of the former single module is importable from here.
 """
 
 # the old module's private names too (tests, and the references of issue 19, import them from here)
