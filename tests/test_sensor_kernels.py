@@ -257,9 +257,9 @@ def test_monitor_with_held_gaps_gives_the_per_sample_kernels_numbers(monkeypatch
     v[1, 700:705, 1] = np.nan
     rec = Signals(rec.t, v, rec.names, check=False)
     fast = _monitor().run(rec)
-    monkeypatch.setattr(sensor, "_ramp_kernel", _ramp_reference)
-    monkeypatch.setattr(sensor, "_gain_kernel", _gain_reference)
-    monkeypatch.setattr(sensor, "_GAIN_LAST", [None])  # nothing of the fast run reused
+    monkeypatch.setattr(sensor.drift, "_ramp_kernel", _ramp_reference)
+    monkeypatch.setattr(sensor.gain, "_gain_kernel", _gain_reference)
+    monkeypatch.setattr(sensor.gain, "_GAIN_LAST", [None])  # nothing of the fast run reused
     ref = _monitor().run(rec)
     assert np.array_equal(fast.statistics.values, ref.statistics.values)
     assert np.nanmax(fast.statistics.values) > 1.0  # alarms: not a comparison of zeros
@@ -317,8 +317,8 @@ def test_gain_run_reuses_exactly_the_residuals_with_the_same_inputs(monkeypatch)
         ran.append(xs.shape[2])
         return kernel(xs, *args)
 
-    monkeypatch.setattr(sensor, "_gain_kernel", spy)
-    monkeypatch.setattr(sensor, "_GAIN_LAST", [None])
+    monkeypatch.setattr(sensor.gain, "_gain_kernel", spy)
+    monkeypatch.setattr(sensor.gain, "_GAIN_LAST", [None])
 
     def fresh():
         return [np.zeros((R, C, W)), np.zeros((R, W)), np.zeros(R, np.int64), np.zeros(R, np.int64)]
@@ -377,7 +377,7 @@ def test_gain_detectors_sharing_residuals_give_each_its_own_numbers(monkeypatch)
     together = [d.run(sig).values for d in (front, rear, front, rear)]
     alone = []
     for d in (front, rear):
-        monkeypatch.setattr(sensor, "_GAIN_LAST", [None])
+        monkeypatch.setattr(sensor.gain, "_GAIN_LAST", [None])
         alone.append(d.run(sig).values)
     for a, b in zip(together, alone * 2):
         assert np.array_equal(a.view(np.int64), b.view(np.int64))
