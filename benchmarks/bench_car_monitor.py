@@ -185,11 +185,11 @@ def main() -> dict:
     out["bank_tabulated_stepped_stream_samples_per_s"] = round(RUNS * T / wall)
     # one thread (no parallel calls): CPU cost per stream-sample of the whole `run` (densities,
     # recursion, probabilities and group sums)
-    saved, mhsspt.PARALLEL_MIN_WORK = mhsspt.PARALLEL_MIN_WORK, 1 << 62
+    saved, mhsspt.core.PARALLEL_MIN_WORK = mhsspt.core.PARALLEL_MIN_WORK, 1 << 62
     try:
         _, cpu = _best(lambda: bank_batch(tab), 2)
     finally:
-        mhsspt.PARALLEL_MIN_WORK = saved
+        mhsspt.core.PARALLEL_MIN_WORK = saved
     out["bank_tabulated_cpu_us_per_stream_sample"] = round(cpu / (RUNS * T) * 1e6, 3)
     P_exact = [t.run(x).values for t, x in zip(exact, small_f)]
     P_tab = [t.run(x).values for t, x in zip(tab, small_f)]
