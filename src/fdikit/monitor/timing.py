@@ -84,7 +84,7 @@ class _TimePolicy:
         return self.dt if self.dt is not None else self._gen_dt
 
     def default_warmup(self, dt: float) -> float:
-        """The default warm-up (s) at sample period ``dt`` (see the class docstring)."""
+        """The default warm-up (s) at sample period ``dt`` (see :class:`~fdikit.monitor.core.Monitor`)."""
         if dt not in self._settle:
             cap = max(MAX_DEFAULT_WARMUP, 20 * dt)
             vals = [_settling_time(g, dt, cap) for g in self.generators]
