@@ -107,6 +107,7 @@ from .params import PARAM_UNITS as PARAM_UNITS
 from .params import STATE_UNITS as STATE_UNITS
 from .params import G as G
 from .simulation import ABSResult, demo_summary, fault_scenarios, simulate, state_mean_square, summarize
+from .simulation import _run_kernel as _run_kernel  # estimation.ABSSimulator runs the kernel directly
 from .tyre import _MU_TAB as _MU_TAB  # used by the tests
 from .tyre import MU_SLIP, MU_TABLE, mu, slip
 
