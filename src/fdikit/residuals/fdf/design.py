@@ -66,11 +66,11 @@ import numpy as np
 import scipy.linalg as sla
 from numba import njit
 
-from ..base.stage import ResidualGenerator
-from ..errors import ConditionError, ModelError
-from ..model.linear import GROUPS, LinearFaultModel
-from ..model.structure import default_tol, invariant_zeros, rank, unobservable_modes
-from ..signals import Signals
+from ...base.stage import ResidualGenerator
+from ...errors import ConditionError, ModelError
+from ...model.linear import GROUPS, LinearFaultModel
+from ...model.structure import default_tol, invariant_zeros, rank, unobservable_modes
+from ...signals import Signals
 
 __all__ = [
     "FaultDetectionFilter",

@@ -38,12 +38,12 @@ from typing import Any
 import numpy as np
 from numba import njit
 
-from ..base.stage import ResidualGenerator
-from ..design.smo_lmi import primary_smo_lmi, secondary_smo_lmi_search
-from ..errors import ConditionError, DataError, ModelError
-from ..model.linear import LinearFaultModel
-from ..model.structure import invariant_zeros, is_detectable, is_observable, rank, rank_decision
-from ..signals import Signals, check_finite
+from ...base.stage import ResidualGenerator
+from ...design.smo_lmi import primary_smo_lmi, secondary_smo_lmi_search
+from ...errors import ConditionError, DataError, ModelError
+from ...model.linear import LinearFaultModel
+from ...model.structure import invariant_zeros, is_detectable, is_observable, rank, rank_decision
+from ...signals import Signals, check_finite
 
 __all__ = [
     "AugmentedSystem",
