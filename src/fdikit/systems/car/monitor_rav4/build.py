@@ -18,7 +18,7 @@ from ....monitor import Decision, Monitor
 from ....residuals import stack_designs
 from ....residuals.transforms import band_limited, delayed_feedthrough
 from ....signals import Signals
-from ..monitor import LATERAL_SETS
+from ..monitor.settings import LATERAL_SETS
 from .channels import RAV4_FAULTS, load_rav4_raw
 from .filters import Rav4LateralFilter, _design_sets
 from .fit import _linear_model, _preprocessing

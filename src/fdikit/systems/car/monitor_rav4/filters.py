@@ -13,7 +13,7 @@ from ....model.linear import GROUPS, LinearFaultModel
 from ....residuals import FilterDesign, fault_detection_filter
 from ....residuals.scheduled import ScheduledFilter
 from ....signals import Signals
-from ..monitor import FILTER_SETS, LATERAL_SETS
+from ..monitor.settings import FILTER_SETS, LATERAL_SETS
 from .channels import _RAW_U, _RAW_Y, CHANNELS, Rav4Preprocessing
 
 __all__ = ["DISTURBANCES", "Rav4LateralFilter"]

@@ -12,7 +12,7 @@ import numpy as np
 from ....base.stage import ResidualGenerator
 from ....errors import DataError
 from ....signals import Signals
-from ..monitor import _biquads
+from ..monitor.sensor_checks import _biquads
 from .channels import _RAW_U, _RAW_Y, Rav4Preprocessing
 
 __all__ = ["SENSOR_CHANNELS", "Rav4SensorChannels", "design_sensor_detectors", "fit_sensor_channels"]
