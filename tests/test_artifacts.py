@@ -205,3 +205,20 @@ def test_old_layout_recipes_resolve():
                 "fdikit.plants.two_mass:design"):
         mod, _, fn = moved(old).partition(":")
         assert callable(getattr(__import__(mod, fromlist=[fn]), fn)), old
+
+
+def test_artifacts_record_the_package_path_of_a_split_module():
+    """A class moved into a one-concept submodule by the wave-3 split is recorded under the path it
+    had before (its package re-exports it), so manifests stay the same across the split and load
+    in older fdikits; a class the package does not re-export keeps its own module."""
+    from fdikit.base.artifacts import _class_path
+    from fdikit.detect.sensor import GainDetector, StuckDetector
+    from fdikit.residuals.fdf import FilterDesign
+    from fdikit.systems.car.monitor_rav4 import Rav4LateralFilter
+
+    assert GainDetector.__module__ == "fdikit.detect.sensor.gain"
+    assert _class_path(object.__new__(GainDetector)) == "fdikit.detect.sensor:GainDetector"
+    assert _class_path(object.__new__(StuckDetector)) == "fdikit.detect.sensor:StuckDetector"
+    assert _class_path(object.__new__(Rav4LateralFilter)) == \
+        "fdikit.systems.car.monitor_rav4:Rav4LateralFilter"
+    assert _class_path(object.__new__(FilterDesign)) == "fdikit.residuals.fdf:FilterDesign"   # KINDS

@@ -38,6 +38,7 @@ from __future__ import annotations
 import importlib
 import json
 import os
+import sys
 import zipfile
 from pathlib import Path
 from typing import Any
@@ -120,8 +121,30 @@ def _class_path(obj: Any) -> str | None:
         return KINDS[cls.__name__]
     if (cls.__module__.split(".")[0] == "fdikit" and callable(getattr(cls, "to_dict", None))
             and callable(getattr(cls, "from_dict", None))):
-        return f"{cls.__module__}:{cls.__qualname__}"
+        return f"{_public_module(cls)}:{cls.__qualname__}"
     return None
+
+
+def _public_module(cls: type) -> str:
+    """The shortest enclosing package that re-exports ``cls`` under its name (else its own module).
+
+    A module split into a package of one-concept submodules (wave 3) keeps its classes importable
+    from the package; recording that path keeps an artifact's manifest the same across such
+    splits, so it loads in the fdikit that wrote it, in older ones and in later layouts alike.
+    Only packages below a layer (``fdikit.detect.sensor``, not ``fdikit.detect``) or below a
+    system (``fdikit.systems.car.monitor_rav4``) are tried: the module paths of the layout before.
+    """
+    parts = cls.__module__.split(".")
+    if "." in cls.__qualname__:   # a nested class lives where its outer class lives
+        return cls.__module__
+    best = cls.__module__
+    floor = 4 if parts[:2] == ["fdikit", "systems"] else 3
+    for i in range(len(parts) - 1, floor - 1, -1):
+        mod = sys.modules.get(".".join(parts[:i]))
+        if mod is None or getattr(mod, cls.__name__, None) is not cls:
+            break
+        best = ".".join(parts[:i])
+    return best
 
 
 def _resolve(kind: str, where: str | None = None) -> type:
