@@ -316,6 +316,10 @@ artifact = "diff"
 
 [[processors]]
 artifact = "hold"
+
+[decision]
+channels = ["r:diff:alarm"]
+names = {{ "r:diff:alarm" = "front wheels differ" }}
 """
 
 
@@ -342,6 +346,11 @@ def test_candump_follow_resumed_equals_uninterrupted(tmp_path):
     lines[40] = "not a frame\n"
     ref = list(LiveMonitor(cfg).records(iter(lines)))
     assert sum(r.get("kind") == "onset" for r in ref) >= 1 and ref[0]["line"] == 41
-    got, after = _crash_and_resume(cfg, lines, 300, len(lines) * 3 // 5, True, tmp_path)
-    assert got == ref and after >= 0
+    onset = next(r for r in ref if r.get("kind") == "onset")
+    # checkpoints every 250 samples; the crash comes 0.5 s after the first onset, which the crashed
+    # run had written after its last checkpoint
+    crash = int(np.searchsorted(ts[keep] - ts[0], onset["t"] + 0.5))
+    got, after = _crash_and_resume(cfg, lines, 250, crash, True, tmp_path)
+    assert after >= 1 and onset["sample"] > 250
+    assert got == ref
     assert not any(math.isnan(r.get("t", 0.0)) for r in got)
