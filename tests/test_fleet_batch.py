@@ -19,8 +19,10 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
-from fdikit.commands import fleet
-from fdikit.commands.fleet import batch_size, batches, is_done, plan, process_log, process_logs, run_fleet
+from fdikit import fleet
+from fdikit.fleet import batch as fleet_batch
+from fdikit.fleet import batch_size, batches, is_done, plan, process_log, process_logs, run_fleet
+from fdikit.fleet import process as fleet_process
 from fdikit.io.decode import read_blf_table, write_blf_table
 from fdikit.monitor.config import load_config, run_design
 
@@ -98,7 +100,7 @@ class _Died(BaseException):
 def test_batch_rerun_after_its_worker_died_skips_what_it_committed(fleet_dir, tmp_path, monkeypatch):
     tasks = _tasks(fleet_dir, tmp_path / "out")
     done = []
-    real = fleet.process_log
+    real = fleet_process.process_log
 
     def dying(task):
         if len(done) == 2:
@@ -106,14 +108,14 @@ def test_batch_rerun_after_its_worker_died_skips_what_it_committed(fleet_dir, tm
         done.append(task.log_id)
         return real(task)
 
-    monkeypatch.setattr(fleet, "process_log", dying)
+    monkeypatch.setattr(fleet_process, "process_log", dying)
     with pytest.raises(_Died):
         process_logs(tasks)
     assert [is_done(t) for t in tasks] == [True, True] + [False] * (len(tasks) - 2)
     first = {t.log_id: pq.ParquetFile(next((tmp_path / "out" / "summaries").rglob(f"{t.part}.parquet")))
              .read().to_pylist()[0] for t in tasks[:2]}
     redone = []
-    monkeypatch.setattr(fleet, "process_log", lambda task: redone.append(task.log_id) or real(task))
+    monkeypatch.setattr(fleet_process, "process_log", lambda task: redone.append(task.log_id) or real(task))
     rows = process_logs(tasks)  # the rerun of the lost task
     assert redone == [t.log_id for t in tasks[2:]]
     assert [r["log_id"] for r in rows] == [t.log_id for t in tasks]
@@ -133,7 +135,7 @@ class _InProcess:
         self.n_tasks = 0
 
     def map_unordered(self, fn, items):
-        real = fleet.process_log
+        real = fleet_process.process_log
         calls = []
 
         def dying(task):
@@ -145,16 +147,16 @@ class _InProcess:
         for i, item in enumerate(items):
             self.n_tasks += 1
             if i == 0:
-                self.monkeypatch.setattr(fleet, "process_log", dying)
+                self.monkeypatch.setattr(fleet_process, "process_log", dying)
                 with pytest.raises(_Died):
                     fn(item)
-                self.monkeypatch.setattr(fleet, "process_log", real)
+                self.monkeypatch.setattr(fleet_process, "process_log", real)
             yield i, fn(item)
 
 
 def test_run_fleet_batches_and_reruns(fleet_dir, tmp_path, monkeypatch):
     tasks = _tasks(fleet_dir, tmp_path / "out")
-    monkeypatch.setattr(fleet, "batch_size", lambda n, w: 3)
+    monkeypatch.setattr(fleet_batch, "batch_size", lambda n, w: 3)
     eng = _InProcess(monkeypatch)
     rep = run_fleet(tasks, eng)
     assert eng.n_tasks == -(-len(tasks) // 3)
