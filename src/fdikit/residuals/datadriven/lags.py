@@ -14,7 +14,7 @@ have been steady before it started), so the first ``lags`` outputs are a warm-up
 
 :func:`select_lags` chooses the number of lags as Russell, Chiang & Braatz (2000) do: the order
 of a vector autoregressive model of the scaled data that minimises Akaike's information
-criterion.
+criterion (its small-sample form).
 """
 
 from __future__ import annotations
@@ -63,9 +63,12 @@ def select_lags(values: Sequence[np.ndarray] | np.ndarray, max_lags: int = 10) -
     """Number of lags by Akaike's criterion for a vector autoregressive model (Russell et al. 2000).
 
     For ``h = 1 .. max_lags`` the model ``z_k = A_1 z_{k-1} + ... + A_h z_{k-h} + e_k`` is fitted
-    by least squares on the same samples (those with ``max_lags`` predecessors, of every run);
-    ``AIC(h) = N log det(S_h) + 2 h m²`` with ``S_h`` the residual covariance over ``N`` samples.
-    Orders whose regression has no more samples than regressors are not tried.
+    by least squares on the same samples (those with ``max_lags`` predecessors, of every run), and
+    scored by the small-sample criterion of Hurvich & Tsai (1993),
+    ``AICc(h) = N log det(S_h) + N m (N + h m) / (N - h m - m - 1)``, with ``S_h`` the residual
+    covariance over ``N`` samples. (The plain AIC ``N log det S_h + 2 h m²`` keeps falling when
+    ``h m`` nears ``N``, as with 52 channels and 500 samples, and picks the largest order tried.)
+    Orders with ``h m + m + 1 >= N`` are not tried.
 
     Parameters
     ----------
@@ -99,15 +102,15 @@ def select_lags(values: Sequence[np.ndarray] | np.ndarray, max_lags: int = 10) -
     V = np.concatenate(rows) if rows else np.zeros((0, (max_lags + 1) * m))
     for h in range(1, max_lags + 1):
         Y, X = V[:, :m], V[:, m:(h + 1) * m]
-        N = Y.shape[0]
-        if N <= X.shape[1] + m:
+        N, k = Y.shape[0], X.shape[1]
+        if N - k - m - 1 <= 0:
             break
         coef, *_ = np.linalg.lstsq(X, Y, rcond=None)
         E = Y - X @ coef
         sign, logdet = np.linalg.slogdet(E.T @ E / N)
         if sign <= 0:
             break
-        aic = N * logdet + 2.0 * h * m * m
+        aic = N * logdet + N * m * (N + k) / (N - k - m - 1)     # Hurvich & Tsai 1993
         if aic < best_aic:
             best, best_aic = h, aic
     if best is None:
