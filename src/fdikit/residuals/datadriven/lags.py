@@ -80,7 +80,7 @@ def select_lags(values: Sequence[np.ndarray] | np.ndarray, max_lags: int = 10) -
     Returns
     -------
     int
-        The order with the smallest AIC (>= 1).
+        The order with the smallest AICc (>= 1).
 
     Examples
     --------
@@ -100,19 +100,23 @@ def select_lags(values: Sequence[np.ndarray] | np.ndarray, max_lags: int = 10) -
     best, best_aic = None, np.inf
     rows = [lagged(z, max_lags) for z in runs if z.shape[0] > max_lags]
     V = np.concatenate(rows) if rows else np.zeros((0, (max_lags + 1) * m))
-    for h in range(1, max_lags + 1):
-        Y, X = V[:, :m], V[:, m:(h + 1) * m]
-        N, k = Y.shape[0], X.shape[1]
-        if N - k - m - 1 <= 0:
-            break
-        coef, *_ = np.linalg.lstsq(X, Y, rcond=None)
-        E = Y - X @ coef
-        sign, logdet = np.linalg.slogdet(E.T @ E / N)
-        if sign <= 0:
-            break
-        aic = N * logdet + N * m * (N + k) / (N - k - m - 1)     # Hurvich & Tsai 1993
-        if aic < best_aic:
-            best, best_aic = h, aic
+    N = V.shape[0]
+    h_max = min(max_lags, (N - m - 2) // m)         # orders with N - h m - m - 1 > 0
+    if h_max >= 1:
+        Y = V[:, :m]
+        # one QR of the regressors of the largest order: the first h m columns of Q span those
+        # of order h, so every order's residual is Y less its projection on them
+        Q, _ = np.linalg.qr(V[:, m:(h_max + 1) * m])
+        C = Q.T @ Y
+        for h in range(1, h_max + 1):
+            k = h * m
+            E = Y - Q[:, :k] @ C[:k]
+            sign, logdet = np.linalg.slogdet(E.T @ E / N)
+            if sign <= 0:
+                break
+            aic = N * logdet + N * m * (N + k) / (N - k - m - 1)     # Hurvich & Tsai 1993
+            if aic < best_aic:
+                best, best_aic = h, aic
     if best is None:
         raise DataError(f"too few training samples to fit even a first-order autoregressive model of {m} "
                         "channels; give the number of lags")
