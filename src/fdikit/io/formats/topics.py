@@ -157,7 +157,7 @@ def read_topic_folder(folder, signals=None, rate=None, *, time: str = "auto", ti
     >>> s.names, s.units[0]
     (['gps.lat', 'odom.v', 'gps.__age__', 'odom.__age__'], '')
     >>> s["gps.lat"][0].tolist(), s.age("gps").round(6).tolist(), s.units[1]
-    ([10.0, 11.0], [0.05, 0.05], 'm/s')
+    ([10.0, 10.0, 11.0], [0.0, 0.1, 0.0], 'm/s')
     """
     d = Path(folder)
     if not d.exists():
