@@ -219,3 +219,18 @@ def test_linear_does_use_the_future():
     b = topics_to_grid(later, {}, 10.0, method="linear", max_gap=10.0)
     assert not a.causal and not b.causal
     assert a["x.v"][0][15] != b["x.v"][0][15]  # t = 1.5 < the moved sample at 2.0
+
+
+def test_fast_parser_equals_the_exact_path(tmp_path, monkeypatch):
+    """pyarrow's parser (fast path) and the line-by-line path give the same bits."""
+    from fdikit.io.formats import topics as topics_mod
+
+    write_folder(tmp_path / "run")
+    (tmp_path / "run" / "gps.csv").write_text("timestamp,a,b\n0.0,1.5,\n0.4,,2\n0.8,nan,3e-3\n1.2,4,5\n")
+    fast = read_topic_folder(tmp_path / "run", rate=20.0)
+    monkeypatch.setattr(topics_mod, "_read_fast", lambda *a, **k: None)
+    slow = read_topic_folder(tmp_path / "run", rate=20.0)
+    assert fast.names == slow.names and fast.units == slow.units
+    np.testing.assert_array_equal(fast.values, slow.values)
+    np.testing.assert_array_equal(fast.valid, slow.valid)
+    assert fast.info == slow.info

@@ -74,8 +74,8 @@ def detect_format(path) -> str:
             return "rosbag"
         if any(d.glob("*.csv")):
             return "topics"
-        raise DataError(f"folder {str(d)!r} is neither a ROS 2 bag (no metadata.yaml) nor a folder of "
-                        "per-topic CSV files (no *.csv)")
+        raise DataError(f"log {str(d)!r} is a directory, not a file, and neither a ROS 2 bag (no "
+                        "metadata.yaml) nor a folder of per-topic CSV files (no *.csv)")
     p = _check_file(path, "log")
     suffix = p.suffix.lower()
     for fmt, sufs in FORMATS.items():

@@ -42,11 +42,68 @@ def _header(cells: list[str]) -> tuple[list[str], list[str]]:
     return names, units
 
 
+_NUMBER = r"^\s*[-+]?((\d+\.?\d*|\.\d+)([eE][-+]?\d+)?|nan|inf|infinity)\s*$"
+
+
+def _read_fast(p: Path, where: str, time, time_unit: str):
+    """:func:`_read_topic_csv` by pyarrow's CSV parser; ``None`` when the file needs the exact
+    line-by-line path (any parse problem, a column of numbers and text), which names the line."""
+    import pyarrow as pa
+    import pyarrow.compute as pc
+    from pyarrow import csv as pacsv
+
+    with open(p, encoding="utf-8", newline="") as fh:
+        first = next(_csv.reader([fh.readline()]), [])
+    header, units = _header(first)
+    if not header or len(set(header)) != len(header):
+        return None
+    time_col = _pick_time(header, None if time == "auto" else time, where)
+    jt = header.index(time_col)
+    try:
+        names = [f"c{j}" for j in range(len(header))]
+        tab = pacsv.read_csv(p, read_options=pacsv.ReadOptions(column_names=names, skip_rows=1),
+                             convert_options=pacsv.ConvertOptions(column_types={f"c{jt}": pa.string()},
+                                                                  strings_can_be_null=False))
+    except (pa.ArrowInvalid, pa.ArrowTypeError, UnicodeDecodeError):
+        return None
+    if tab.num_rows == 0:
+        return None
+    traw = [x.strip() for x in tab.column(jt).to_pylist()]
+    present = np.array([x != "" for x in traw])
+    _check_table_time(np.zeros(present.size), where, time_col, present, line_offset=2)
+    t, origin = times_to_seconds(traw, time_unit, where=where, column=time_col, line_offset=2)
+    _check_table_time(t, where, time_col, None, line_offset=2)
+    cols: dict[str, np.ndarray] = {}
+    col_units: dict[str, str] = {}
+    for j, name in enumerate(header):
+        if j == jt:
+            continue
+        col = tab.column(j)
+        ty = col.type
+        if pa.types.is_null(ty):
+            continue  # an empty column
+        if pa.types.is_string(ty) or pa.types.is_large_string(ty):
+            if pc.any(pc.match_substring_regex(col, _NUMBER, ignore_case=True)).as_py():
+                return None  # numbers and text: the exact path names the line
+            continue  # a text column: not a channel
+        if not (pa.types.is_integer(ty) or pa.types.is_floating(ty) or pa.types.is_boolean(ty)):
+            return None
+        cols[name] = pc.cast(col, pa.float64()).to_numpy(zero_copy_only=False).astype(float, copy=False)
+        col_units[name] = units[j]
+    return t, origin, cols, col_units, tab.num_rows
+
+
 def _read_topic_csv(p: Path, time, time_unit: str):
     """One topic file: (t, origin, {column: values}, {column: unit}, rows)."""
     where = f"topic file {p.name!r}"
     if p.stat().st_size == 0:
         raise DataError(f"{where} is empty (0 bytes)")
+    try:
+        fast = _read_fast(p, where, time, time_unit)
+    except UnicodeDecodeError:
+        fast = None
+    if fast is not None:
+        return fast
     try:
         with open(p, encoding="utf-8", newline="") as fh:
             rows = list(_csv.reader(fh))
