@@ -221,16 +221,23 @@ def test_linear_does_use_the_future():
     assert a["x.v"][0][15] != b["x.v"][0][15]  # t = 1.5 < the moved sample at 2.0
 
 
-def test_fast_parser_equals_the_exact_path(tmp_path, monkeypatch):
+@pytest.mark.parametrize("clock", ["relative", "ns", "decimal"])
+def test_fast_parser_equals_the_exact_path(tmp_path, monkeypatch, clock):
     """pyarrow's parser (fast path) and the line-by-line path give the same bits."""
     from fdikit.io.formats import topics as topics_mod
 
-    write_folder(tmp_path / "run")
-    (tmp_path / "run" / "gps.csv").write_text("timestamp,a,b\n0.0,1.5,\n0.4,,2\n0.8,nan,3e-3\n1.2,4,5\n")
+    write_folder(tmp_path / "run", clock_ns=None if clock == "relative" else 1_700_000_000_123_456_789)
+    if clock == "decimal":
+        (tmp_path / "run" / "gps.csv").write_text(
+            "timestamp,a,b\n1700000000.123456789,1.5,\n1700000000.5234567891,,2\n1700000000.9,nan,3e-3\n")
+    elif clock == "relative":
+        (tmp_path / "run" / "gps.csv").write_text("timestamp,a,b\n0.0,1.5,\n0.4,,2\n0.8,nan,3e-3\n1.2,4,5\n")
     fast = read_topic_folder(tmp_path / "run", rate=20.0)
     monkeypatch.setattr(topics_mod, "_read_fast", lambda *a, **k: None)
     slow = read_topic_folder(tmp_path / "run", rate=20.0)
     assert fast.names == slow.names and fast.units == slow.units
+    assert fast.time_origin == slow.time_origin
+    np.testing.assert_array_equal(fast.t, slow.t)
     np.testing.assert_array_equal(fast.values, slow.values)
     np.testing.assert_array_equal(fast.valid, slow.valid)
     assert fast.info == slow.info

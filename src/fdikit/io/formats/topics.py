@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from ...errors import DataError
-from ..timebase import TimeOrigin, times_to_seconds
+from ..timebase import ABSOLUTE_AFTER, TimeOrigin, times_to_seconds
 from .grid import SourceReport
 from .multirate import MultiRateSignals, pick_channels, topics_to_grid
 from .table import _check_table_time, _pick_time
@@ -59,19 +59,40 @@ def _read_fast(p: Path, where: str, time, time_unit: str):
         return None
     time_col = _pick_time(header, None if time == "auto" else time, where)
     jt = header.index(time_col)
+    names = [f"c{j}" for j in range(len(header))]
+
+    def parse(types):
+        return pacsv.read_csv(p, read_options=pacsv.ReadOptions(column_names=names, skip_rows=1),
+                              convert_options=pacsv.ConvertOptions(column_types=types,
+                                                                   strings_can_be_null=False))
+
     try:
-        names = [f"c{j}" for j in range(len(header))]
-        tab = pacsv.read_csv(p, read_options=pacsv.ReadOptions(column_names=names, skip_rows=1),
-                             convert_options=pacsv.ConvertOptions(column_types={f"c{jt}": pa.string()},
-                                                                  strings_can_be_null=False))
+        tab = parse({})
+        tcol = tab.column(jt)
+        ty = tcol.type
+        if tab.num_rows and tcol.null_count == 0 and pa.types.is_floating(ty) and time_unit in ("auto", "s"):
+            f = tcol.to_numpy().astype(float)
+            if abs(f[0]) < ABSOLUTE_AFTER:  # relative seconds: the float of each cell, as
+                _check_table_time(f, where, time_col, None, line_offset=2)  # times_to_seconds
+                t, origin = f, TimeOrigin(0, 0, "s", False)
+            else:
+                tab = None
+        elif tab.num_rows and tcol.null_count == 0 and pa.types.is_integer(ty):
+            t, origin = times_to_seconds(tcol.to_numpy(), time_unit, where=where, column=time_col)
+        else:
+            tab = None
+        if tab is None:  # absolute decimal clocks: read the text, exactly
+            tab = parse({f"c{jt}": pa.string()})
+            if tab.num_rows == 0:
+                return None
+            traw = [x.strip() for x in tab.column(jt).to_pylist()]
+            present = np.array([x != "" for x in traw])
+            _check_table_time(np.zeros(present.size), where, time_col, present, line_offset=2)
+            t, origin = times_to_seconds(traw, time_unit, where=where, column=time_col, line_offset=2)
     except (pa.ArrowInvalid, pa.ArrowTypeError, UnicodeDecodeError):
         return None
     if tab.num_rows == 0:
         return None
-    traw = [x.strip() for x in tab.column(jt).to_pylist()]
-    present = np.array([x != "" for x in traw])
-    _check_table_time(np.zeros(present.size), where, time_col, present, line_offset=2)
-    t, origin = times_to_seconds(traw, time_unit, where=where, column=time_col, line_offset=2)
     _check_table_time(t, where, time_col, None, line_offset=2)
     cols: dict[str, np.ndarray] = {}
     col_units: dict[str, str] = {}
