@@ -56,6 +56,8 @@ class Hold(ResidualProcessor):
         Compare ``|x|`` (default, :data:`ABSOLUTE_DEFAULT`, the same as
         :func:`~fdikit.detect.design_threshold`'s) or the signed ``x`` with the threshold.
 
+    Notes
+    -----
     Outputs one alarm channel per input, named ``"<input>:alarm"``, valued 0.0 or 1.0.
 
     Examples
