@@ -66,6 +66,7 @@ nb_execution_raise_on_error = True
 nb_execution_show_tb = True
 nb_execution_in_temp = False          # cells run in the tutorial's folder; they cd to the repository
 nb_merge_streams = True
+nb_render_markdown_format = "myst"   # Markdown outputs (the paper map) may hold tables
 nb_kernel_rgx_aliases = {".*": "python3"}
 
 # -- HTML -----------------------------------------------------------------------------------------
