@@ -59,7 +59,8 @@ def page(package: str, owners: dict[int, str] | None = None) -> str:
     members = [n for n in names if n not in sub]
     data = [n for n in members if _kind(getattr(mod, n)) == "data"]
     code = [n for n in members if n not in data]
-    lines = [f"# `{package}`", "", "```{eval-rst}", f".. automodule:: {package}", "", f".. currentmodule:: {package}", ""]
+    lines = [f"# `{package}`", "", "```{eval-rst}", f".. automodule:: {package}", "",
+             f".. currentmodule:: {package}", ""]
     if sub:
         lines += ["Subpackages: " + ", ".join(f":doc:`{package}.{n}`" for n in sub) + ".", ""]
     if code:
@@ -77,7 +78,8 @@ def page(package: str, owners: dict[int, str] | None = None) -> str:
         lines.append("")
     for n in data:
         doc = attribute_doc(package, n) or ""
-        lines += [f".. py:data:: {n}", ""] + [f"   {line}" if line else "" for line in doc.splitlines()] + [""]
+        body = [f"   {line}" if line else "" for line in doc.splitlines()]
+        lines += [f".. py:data:: {n}", "", *body, ""]
     lines += ["```", ""]
     return "\n".join(lines)
 
