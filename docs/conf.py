@@ -25,7 +25,9 @@ if (ROOT / "src" / "fdikit").is_dir():
     sys.path.insert(0, str(ROOT / "src"))
     os.environ["PYTHONPATH"] = os.pathsep.join(
         [str(ROOT / "src")] + [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p])
-os.environ.setdefault("MPLBACKEND", "Agg")
+# The notebook kernels inherit this environment: a non-interactive MPLBACKEND (Agg) there would
+# keep the tutorials' figures out of the pages; the kernels' own inline backend embeds them.
+os.environ.pop("MPLBACKEND", None)
 
 import _apigen  # noqa: E402
 
