@@ -75,35 +75,3 @@ nb_kernel_rgx_aliases = {".*": "python3"}
 html_theme = "furo"
 html_title = f"fdikit {release}"
 html_static_path: list[str] = []
-
-# -- Narrow, temporary fixes of docstrings in files being split right now (issue 25) -----------
-# These docstrings put prose after their Parameters section without a section header, which
-# napoleon reads as more parameters (garbled output and a docutils warning under -W). Until the
-# source gets a "Notes" header before that paragraph, insert it at build time, for these objects
-# only. Remove an entry once its file is fixed (the build then still passes).
-_NOTES_BEFORE = {
-    "fdikit.detect.mhsspt.MHSSPT": 'Outputs ``"P',                        # detect/mhsspt.py
-    "fdikit.detect.sensor.StuckDetector": 'Outputs ``"<measured>',        # detect/sensor.py
-    "fdikit.detect.sensor.DriftDetector": 'Outputs ``"<input>',           # detect/sensor.py
-    "fdikit.detect.sensor.GainDetector": "Outputs per residual (or once",  # detect/sensor.py
-    "fdikit.detect.sensor.IntermittentDetector": 'Outputs ``"<input>',    # detect/sensor.py
-}
-
-
-def _insert_notes_header(app, what, name, obj, options, lines):
-    import inspect
-
-    if what not in ("class", "exception") or not inspect.isclass(obj):
-        return
-    prefix = _NOTES_BEFORE.get(f"{obj.__module__}.{obj.__qualname__}")
-    if prefix is None:
-        return
-    for i, line in enumerate(lines):
-        if line.startswith(prefix):
-            lines[i:i] = ["Notes", "-----"]
-            return
-
-
-def setup(app):
-    # before napoleon (priority 500) turns the NumPy sections into fields
-    app.connect("autodoc-process-docstring", _insert_notes_header, priority=400)
