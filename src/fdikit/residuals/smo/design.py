@@ -20,7 +20,7 @@ from .runtime import SlidingModeReconstructor
 from .selfcheck import self_check
 from .validation import _mat, _pos, _spd
 
-__all__ = ["DELTA_LADDER", "MAX_STEP_ERROR", "design_reconstructor"]
+__all__ = ["DELTA_LADDER", "MAX_STEP_ERROR", "NOISE_WARN", "design_reconstructor"]
 
 def _as_omega(A_Omega, B_Omega, omega_d, h):
     omega_d = _pos(omega_d, "omega_d")
@@ -34,6 +34,9 @@ def _as_omega(A_Omega, B_Omega, omega_d, h):
 #: Largest relative self-check step error a design may leave: above it the step is too large for
 #: the observer dynamics and the design is refused.
 MAX_STEP_ERROR = 1.0
+
+#: A noise-aware design whose predicted error exceeds this fraction of ``fault_bound`` warns.
+NOISE_WARN = 0.1
 
 
 def _finite_check(sc: dict | None) -> bool:
@@ -527,6 +530,21 @@ def design_reconstructor(
                                            g1 if case == "cascade" else None, g2, dt)
         sc = self_check(rec, fault_bound=f_chk, xi_amplitude=xi_chk if h else 0.0,
                         horizon=check_horizon) if check else None
+        nz = [(info["noise"]["delta"], info["noise"]["delta2"], rec, sc)]
+        if not _finite_check(sc):
+            raise _step_refusal(nz, dt, details, "the noise-sized boundary layers give a non-finite "
+                                "self-check")
+        if sc is not None and sc["step_error"] > MAX_STEP_ERROR:
+            raise _step_refusal(nz, dt, details, f"the noise-sized design leaves a self-check step "
+                                f"error of {sc['step_error']:.3g} (relative to the fault, > "
+                                f"{MAX_STEP_ERROR:g})")
+        pe = info["noise"]["predicted_error"]
+        if pe > NOISE_WARN * fault_bound:
+            warnings.warn(f"with noise_std = {sig.tolist()} the predicted reconstruction error is "
+                          f"{pe:.3g} ({pe / fault_bound:.1%} of fault_bound = {fault_bound:g}; lag "
+                          f"{info['noise']['lag_s']:.3g} s, noise std of fhat "
+                          f"{np.linalg.norm(info['noise']['fhat_noise_std']):.3g}): the estimate is "
+                          f"not accurate at this noise level; info['noise']", stacklevel=2)
     info["self_check"] = sc
     if sc is not None:
         if sig is None and sc["step_error"] > accuracy:
