@@ -27,7 +27,7 @@ def test_a_1d_control_matrix_of_the_wrong_length_is_named():
 
 
 def test_a_non_finite_fault_direction_is_refused():
-    (A, M, C, Q), _m = _model(1)
+    (A, M, C, _Q), _m = _model(1)
     b = M[:, 0].copy()
     b[2] = np.nan
     with pytest.raises(ModelError, match="non-finite"):
@@ -112,7 +112,7 @@ def designs():
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         for seed in (1, 2):
-            (A, M, C, Q), m = _model(seed)
+            (A, M, C, _Q), m = _model(seed)
             rec = design_reconstructor(m, hinf_check=False, check_horizon=0.3)
             g = rec.info["gains"]
             small = design_reconstructor(m, hinf_check=False, check_horizon=0.3,
