@@ -23,7 +23,18 @@ __all__ = ["run_section", "run_sections", "section_linear", "sections"]
 def section_linear(seed: int = 0, details: dict | None = None) -> dict:
     """Sensor-bias detection on a linear two-mass plant (fdikit.systems.two_mass).
 
-    ``details``, when given, receives the signals, the monitor and its result (for the report).
+    Parameters
+    ----------
+    seed : int
+        Seed of the design runs (the faulty record uses ``seed + 1``).
+    details : dict, optional
+        When given, receives the signals, the monitor and its result (for the report).
+
+    Returns
+    -------
+    dict
+        The thresholds, the hold length, the detected fault, its detection time and delay (s), the
+        false alarms before the onset and every alarm.
     """
     from ..faults import Bias
     from ..monitor import Decision, Monitor
