@@ -112,9 +112,10 @@ def test_too_few_samples_for_the_sample_covariance_names_the_need_and_the_altern
     assert iso.design_report_["rank"] == 4 and np.linalg.matrix_rank(iso.P_) == 4
 
 
-def multi_fault(n_cycles=4, seg=300, C=8, K=4, phi=0.8, mag=1.0, seed=0):
+def multi_fault(n_cycles=4, seg=300, C=8, K=4, phi=0.8, mag=1.0, seed=0, either_sign=False):
     """Nominal and fault segments alternating (every fault once per cycle), AR(1) noise with
-    correlated innovations; fault k adds a constant signature (faults 1/2 and 3/4 look alike)."""
+    correlated innovations; fault k adds a constant signature (faults 1/2 and 3/4 look alike), of
+    either sign per segment with ``either_sign`` (a bias up or down: no linear boundary)."""
     rng = np.random.default_rng(seed)
     L = rng.normal(size=(C, C)) * 0.5 + np.eye(C)
     S = rng.normal(size=(K, C))
@@ -125,17 +126,19 @@ def multi_fault(n_cycles=4, seg=300, C=8, K=4, phi=0.8, mag=1.0, seed=0):
     for _ in range(n_cycles):
         for k in rng.permutation(K):
             labels += ["nominal"] * seg + [f"F{k + 1}"] * seg
-            shift += [np.zeros(C)] * seg + [mag * S[k] * np.sqrt(C)] * seg
+            sign = rng.choice([-1.0, 1.0]) if either_sign else 1.0
+            shift += [np.zeros(C)] * seg + [sign * mag * S[k] * np.sqrt(C)] * seg
     e = rng.normal(size=(len(labels) + 200, C)) @ L.T
     r = lfilter([1.0], [1.0, -phi], e, axis=0)[200:] * np.sqrt(1 - phi**2)
     return r + np.array(shift), np.array(labels)
 
 
-def test_isolation_at_least_as_good_as_a_random_forest_on_the_same_windows():
+@pytest.mark.parametrize("either_sign", [False, True])
+def test_isolation_at_least_as_good_as_a_random_forest_on_the_same_windows(either_sign):
     from sklearn.ensemble import RandomForestClassifier
 
     W = 20
-    r, lab = multi_fault()
+    r, lab = multi_fault(n_cycles=6 if either_sign else 4, either_sign=either_sign)
     n = lab.size
     tr, te = slice(0, n // 2), slice(n // 2, n)  # time-ordered split
     lt = lab[te]
