@@ -21,8 +21,8 @@ from .online import DMatrixDecision
 from .sequencing import DiagnosticTree, TreeNode, ao_star, exhaustive, huffman_cost
 from .signature import SignatureDecision, SignatureIsolator
 
-_SVM_NAMES = ("SVMDecision", "SVMIsolator", "WindowFeatures", "concat_measurements", "cv_pipeline",
-              "rbf_gamma")
+_SVM_NAMES = ("BlockedStratifiedKFold", "SVMDecision", "SVMIsolator", "WindowFeatures", "concat_measurements",
+              "cv_pipeline", "rbf_gamma")
 
 
 def __getattr__(name: str):
@@ -34,6 +34,7 @@ def __getattr__(name: str):
     raise AttributeError(f"module 'fdikit.isolate' has no attribute {name!r}")
 
 __all__ = [
+    "BlockedStratifiedKFold",
     "DMatrix",
     "DMatrixDecision",
     "Diagnosis",
