@@ -203,9 +203,10 @@ class VARWhitener(ResidualProcessor):
             if sign <= 0:
                 raise DataError(f"innovation covariance of the VAR({p}) is singular (channels {list(inputs)} "
                                 f"linearly dependent?)")
-            k = p * C * (C if structure == "full" else 1)
             pen = np.log(E.shape[0]) if criterion == "bic" else 2.0
-            b = float(E.shape[0] * logdet + pen * k)
+            # the penalty per coefficient times p C C (full) or p C (diagonal), in the order of operations
+            # of the former BIC (bitwise the same values)
+            b = float(E.shape[0] * logdet + (pen * p * C * C if structure == "full" else pen * p * C))
             ic[p] = b
             if best is None or b < best[0]:
                 best = (b, p, A, S)
