@@ -15,6 +15,13 @@ Pre-whitening is chosen over an effective-sample correction (raising each likeli
 ``1 / tau``) because it is exact for an autoregressive process: it leaves the evidence of each
 sample its true weight and keeps the shape of the posterior, while tempering only rescales it.
 
+Many channels and few nominal samples (a VAR(p) of C channels needs about ``10 (p C + 1)``):
+the fit refuses, naming what it needs and the alternatives, or with ``reduce=True`` lowers the
+order to what the samples carry (by BIC or AIC) and, when not even a full VAR(1) fits, fits one
+autoregression per channel (``structure="diagonal"``; the cross-channel correlation is then left to
+the innovation covariance, estimated with shrinkage by
+:func:`~fdikit.detect.mhsspt.calibrate_segments`).
+
 Samples before the history is full use ``mu`` for the missing past (zero centred history); the
 first ``p`` outputs of a record are therefore transients.
 """
