@@ -27,7 +27,7 @@ from fdikit.detect import (
 )
 from fdikit.detect.mhsspt import decision_outputs
 
-TEP = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "tep"
+TEP = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "tep"
 ONSET = 160
 
 
