@@ -486,6 +486,11 @@ def main(argv=None) -> dict:
         print(f"  {label:24s} FAR on d00_te {d['far_d00te']:.3f} within [{lo:.3f}, {hi:.3f}] and <= 0.02: "
               f"{'met' if ok_far else 'NOT met'}; mean MDR {d['mean_mdr']:.3f} <= 0.05: "
               f"{'met' if ok_mdr else 'NOT met'}")
+    for c in claims:
+        if c["design"].endswith("design_threshold") and c["measured"] is None:
+            det = c["design"].split()[0]
+            targets[det] = {"far_within_interval": False, "mean_mdr_le_0.05": False, "refused": True}
+            print(f"  {det:24s} NOT met: design_threshold refused 1 % per sample (no claim, no rate)")
     if iso is not None and iso["accuracy"].get("fdikit"):
         fa, ra = mean_easy(iso["accuracy"]["fdikit"]), mean_easy(iso["accuracy"]["forest"])
         targets["isolation_ge_forest"] = fa >= ra
