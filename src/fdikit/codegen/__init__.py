@@ -12,16 +12,18 @@ A stage the generator does not know is refused by name (``stage X cannot be gene
 from .emit import GeneratedSource, emit_monitor, stage_digest
 from .generate import config_digest, generate, generate_monitor
 from .harness import (
-           CFLAGS,
-           CMonitor,
-           c_to_py_state,
-           compile_shared,
-           find_compiler,
-           py_to_c_state,
-           signals_input,
+    CFLAGS,
+    CMonitor,
+    c_to_py_state,
+    compile_shared,
+    driver_source,
+    find_compiler,
+    py_to_c_state,
+    run_driver,
+    signals_input,
 )
 from .stages import EMITTERS
 
 __all__ = ["CFLAGS", "EMITTERS", "CMonitor", "GeneratedSource", "c_to_py_state", "compile_shared",
-           "config_digest", "emit_monitor", "find_compiler", "generate", "generate_monitor",
-           "py_to_c_state", "signals_input", "stage_digest"]
+           "config_digest", "driver_source", "emit_monitor", "find_compiler", "generate", "generate_monitor",
+           "py_to_c_state", "run_driver", "signals_input", "stage_digest"]

@@ -182,7 +182,7 @@ def emit_monitor(mon: Any, *, name: str = "fdk_monitor", precision: str = "doubl
     c += [f"int {name}_step({name}_state *s, double t, const double *x, double *out,",
           f"        {name}_event *events, int *n_events)", "{",
           f"    fdk_real pool[{max(P, 1)}];", "    int64_t n_gap = 0, n_resume;", "    int i, status, invalid = 0;",
-          "    *n_events = 0;", "    s->last_gap = 0;",
+          "    *n_events = 0;", "    (void)events;", "    s->last_gap = 0;",
           "    if (s->has_t_prev[0] && !(t > s->t_prev[0])) {",
           f"        if ({int(raise_)} || !isfinite(t)) return {N}_ERR_TIME;",
           "        return fdk_hold(s, out, 0, 0.0);", "    }",

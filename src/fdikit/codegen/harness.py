@@ -15,7 +15,8 @@ import numpy as np
 
 from ..errors import DataError
 
-__all__ = ["CFLAGS", "CMonitor", "c_to_py_state", "compile_shared", "find_compiler", "py_to_c_state"]
+__all__ = ["CFLAGS", "CMonitor", "c_to_py_state", "compile_shared", "driver_source", "find_compiler",
+           "py_to_c_state", "run_driver"]
 
 #: Flags every generated file must pass (``-ffp-contract=off``: no fused multiply-add, so the C
 #: performs the Python stages' floating-point operations exactly).
@@ -33,14 +34,14 @@ def find_compiler() -> str | None:
 
 
 def compile_shared(sources: list[str | Path], out: str | Path, *, sanitize: bool = False,
-                   extra: tuple[str, ...] = ()) -> Path:
+                   extra: tuple[str, ...] = (), shared: bool = True) -> Path:
     """Compile C sources into a shared library with :data:`CFLAGS` (and
     ``-fsanitize=address,undefined`` when ``sanitize``). Raises :class:`DataError` with the
     compiler's message on failure, or when no compiler is found."""
     cc = find_compiler()
     if cc is None:
         raise DataError("no C compiler found (install gcc, e.g. 'apt-get install gcc', or set CC)")
-    flags = [*CFLAGS, "-fPIC", "-shared", *extra]
+    flags = [*CFLAGS, *(("-fPIC", "-shared") if shared else ()), *extra]
     if sanitize:
         flags += ["-fsanitize=address,undefined", "-fno-sanitize-recover=all", "-fno-omit-frame-pointer"]
     cmd = [cc, *flags, *map(str, sources), "-o", str(out), "-lm"]
@@ -216,3 +217,67 @@ def py_to_c_state(layout: dict, state: dict[str, Any], emitters) -> np.ndarray:
             v = np.concatenate([v, np.zeros(n - v.size)])
         buf.append(v[:n])
     return np.concatenate(buf)
+
+
+def driver_source(layout: dict) -> str:
+    """A C ``main`` for the generated monitor: binary doubles on stdin, ``t`` then the inputs per
+    sample; per sample on stdout ``status``, the outputs, the number of events and each event's
+    ``k, t, value, size, episode, channel, kind``, all as doubles. Used to run the code as a
+    program (e.g. under the sanitizers) and in the benchmark."""
+    nm = layout["name"]
+    n_in = len(layout["inputs"])
+    n_out = len(layout["residuals"]) + len(layout["statistics"])
+    return f"""/* driver of {nm}: binary samples in, binary results out (fdikit.codegen.harness) */
+#include <stdio.h>
+#include "{nm}.h"
+
+int main(void)
+{{
+    {nm}_state s;
+    {nm}_event ev[{nm.upper()}_MAX_EVENTS];
+    double in[{n_in + 1}], out[{max(n_out, 1)}], rec[7];
+    int n, i, st;
+    {nm}_init(&s);
+    while (fread(in, sizeof(double), {n_in + 1}, stdin) == {n_in + 1}) {{
+        double h[2];
+        st = {nm}_step(&s, in[0], in + 1, out, ev, &n);
+        if (st < 0) n = 0;
+        h[0] = (double)st;
+        fwrite(h, sizeof(double), 1, stdout);
+        fwrite(out, sizeof(double), {n_out}, stdout);
+        h[1] = (double)n;
+        fwrite(h + 1, sizeof(double), 1, stdout);
+        for (i = 0; i < n; ++i) {{
+            rec[0] = (double)ev[i].k; rec[1] = ev[i].t; rec[2] = ev[i].value; rec[3] = ev[i].size;
+            rec[4] = (double)ev[i].episode; rec[5] = (double)ev[i].channel; rec[6] = (double)ev[i].kind;
+            fwrite(rec, sizeof(double), 7, stdout);
+        }}
+    }}
+    return 0;
+}}
+"""
+
+
+def run_driver(exe: str | Path, layout: dict, t: np.ndarray, x: np.ndarray) -> dict[str, Any]:
+    """Run a program built from :func:`driver_source` on a record; the same result as
+    :meth:`CMonitor.run`."""
+    data = np.column_stack([t, x]).astype(float).tobytes()
+    res = subprocess.run([str(exe)], input=data, capture_output=True)
+    if res.returncode != 0:
+        raise DataError(f"{exe} failed ({res.returncode}): {res.stderr.decode(errors='replace')[-2000:]}")
+    v = np.frombuffer(res.stdout, float)
+    n_out = len(layout["residuals"]) + len(layout["statistics"])
+    out, status, events, p = [], [], [], 0
+    while p < v.size:
+        status.append(int(v[p]))
+        out.append(v[p + 1:p + 1 + n_out])
+        n = int(v[p + 1 + n_out])
+        p += 2 + n_out
+        for _ in range(n):
+            k, tt, val, size, ep, ch, kind = v[p:p + 7]
+            events.append({"k": int(k), "t": float(tt), "hypothesis": layout["hypotheses"][int(ch)],
+                           "value": float(val), "kind": "onset" if kind == 1 else "cleared",
+                           "size": None if np.isnan(size) else float(size), "episode": int(ep)})
+            p += 7
+    return {"out": np.array(out).reshape(-1, n_out), "status": np.array(status), "events": events,
+            "stderr": res.stderr.decode(errors="replace")}
