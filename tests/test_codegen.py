@@ -57,7 +57,8 @@ def _fdf_monitor(seed=0, **kw):
     a hold and an isolation by signature, a decision."""
     rng = np.random.default_rng(seed)
     n, q = 3, 3
-    d = FilterDesign(_stable(rng, n), rng.normal(size=(n, 1)), rng.normal(size=(n, 2)), rng.normal(size=(q, n)),
+    d = FilterDesign(_stable(rng, n), rng.normal(size=(n, 1)), rng.normal(size=(n, 2)),
+                     rng.normal(size=(q, n)),
                      rng.normal(size=(q, 1)) * 0.1, rng.normal(size=(q, 2)), DT, ["u"], ["y0", "y1"],
                      ["r0", "r1", "r2"])
     d.A[0, 2] = 0.0   # a structural zero (skipped by the sparse rows)
@@ -81,7 +82,8 @@ def _observer_monitor(seed=1, **kw):
     signed = Hold(gen.output_names, [0.5, 0.4], Z=4, absolute=False)
     gate = TimeGated(glrt.output_names, [5.0, 5.0], T=0.2)
     alarms = [*hold.output_names, *signed.output_names]
-    dec = Decision(alarms, 0.5, {a: f"h{i}" for i, a in enumerate(alarms)}, clear_level=0.25, clear_after=0.05,
+    dec = Decision(alarms, 0.5, {a: f"h{i}" for i, a in enumerate(alarms)}, clear_level=0.25,
+                   clear_after=0.05,
                    size_channels={hold.output_names[0]: "r:y0"})
     return Monitor([gen], [glrt, hold, signed, gate], dec, on_invalid="hold", **kw)
 
@@ -130,7 +132,8 @@ def _c_events(res):
 
 def _build(mon, where: Path, name: str):
     gen = generate_monitor(mon, where, name=name)
-    c64 = CMonitor(compile_shared([where / f"{name}.c"], where / f"lib{name}.so"), where / f"{name}.layout.json")
+    c64 = CMonitor(compile_shared([where / f"{name}.c"], where / f"lib{name}.so"),
+                   where / f"{name}.layout.json")
     c32 = CMonitor(compile_shared([where / f"{name}_f32.c"], where / f"lib{name}_f32.so"),
                    where / f"{name}_f32.layout.json")
     return gen, c64, c32, emit_monitor(mon, name=name).emitters
@@ -154,7 +157,8 @@ def test_c_equals_python_streaming(built, which, seed):
     assert np.array_equal(res["status"], py_status)
     assert np.array_equal(res["out"], py_out)       # bitwise: the same operations in the same order
     assert _c_events(res) == py_ev
-    assert len(py_ev) >= 4 and {"cannot_judge", "warmup"} <= {("ok", "cannot_judge", "warmup")[s] for s in py_status}
+    assert len(py_ev) >= 4
+    assert {1, 2} <= set(py_status.tolist())   # held samples and warm-up were exercised
     # float32: statistics within float resolution of the channel's scale; events compared
     r32 = c32.run(t, x)
     scale = np.maximum(np.abs(py_out).max(axis=0), 1e-12)
@@ -205,7 +209,7 @@ def test_nan_refused_without_changing_state(built, which):
     before = c64.checkpoint()
     bad = x[400].copy()
     bad[1] = np.nan
-    st, out, ev = c64.step(t[400], bad)
+    st, _out, ev = c64.step(t[400], bad)
     assert st == 1 and ev == []
     after = c64.checkpoint()
     py_before = mon.state()
@@ -264,8 +268,8 @@ def test_unsupported_stages_refused_by_name():
     from fdikit.base.stage import ResidualProcessor
 
     class Mystery(ResidualProcessor):
-        input_names = ["r0"]
-        output_names = ["m"]
+        input_names = ("r0",)
+        output_names = ("m",)
 
         def reset(self, runs=1):
             pass
@@ -299,10 +303,11 @@ def own_system(tmp_path_factory):
 def test_example_config_events_equal(own_system):
     from fdikit.monitor.config import build_monitor, load_config, map_channels, read_log
 
-    ex, tmp, gen = own_system
+    ex, tmp, _gen = own_system
     cfg = load_config(ex / "monitor.toml")
     mon = build_monitor(cfg)
-    c64 = CMonitor(compile_shared([tmp / "c" / "fdk_own.c"], tmp / "c" / "lib64.so"), tmp / "c" / "fdk_own.layout.json")
+    c64 = CMonitor(compile_shared([tmp / "c" / "fdk_own.c"], tmp / "c" / "lib64.so"),
+                   tmp / "c" / "fdk_own.layout.json")
     c32 = CMonitor(compile_shared([tmp / "c" / "fdk_own_f32.c"], tmp / "c" / "lib32.so"),
                    tmp / "c" / "fdk_own_f32.layout.json")
     c64.check_design(config_digest(cfg))
@@ -310,7 +315,7 @@ def test_example_config_events_equal(own_system):
     for log in sorted((tmp / "logs").glob("*.csv")):
         sig = map_channels(cfg, read_log(cfg, log))
         x = sig.values[0][:, sig.index(c64.layout["inputs"])]
-        py_out, py_status, py_ev = _py_stream(mon, sig.t, x, c64.layout["inputs"])
+        py_out, _status, py_ev = _py_stream(mon, sig.t, x, c64.layout["inputs"])
         res = c64.run(sig.t, x)
         assert np.array_equal(res["out"], py_out), log.name
         assert _c_events(res) == py_ev, log.name
@@ -323,8 +328,9 @@ def test_example_config_events_equal(own_system):
 def test_changed_design_detected(own_system):
     from fdikit.monitor.config import load_config
 
-    ex, tmp, gen = own_system
-    c64 = CMonitor(compile_shared([tmp / "c" / "fdk_own.c"], tmp / "c" / "libchk.so"), tmp / "c" / "fdk_own.layout.json")
+    ex, tmp, _gen = own_system
+    c64 = CMonitor(compile_shared([tmp / "c" / "fdk_own.c"], tmp / "c" / "libchk.so"),
+                   tmp / "c" / "fdk_own.layout.json")
     cfg = load_config(ex / "monitor.toml")
     c64.check_design(config_digest(cfg))
     hold = ex / "designs" / "hold.json"
@@ -346,7 +352,8 @@ def test_example_under_sanitizers(own_system):
     layout = gen["layout"]
     (tmp / "c" / "main.c").write_text(driver_source(layout))
     try:
-        exe = compile_shared([tmp / "c" / "main.c", tmp / "c" / "fdk_own.c"], tmp / "c" / "asan", sanitize=True,
+        exe = compile_shared([tmp / "c" / "main.c", tmp / "c" / "fdk_own.c"], tmp / "c" / "asan",
+                             sanitize=True,
                              shared=False, extra=(f"-I{tmp / 'c'}",))
     except DataError as exc:   # a compiler without the sanitizer runtimes
         pytest.skip(f"no sanitizer runtime: {str(exc)[-200:]}")

@@ -69,7 +69,8 @@ def emit_monitor(mon: Any, *, name: str = "fdk_monitor", precision: str = "doubl
         raise DataError(f"stage plausibility cannot be generated yet (rules on {sorted(mon.plausibility)})")
     dt = mon.expected_dt()
     if dt is None:
-        raise DataError("a monitor without a known sample period cannot be generated yet: give Monitor(dt=...)")
+        raise DataError("a monitor without a known sample period cannot be generated yet: give "
+                        "Monitor(dt=...)")
     gens = [stage_emitter(g, f"g{i}") for i, g in enumerate(mon.generators)]
     procs = [stage_emitter(p, f"p{i}") for i, p in enumerate(mon.processors)]
     for e in procs:
@@ -105,8 +106,10 @@ def emit_monitor(mon: Any, *, name: str = "fdk_monitor", precision: str = "doubl
          f"#define {N}_ERR_STAT (-3)   /* a non-finite statistic reached a stage that refuses it */",
          "", "typedef struct {", "    int64_t k;          /* sample index */",
          "    double t;           /* sample time (s) */", "    double value;       /* alarm channel value */",
-         "    double size;        /* size estimate (NaN: none) */", "    int64_t episode;    /* per record, from 0 */",
-         "    int32_t channel;    /* alarm channel index */", "    int32_t kind;       /* 1 onset, 0 cleared */",
+         "    double size;        /* size estimate (NaN: none) */",
+         "    int64_t episode;    /* per record, from 0 */",
+         "    int32_t channel;    /* alarm channel index */",
+         "    int32_t kind;       /* 1 onset, 0 cleared */",
          f"}} {name}_event;", "", "typedef struct {"]
     h += [f"    {_ctype(f.kind).replace('fdk_real', name + '_real')} {f.name}[{f.n}];" for f in fields]
     h += ["    int64_t last_gap;  /* samples missing in the gap that ended at the last step (0: none) */",
@@ -159,7 +162,8 @@ def emit_monitor(mon: Any, *, name: str = "fdk_monitor", precision: str = "doubl
           "    s->missing[0] = 0; s->has_last[0] = 0; s->n_ep[0] = 0; s->last_gap = 0;",
           f"    for (i = 0; i < {max(P, 1)}; ++i) s->last[i] = 0.0;",
           f"    for (i = 0; i < {max(A, 1)}; ++i) {{ s->active[i] = 0; s->below[i] = 0; s->ep_id[i] = 0; }}",
-          f"    s->warm_left[0] = {start}; s->reset_due[0] = {int(start > 0)}; s->warm_min[0] = 0; s->quiet[0] = -1;",
+          f"    s->warm_left[0] = {start}; s->reset_due[0] = {int(start > 0)};",
+          "    s->warm_min[0] = 0; s->quiet[0] = -1;",
           "}", "", f"void {name}_init({name}_state *s) {{ {name}_reset(s); }}", ""]
     # checkpoint / restore: every field as doubles, in struct order
     ck, rs, off = [], [], 0
@@ -181,7 +185,8 @@ def emit_monitor(mon: Any, *, name: str = "fdk_monitor", precision: str = "doubl
     raise_ = mon.on_invalid == "raise"
     c += [f"int {name}_step({name}_state *s, double t, const double *x, double *out,",
           f"        {name}_event *events, int *n_events)", "{",
-          f"    fdk_real pool[{max(P, 1)}];", "    int64_t n_gap = 0, n_resume;", "    int i, status, invalid = 0;",
+          f"    fdk_real pool[{max(P, 1)}];", "    int64_t n_gap = 0, n_resume;",
+          "    int i, status, invalid = 0;",
           "    *n_events = 0;", "    (void)events;", "    s->last_gap = 0;",
           "    if (s->has_t_prev[0] && !(t > s->t_prev[0])) {",
           f"        if ({int(raise_)} || !isfinite(t)) return {N}_ERR_TIME;",
@@ -200,11 +205,13 @@ def emit_monitor(mon: Any, *, name: str = "fdk_monitor", precision: str = "doubl
           "    n_resume = s->missing[0] + s->held_t[0];",
           f"    if (n_resume) {{ s->warm_left[0] = {n_warm}; s->reset_due[0] = 1;"]
     if mon.warmup is None and dec is not None:
-        c.append(f"        s->warm_min[0] = {n_warm} < 10 * n_resume ? {n_warm} : 10 * n_resume; s->quiet[0] = 0;")
+        c.append(f"        s->warm_min[0] = {n_warm} < 10 * n_resume ? {n_warm} : 10 * n_resume;")
+        c.append("        s->quiet[0] = 0;")
     c += ["    }", "    s->held[0] = 0; s->held_t[0] = 0; s->missing[0] = 0;",
           f"    if (s->warm_left[0] > 0) {{ status = {N}_WARMUP; s->warm_left[0] -= 1;",
           "        s->warm_min[0] = s->warm_min[0] - 1 > 0 ? s->warm_min[0] - 1 : 0; }",
-          f"    else {{ status = {N}_OK; if (s->reset_due[0]) {{ fdk_reset_processors(s); s->reset_due[0] = 0; }} }}",
+          "    else "
+          f"{{ status = {N}_OK; if (s->reset_due[0]) {{ fdk_reset_processors(s); s->reset_due[0] = 0; }} }}",
           *body]
     if dec is not None:
         c += ["    {", f"        fdk_real v[{A}];", f"        int on[{A}], done[{A}];"]
@@ -212,24 +219,30 @@ def emit_monitor(mon: Any, *, name: str = "fdk_monitor", precision: str = "doubl
         c += [f"    if (status == {N}_OK) {{"]
         for a in range(A):
             c += [f"        on[{a}] = v[{a}] >= {rl(dec.level)};",
-                  f"        s->below[{a}] = (s->active[{a}] && v[{a}] < {rl(dec.low_level)}) ? s->below[{a}] + 1 : 0;",
+                  f"        s->below[{a}] = (s->active[{a}] && v[{a}] < {rl(dec.low_level)}) ? s->below[{a}] "
+                  "+ 1 : 0;",
                   f"        done[{a}] = s->active[{a}] && s->below[{a}] >= {n_clear};"]
         for a in order:  # cleared events first, then onsets, each by (hypothesis, channel)
-            c += [f"        if (done[{a}]) {{ {name}_event *e = &events[(*n_events)++]; e->k = s->k[0]; e->t = t;",
+            c += [f"        if (done[{a}]) "
+                  f"{{ {name}_event *e = &events[(*n_events)++]; e->k = s->k[0]; e->t = t;",
                   f"            e->value = (double)v[{a}]; e->size = NAN; e->episode = s->ep_id[{a}];",
                   f"            e->channel = {a}; e->kind = 0; }}"]
         for a in order:
             sz = "NAN" if size_idx[a] is None else f"(double)pool[{size_idx[a]}]"
-            c += [f"        if (on[{a}] && !s->active[{a}]) {{ {name}_event *e = &events[(*n_events)++]; e->k = s->k[0];",
-                  f"            e->t = t; e->value = (double)v[{a}]; e->size = {sz}; e->episode = s->n_ep[0];",
-                  f"            s->ep_id[{a}] = s->n_ep[0]; s->n_ep[0] += 1; e->channel = {a}; e->kind = 1; }}"]
+            c += [f"        if (on[{a}] && !s->active[{a}]) "
+                  f"{{ {name}_event *e = &events[(*n_events)++]; e->k = s->k[0];",
+                  f"            e->t = t; e->value = (double)v[{a}]; e->size = {sz}; e->episode = "
+                  "s->n_ep[0];",
+                  f"            s->ep_id[{a}] = s->n_ep[0]; s->n_ep[0] += 1; e->channel = {a}; e->kind = 1; "
+                  f"}}"]
         for a in range(A):
             c += [f"        if (done[{a}]) {{ s->active[{a}] = 0; s->below[{a}] = 0; }}",
                   f"        if (on[{a}]) s->active[{a}] = 1;"]
         c += ["    }", f"    if (status == {N}_WARMUP && s->quiet[0] >= 0) {{",
               "        int quiet = " + " && ".join(f"(v[{a}] < {rl(dec.low_level)})" for a in range(A)) + ";",
               "        s->quiet[0] = quiet ? s->quiet[0] + 1 : 0;",
-              f"        if (s->warm_min[0] == 0 && s->quiet[0] >= {n_clear}) s->warm_left[0] = 0;", "    }", "    }"]
+              f"        if (s->warm_min[0] == 0 && s->quiet[0] >= {n_clear}) s->warm_left[0] = 0;",
+              "    }", "    }"]
     c += [f"    for (i = 0; i < {P}; ++i) {{ out[i] = (double)pool[i]; s->last[i] = out[i]; }}",
           "    s->has_last[0] = 1;", "    s->k[0] += 1; s->t_prev[0] = t; s->has_t_prev[0] = 1;",
           "    return status;", "}"]

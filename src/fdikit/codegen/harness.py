@@ -147,7 +147,8 @@ class CMonitor:
     def restore(self, buf: np.ndarray) -> None:
         b = np.ascontiguousarray(buf, dtype=float)
         if b.shape != (self.layout["checkpoint_len"],):
-            raise DataError(f"a checkpoint of this monitor has {self.layout['checkpoint_len']} values, got {b.shape}")
+            raise DataError(f"a checkpoint of this monitor has {self.layout['checkpoint_len']} values, got "
+                            f"{b.shape}")
         self._fn["restore"](self._state, b.ctypes.data)
 
 

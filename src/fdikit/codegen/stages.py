@@ -146,7 +146,8 @@ class FeatureNormsEmitter(StageEmitter):
             for c in range(self.starts[j], self.starts[j + 1]):
                 lines += [f"        v = {inp[self.idx[c]]};", "        acc += v * v;"]
             x = self.f("x") + f"[{j}]"
-            lines += [f"        {x} = {x} + {rl(self.obj.alpha)} * (FDK_SQRT(acc) - {x});", f"        {out[j]} = {x};"]
+            lines += [f"        {x} = {x} + {rl(self.obj.alpha)} * (FDK_SQRT(acc) - {x});",
+                      f"        {out[j]} = {x};"]
         lines.append("    }")
         return "\n".join(lines)
 
@@ -209,7 +210,8 @@ class SignatureEmitter(StageEmitter):
         lines.append("        m = (d[0] == dmin) ? 0 : (" + " + ".join(
             f"(d[{i}] == dmin)" for i in range(1, nr)) + ");")
         for i in range(1, nr):
-            lines.append(f"        {out[i - 1]} = (m > 0 && d[{i}] == dmin) ? FDK_R(1.0) / (fdk_real)m : FDK_R(0.0);")
+            lines.append(f"        {out[i - 1]} = (m > 0 && d[{i}] == dmin) ? FDK_R(1.0) / (fdk_real)m : "
+                         "FDK_R(0.0);")
         lines.append("    }")
         return "\n".join(lines)
 
@@ -229,12 +231,16 @@ class GLRTEmitter(StageEmitter):
         self.scale = 1.0 / (2.0 * np.asarray(obj.sigma2, float))
 
     def fields(self):
-        return [Field(f"{self.p}_Q", "real", self.C * (2 * self.W + 1)), Field(f"{self.p}_pos", "i64", self.C),
+        return [Field(f"{self.p}_Q", "real", self.C * (2 * self.W + 1)),
+                Field(f"{self.p}_pos", "i64", self.C),
                 Field(f"{self.p}_count", "i64", self.C), Field(f"{self.p}_k", "i64", 1)]
 
     def reset_code(self):
-        return (f"    {{ int i; for (i = 0; i < {self.C * (2 * self.W + 1)}; ++i) {self.f('Q')}[i] = FDK_R(0.0);\n"
-                f"      for (i = 0; i < {self.C}; ++i) {{ {self.f('pos')}[i] = 0; {self.f('count')}[i] = 0; }}\n"
+        return ("    "
+                f"{{ int i; for (i = 0; i < {self.C * (2 * self.W + 1)}; ++i) "
+                f"{self.f('Q')}[i] = FDK_R(0.0);\n"
+                f"      for (i = 0; i < {self.C}; ++i) "
+                f"{{ {self.f('pos')}[i] = 0; {self.f('count')}[i] = 0; }}\n"
                 f"      {self.f('k')}[0] = 0; }}")
 
     def step_code(self, inp, out):
@@ -287,7 +293,8 @@ class TimeGatedEmitter(StageEmitter):
                 + "\n".join(f"    {self.f('early')}[{j}] = 0;" for j in range(n)))
 
     def step_code(self, inp, out):
-        lines = ["    {", f"        if (!{self.f('has_t0')}[0]) {{ {self.f('t0')}[0] = t; {self.f('has_t0')}[0] = 1; }}",
+        lines = ["    {", f"        if (!{self.f('has_t0')}[0]) "
+                          f"{{ {self.f('t0')}[0] = t; {self.f('has_t0')}[0] = 1; }}",
                  f"        if (t - {self.f('t0')}[0] <= {lit(self.obj.T)}) {{"]
         for j, e in enumerate(inp):
             lines += [f"            if ({e} > {rl(self.obj.q[j])}) {self.f('early')}[{j}] = 1;",
