@@ -32,7 +32,7 @@ from fdikit.codegen import (
     py_to_c_state,
     run_driver,
 )
-from fdikit.detect import GLRT, FeatureNorms, Hold, TimeGated
+from fdikit.detect import GLRT, MHSSPT, FeatureNorms, Hold, TimeGated, UniformMeanGaussian
 from fdikit.errors import DataError
 from fdikit.isolate import SignatureDecision
 from fdikit.model import LinearFaultModel
@@ -86,6 +86,21 @@ def _observer_monitor(seed=1, **kw):
                    clear_after=0.05,
                    size_channels={hold.output_names[0]: "r:y0"})
     return Monitor([gen], [glrt, hold, signed, gate], dec, on_invalid="hold", **kw)
+
+
+def _mhsspt_monitor(q=0.01, **kw):
+    """The random filter's features into an exact MHSSPT (three faults, a group), a decision on
+    the posteriors."""
+    base = _fdf_monitor()
+    feats = base.processors[0]
+    s = [0.3, 0.3, 0.3]
+    dens = {"none": UniformMeanGaussian([0, 0, 0], s, s),
+            "fa": UniformMeanGaussian([0, 1, 1], [0.3, 5, 5], s),
+            "fb": UniformMeanGaussian([1, 0, 1], [5, 0.3, 5], s),
+            "fc": UniformMeanGaussian([1, 1, 0], [5, 5, 0.3], s)}
+    mh = MHSSPT(feats.output_names, dens, p=1e-3, q=q, groups={"ab": ["fa", "fb"]})
+    dec = Decision(mh.output_names[1:4], 0.9, clear_after=0.1)
+    return Monitor(base.generators, [feats, mh], dec, on_invalid="hold", **kw)
 
 
 def _log(mon, seed=0, T=1500, gap=True):
@@ -143,11 +158,12 @@ def _build(mon, where: Path, name: str):
 def built(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("codegen")
     return {"fdf": (_fdf_monitor(), *_build(_fdf_monitor(), tmp, "fdk_fdf")),
-            "obs": (_observer_monitor(), *_build(_observer_monitor(), tmp, "fdk_obs"))}
+            "obs": (_observer_monitor(), *_build(_observer_monitor(), tmp, "fdk_obs")),
+            "mhsspt": (_mhsspt_monitor(), *_build(_mhsspt_monitor(), tmp, "fdk_mh"))}
 
 
 # ------------------------------------------------------------------ per stage: C equals Python
-@pytest.mark.parametrize("which", ["fdf", "obs"])
+@pytest.mark.parametrize("which", ["fdf", "obs", "mhsspt"])
 @pytest.mark.parametrize("seed", [0, 1])
 def test_c_equals_python_streaming(built, which, seed):
     mon, _gen, c64, c32, _em = built[which]
@@ -167,7 +183,7 @@ def test_c_equals_python_streaming(built, which, seed):
     assert np.array_equal(r32["status"], py_status)
 
 
-@pytest.mark.parametrize("which", ["fdf", "obs"])
+@pytest.mark.parametrize("which", ["fdf", "obs", "mhsspt"])
 def test_c_equals_python_batch(built, which):
     mon, _gen, c64, _c32, _em = built[which]
     t, x, names = _log(mon, 3)
@@ -200,7 +216,7 @@ def test_each_stage_alone_equals_python(tmp_path):
 
 
 # ------------------------------------------------------------------ NaN refused, state unchanged
-@pytest.mark.parametrize("which", ["fdf", "obs"])
+@pytest.mark.parametrize("which", ["fdf", "obs", "mhsspt"])
 def test_nan_refused_without_changing_state(built, which):
     mon, _gen, c64, _c32, em = built[which]
     t, x, names = _log(mon, 4, gap=False)
@@ -230,7 +246,7 @@ def test_nan_refused_without_changing_state(built, which):
 
 
 # ------------------------------------------------------------------ checkpoints between C and Python
-@pytest.mark.parametrize("which", ["fdf", "obs"])
+@pytest.mark.parametrize("which", ["fdf", "obs", "mhsspt"])
 @pytest.mark.parametrize("cut", [130, 510, 1003])
 def test_checkpoint_c_to_python_and_back(built, which, cut):
     mon, _gen, c64, _c32, em = built[which]
@@ -282,6 +298,10 @@ def test_unsupported_stages_refused_by_name():
         emit_monitor(Monitor(base.generators, [Mystery()]))
     with pytest.raises(DataError, match="stage _Doubler cannot be generated yet"):
         emit_monitor(Monitor(base.generators, [_Doubler(["r0"], 1.0)]))
+    mh = _mhsspt_monitor().processors[1]
+    tab = MHSSPT(mh.input_names, dict(zip(mh.hypotheses, mh.densities)), p=1e-3, tabulate=0.125)
+    with pytest.raises(DataError, match=r"stage MHSSPT \(tabulated densities\) cannot be generated yet"):
+        emit_monitor(Monitor(base.generators, [base.processors[0], tab]))
     with pytest.raises(DataError, match="stage plausibility cannot be generated yet"):
         emit_monitor(Monitor(base.generators, plausibility={"y0": Plausibility(min=-1.0, max=1.0)}))
 

@@ -149,10 +149,12 @@ def emit_monitor(mon: Any, *, name: str = "fdk_monitor", precision: str = "doubl
          "#define FDK_FINITE(x) (isfinite(x))",
          "#define FDK_ABS(x) " + ("fabs(x)" if precision == "double" else "fabsf(x)"),
          "#define FDK_SQRT(x) " + ("sqrt(x)" if precision == "double" else "sqrtf(x)"),
-         f"#define FDK_ERR_STAT {N}_ERR_STAT", "",
+         f"#define FDK_ERR_STAT {N}_ERR_STAT", f"#define FDK_PI {lit(math.pi)}",
+         f"#define FDK_INV_SQRT2 {lit(1.0 / math.sqrt(2.0))}", "",
          f'static const char FDK_HASH[] = "{design_hash}";',
          f"const char *{name}_design_hash(void) {{ return FDK_HASH; }}",
          f"int {name}_state_size(void) {{ return (int)sizeof({name}_state); }}", "",
+         *dict.fromkeys(e.helpers for e in (*gens, *procs) if e.helpers),
          f"static void fdk_reset_processors({name}_state *s)", "{"]
     c += [e.reset_code() for e in procs if e.reset_code()]
     c += ["    (void)s;", "}", "", f"void {name}_reset({name}_state *s)", "{", "    int i;"]
