@@ -141,16 +141,30 @@ def _same(a, b) -> bool:
     return np.array_equal(np.asarray(a), np.asarray(b))
 
 
+_REF: dict = {}
+
+
+def _reference(built, which, seed):
+    """The random log of ``seed`` and the Python streaming result on it (computed once)."""
+    if (which, seed) not in _REF:
+        mon = built[which][0]
+        t, x, names = _log(mon, seed)
+        _REF[which, seed] = (t, x, names, *_py_stream(mon, t, x, names))
+    return _REF[which, seed]
+
+
 def _c_events(res):
     return [(e["k"], e["kind"], e["hypothesis"], e["episode"], e["value"], e["size"]) for e in res["events"]]
 
 
-def _build(mon, where: Path, name: str):
-    gen = generate_monitor(mon, where, name=name)
+def _build(mon, where: Path, name: str, f32: bool = True):
+    gen = generate_monitor(mon, where, name=name, precisions=("double", "float") if f32 else ("double",))
     c64 = CMonitor(compile_shared([where / f"{name}.c"], where / f"lib{name}.so"),
                    where / f"{name}.layout.json")
-    c32 = CMonitor(compile_shared([where / f"{name}_f32.c"], where / f"lib{name}_f32.so"),
-                   where / f"{name}_f32.layout.json")
+    c32 = None
+    if f32:
+        c32 = CMonitor(compile_shared([where / f"{name}_f32.c"], where / f"lib{name}_f32.so"),
+                       where / f"{name}_f32.layout.json")
     return gen, c64, c32, emit_monitor(mon, name=name).emitters
 
 
@@ -166,9 +180,8 @@ def built(tmp_path_factory):
 @pytest.mark.parametrize("which", ["fdf", "obs", "mhsspt"])
 @pytest.mark.parametrize("seed", [0, 1])
 def test_c_equals_python_streaming(built, which, seed):
-    mon, _gen, c64, c32, _em = built[which]
-    t, x, names = _log(mon, seed)
-    py_out, py_status, py_ev = _py_stream(mon, t, x, names)
+    _mon, _gen, c64, c32, _em = built[which]
+    t, x, _names, py_out, py_status, py_ev = _reference(built, which, seed)
     res = c64.run(t, x)
     assert np.array_equal(res["status"], py_status)
     assert np.array_equal(res["out"], py_out)       # bitwise: the same operations in the same order
@@ -208,7 +221,7 @@ def test_each_stage_alone_equals_python(tmp_path):
     x = rng.normal(size=(400, 2)) + np.where(np.arange(400)[:, None] > 200, 1.0, 0.0)
     for key, st in stages.items():
         mon = Monitor([FaultDetectionFilter(d)], [st], None, on_invalid="hold")
-        _gen, c64, _c32, _em = _build(mon, tmp_path / key, f"fdk_{key}")
+        _gen, c64, _c32, _em = _build(mon, tmp_path / key, f"fdk_{key}", f32=False)
         py_out, py_status, _ = _py_stream(mon, t, x, ["a", "b"])
         res = c64.run(t, x)
         assert np.array_equal(res["out"], py_out), key
@@ -247,11 +260,10 @@ def test_nan_refused_without_changing_state(built, which):
 
 # ------------------------------------------------------------------ checkpoints between C and Python
 @pytest.mark.parametrize("which", ["fdf", "obs", "mhsspt"])
-@pytest.mark.parametrize("cut", [130, 510, 1003])
+@pytest.mark.parametrize("cut", [130, 1003])
 def test_checkpoint_c_to_python_and_back(built, which, cut):
     mon, _gen, c64, _c32, em = built[which]
-    t, x, names = _log(mon, 6)
-    full_out, full_status, full_ev = _py_stream(mon, t, x, names)
+    t, x, names, full_out, full_status, full_ev = _reference(built, which, 0)
     # C first, Python continues
     c64.run(t[:cut], x[:cut])
     mon.reset(1)
@@ -312,9 +324,10 @@ def own_system(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("own")
     ex = tmp / "own-system"
     shutil.copytree(ROOT / "examples" / "own-system", ex, ignore=shutil.ignore_patterns("designs"))
-    cli = [sys.executable, "-m", "fdikit.cli"]
-    subprocess.run([*cli, "design", str(ex / "monitor.toml")], check=True, capture_output=True)
-    subprocess.run([sys.executable, str(ex / "simulate_logs.py"), str(tmp / "logs"), "--minutes", "1"],
+    from fdikit.monitor.config import load_config, run_design
+
+    run_design(load_config(ex / "monitor.toml"))
+    subprocess.run([sys.executable, str(ex / "simulate_logs.py"), str(tmp / "logs"), "--minutes", "0.6"],
                    check=True, capture_output=True)
     res = generate(ex / "monitor.toml", tmp / "c", name="fdk_own")
     return ex, tmp, res
@@ -332,7 +345,8 @@ def test_example_config_events_equal(own_system):
                    tmp / "c" / "fdk_own_f32.layout.json")
     c64.check_design(config_digest(cfg))
     n_onsets = 0
-    for log in sorted((tmp / "logs").glob("*.csv")):
+    for stem in ("nominal", "sensor_w_meas", "actuator_V"):
+        log = tmp / "logs" / f"{stem}.csv"
         sig = map_channels(cfg, read_log(cfg, log))
         x = sig.values[0][:, sig.index(c64.layout["inputs"])]
         py_out, _status, py_ev = _py_stream(mon, sig.t, x, c64.layout["inputs"])
@@ -342,7 +356,7 @@ def test_example_config_events_equal(own_system):
         r32 = c32.run(sig.t, x)
         assert [e[:4] for e in _c_events(r32)] == [e[:4] for e in py_ev], log.name   # float32: same events
         n_onsets += sum(e[1] == "onset" for e in py_ev)
-    assert n_onsets >= 4   # every fault log announces its fault
+    assert n_onsets >= 2   # each fault log announces its fault
 
 
 def test_changed_design_detected(own_system):
@@ -363,27 +377,21 @@ def test_changed_design_detected(own_system):
         hold.write_text(text)
 
 
-def test_example_under_sanitizers(own_system):
-    from fdikit.monitor.config import build_monitor, load_config, map_channels, read_log
-
-    ex, tmp, gen = own_system
-    cfg = load_config(ex / "monitor.toml")
-    mon = build_monitor(cfg)
+def test_under_sanitizers(built, tmp_path):
+    """The generated code as a program under -fsanitize=address,undefined (no recovery): the same
+    numbers and events as Python on a log with NaN, huge values and a gap."""
+    which = "mhsspt"   # the most C: filter, features, erfc/log/exp densities, the recursion, episodes
+    _mon, gen, _c64, _c32, _em = built[which]
     layout = gen["layout"]
-    (tmp / "c" / "main.c").write_text(driver_source(layout))
+    cdir = Path(gen["files"][0]).parent
+    (tmp_path / "main.c").write_text(driver_source(layout))
     try:
-        exe = compile_shared([tmp / "c" / "main.c", tmp / "c" / "fdk_own.c"], tmp / "c" / "asan",
-                             sanitize=True,
-                             shared=False, extra=(f"-I{tmp / 'c'}",))
+        exe = compile_shared([tmp_path / "main.c", cdir / f"{layout['name']}.c"], tmp_path / "asan",
+                             sanitize=True, shared=False, extra=(f"-I{cdir}",))
     except DataError as exc:   # a compiler without the sanitizer runtimes
         pytest.skip(f"no sanitizer runtime: {str(exc)[-200:]}")
-    sig = map_channels(cfg, read_log(cfg, tmp / "logs" / "sensor_w_meas.csv"))
-    x = sig.values[0][:, sig.index(layout["inputs"])].copy()
-    x[500, 1] = np.nan
-    t = sig.t.copy()
-    t[2000:] += 0.05
+    t, x, _names, py_out, py_status, py_ev = _reference(built, which, 0)
     res = run_driver(exe, layout, t, x)
-    py_out, py_status, py_ev = _py_stream(mon, t, x, layout["inputs"])
     assert np.array_equal(res["out"], py_out)
     assert np.array_equal(res["status"], py_status)
     assert _c_events(res) == py_ev and py_ev
