@@ -258,6 +258,50 @@ def test_nan_refused_without_changing_state(built, which):
     assert (a["k"], a["held"], a["held_t"], a["t_prev"]) == (p["k"], p["held"], p["held_t"], p["t_prev"])
 
 
+def test_time_going_back_and_raise_mode(built, tmp_path):
+    """Time not increasing is held (hold mode) as in Python; in raise mode an invalid sample or
+    time returns an error code where Python raises, and neither changes the state."""
+    mon, _gen, c64, _c32, _em = built["fdf"]
+    t, x, names = _log(mon, 7, gap=False)
+    t, x = t[:300], x[:300]
+    c64.run(t[:200], x[:200])
+    _py_stream(mon, t[:200], x[:200], names)
+    st, _o, _e = c64.step(t[150], x[200])
+    mon.step(float(t[150]), x[200][None], names)
+    assert st == 1 and mon.last_status == "cannot_judge"
+    rest = c64.run(t[200:], x[200:], reset=False)
+    py = [mon.step(float(t[k]), x[k][None], names) for k in range(200, 300)]
+    assert np.array_equal(rest["out"], np.array([np.concatenate([r[0], s[0]]) for r, s, _ in py]))
+    strict = _fdf_monitor()
+    strict.on_invalid = "raise"
+    _g, cs, _c, _em2 = _build(strict, tmp_path, "fdk_strict", f32=False)
+    cs.run(t[:100], x[:100])
+    before = cs.checkpoint()
+    bad = x[100].copy()
+    bad[2] = np.nan
+    assert cs.step(t[100], bad)[0] == -2          # FDK_ERR_VALUE
+    assert cs.step(t[50], x[100])[0] == -1        # FDK_ERR_TIME
+    assert cs.step(np.nan, x[100])[0] == -1
+    assert np.array_equal(cs.checkpoint(), before)
+    _py_stream(strict, t[:100], x[:100], names)
+    with pytest.raises(DataError):
+        strict.step(float(t[100]), bad[None], names)
+
+
+def test_command_prints_one_json_object(own_system, tmp_path, capsys):
+    import json
+
+    from fdikit.cli import main
+
+    ex, _tmp, _gen = own_system
+    argv = ["codegen", str(ex / "monitor.toml"), "--out", str(tmp_path / "gen"), "--compile", "--json"]
+    assert main(argv) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["stages"] == ["FaultDetectionFilter", "FeatureNorms", "Hold", "SignatureDecision"]
+    assert out["compiled"]["double"]["state_bytes"] > out["compiled"]["float"]["state_bytes"] > 0
+    assert out["design_hash"] == _gen["design_hash"]
+
+
 # ------------------------------------------------------------------ checkpoints between C and Python
 @pytest.mark.parametrize("which", ["fdf", "obs", "mhsspt"])
 @pytest.mark.parametrize("cut", [130, 1003])

@@ -196,7 +196,10 @@ def emit_monitor(mon: Any, *, name: str = "fdk_monitor", precision: str = "doubl
           f"    if (!isfinite(t)) return {N}_ERR_TIME;",
           f"    if (s->has_t_prev[0] && t - s->t_prev[0] > {lit(limit)}) {{",
           f"        double m = nearbyint((t - s->t_prev[0]) / {lit(dt)}) - 1.0;",
-          "        n_gap = m < 1.0 ? 1 : (int64_t)m;", "    }"]
+          "        /* (clamped at 2^53: a count beyond it is absurd and would overflow) */",
+          "        if (m > 9007199254740992.0) m = 9007199254740992.0;",
+          "        n_gap = m < 1.0 ? 1 : (int64_t)m;",
+          "    }"]
     if mon.validate:  # NaN, and |x| > max_abs (Python: an inf passes when max_abs is None)
         c += [f"    for (i = 0; i < {len(inputs)}; ++i) if (!(fabs(x[i]) <= {vlimit})) invalid = 1;"]
         if raise_:
