@@ -55,7 +55,9 @@ def register(sub) -> None:
             "Generate C99 from a monitor config's designed artifacts (run 'fdikit design CONFIG'\n"
             "first): a header with a fixed-size state struct and init, reset, step, checkpoint\n"
             "and restore; no dynamic memory, no globals with state, only <math.h> and <stdint.h>.\n"
-            "The design hash is compiled in. A stage that cannot be generated is refused by name."
+            "The design hash is compiled in. A stage that cannot be generated is refused by name.\n"
+            "Prints the generated files, or with --json one JSON object with the files, the\n"
+            "stages, the design hash, the code and state sizes in bytes and the time taken."
         ),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
