@@ -96,7 +96,7 @@ def _size(obj: Path) -> int:
 
 
 def bench(example: str, tmp: Path, repeat: int) -> dict:
-    from fdikit.codegen import CFLAGS, CMonitor, compile_shared, find_compiler, generate
+    from fdikit.codegen import generate
     from fdikit.errors import DataError
     from fdikit.monitor.config import build_monitor, load_config, map_channels, read_log
 
@@ -125,11 +125,18 @@ def bench(example: str, tmp: Path, repeat: int) -> dict:
     mon = build_monitor(cfg)
     log = next((p for p in logs if p.stem == "fault"), logs[-1])
     sig = map_channels(cfg, read_log(cfg, log))
-    names = gen["layout"]["inputs"]
-    x = sig.values[0][:, sig.index(names)]
-    t = sig.t
-    out["samples"] = int(t.size)
+    x = sig.values[0][:, sig.index(gen["layout"]["inputs"])]
     out["log"] = log.name
+    return _time_monitor(out, mon, cdir, sig.t, x, repeat)
+
+
+def _time_monitor(out: dict, mon, cdir: Path, t: np.ndarray, x: np.ndarray, repeat: int) -> dict:
+    """Time the generated ``fdk_m`` in ``cdir`` (double and float32) and ``mon``'s streaming path
+    on the same record; sizes and equivalence."""
+    from fdikit.codegen import CFLAGS, CMonitor, compile_shared, find_compiler
+
+    names = list(mon.input_names)
+    out["samples"] = int(t.size)
     cc = find_compiler()
     res = {}
     for prec, stem in (("double", "fdk_m"), ("float", "fdk_m_f32")):
@@ -175,17 +182,58 @@ def bench(example: str, tmp: Path, repeat: int) -> dict:
     return out
 
 
+def synthetic_mhsspt(tmp: Path, repeat: int) -> dict:
+    """A monitor no example has yet: a random 6-state filter, residual-norm features and an exact
+    MHSSPT (4 hypotheses, a group), on 20 000 random samples with faults."""
+    from fdikit.detect import MHSSPT, FeatureNorms, UniformMeanGaussian
+    from fdikit.monitor import Decision, Monitor
+    from fdikit.residuals import FaultDetectionFilter, FilterDesign
+
+    rng = np.random.default_rng(0)
+    n, dt = 6, 0.01
+    A = rng.normal(size=(n, n))
+    A *= 0.9 / max(abs(np.linalg.eigvals(A)))
+    d = FilterDesign(A, rng.normal(size=(n, 1)), rng.normal(size=(n, 3)), rng.normal(size=(6, n)),
+                     rng.normal(size=(6, 1)), rng.normal(size=(6, 3)), dt, ["u"], ["y0", "y1", "y2"],
+                     [f"r{i}" for i in range(6)])
+    feats = FeatureNorms({"a": ["r0", "r1"], "b": ["r2", "r3"], "c": ["r4", "r5"]}, dt, tau=0.05)
+    s3 = [0.5, 0.5, 0.5]
+    dens = {"none": UniformMeanGaussian([0, 0, 0], [1, 1, 1], s3),
+            "fa": UniformMeanGaussian([0, 2, 2], [1, 9, 9], s3),
+            "fb": UniformMeanGaussian([2, 0, 2], [9, 1, 9], s3),
+            "fc": UniformMeanGaussian([2, 2, 0], [9, 9, 1], s3)}
+    mh = MHSSPT(feats.output_names, dens, p=1e-4, groups={"ab": ["fa", "fb"]})
+    mon = Monitor([FaultDetectionFilter(d)], [feats, mh], Decision(mh.output_names[1:4], 0.9),
+                  on_invalid="hold")
+    T = 20000
+    t = np.arange(T) * dt
+    x = rng.normal(scale=0.3, size=(T, 4))
+    x[5000:7000, 1] += 3.0
+    x[12000:13000, 3] -= 3.0
+    from fdikit.codegen import generate_monitor
+
+    cdir = tmp / "synthetic-c"
+    t0 = time.perf_counter()
+    gen = generate_monitor(mon, cdir, name="fdk_m")
+    out = {"example": "synthetic-mhsspt", "generation_seconds": round(time.perf_counter() - t0, 4),
+           "stages": gen["layout"]["stages"], "code_source_bytes": gen["code_bytes"], "log": "random"}
+    return _time_monitor(out, mon, cdir, t, x, repeat)
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeat", type=int, default=20, help="passes of the C loop over the log")
     ap.add_argument("--examples", nargs="*",
-                    default=["two-mass", "own-system", "abs", "passenger-car", "rav4-lateral",
-                             "aircraft-smo"])
+                    default=["two-mass", "own-system", "synthetic-mhsspt", "abs", "passenger-car",
+                             "rav4-lateral", "aircraft-smo"])
     args = ap.parse_args(argv)
     rows = []
     with tempfile.TemporaryDirectory() as d:
         for ex in args.examples:
-            r = bench(ex, Path(d), args.repeat)
+            if ex == "synthetic-mhsspt":
+                r = synthetic_mhsspt(Path(d), args.repeat)
+            else:
+                r = bench(ex, Path(d), args.repeat)
             rows.append(r)
             if "refused" in r or "c" not in r:
                 print(f"{ex:14s} not generated: {r.get('refused', r.get('note'))}")
@@ -196,7 +244,8 @@ def main(argv=None) -> int:
                   f"({r['speedup_double']}x); "
                   f"state {c64['state_bytes']} B (float32 {c32['state_bytes']} B), code {c64['code_bytes']} "
                   "B; "
-                  f"generation {r['generation_seconds']} s; events equal {c64['events_equal']} "
+                  f"generation {r['generation_seconds']} s; {r['events']} events, "
+                  f"equal {c64['events_equal']} "
                   f"(float32 {c32['events_equal']}), bitwise {c64['bitwise_equal']}, "
                   f"float32 error {c32['max_error_rel_to_channel_scale']:.2e}")
     print(json.dumps({"benchmark": "codegen", "monitors": rows}, default=float))
