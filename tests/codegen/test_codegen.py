@@ -42,7 +42,7 @@ from fdikit.residuals import FaultDetectionFilter, FilterDesign, ObserverResidua
 
 pytestmark = pytest.mark.skipif(find_compiler() is None, reason="no C compiler (cc, gcc or clang) on PATH")
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 DT = 0.01
 
 
