@@ -49,7 +49,7 @@ def _design(args) -> int:
 
 def _batch(args, cfg) -> int:
     from ..monitor.config import build_monitor, map_channels, read_log
-    from ..monitor.records import batch_records, batch_summary, stats_frame, summary_lines
+    from ..monitor.records import batch_records, batch_summary, summary_lines, write_records, write_stats
 
     t0 = time.perf_counter()
     log = read_log(cfg, args.log)
@@ -58,11 +58,9 @@ def _batch(args, cfg) -> int:
     res = mon.run(sig)
     records = batch_records(sig, res)
     if args.events:
-        with open(args.events, "w") as fh:
-            for rec in records:
-                fh.write(json.dumps(rec) + "\n")
+        write_records(args.events, records)
     if args.stats:
-        stats_frame(sig, res).to_parquet(args.stats, index=False)
+        write_stats(args.stats, sig, res)
     summary = batch_summary(cfg, args.log, sig, res, t_start=t0)
     if args.report or args.plot:
         from ..report import monitor_report, monitor_thresholds
@@ -97,9 +95,13 @@ def _follow(args, cfg) -> int:
     try:
         live.follow(stream, on_record=lambda rec: print(json.dumps(rec), flush=True), events=args.events,
                     checkpoint=args.checkpoint, resume=args.resume, checkpoint_every=args.checkpoint_every)
+    except KeyboardInterrupt:  # Ctrl-C is follow mode's normal end: its summary, then the stop
+        print(live.summary_line(), file=sys.stderr, flush=True)
+        raise
     finally:
         if stream is not sys.stdin:
             stream.close()
+    print(live.summary_line(), file=sys.stderr, flush=True)
     return 0
 
 
@@ -109,7 +111,8 @@ def _monitor(args) -> int:
     cfg = load_config(args.config)
     from ._output import check_output_paths
 
-    check_output_paths(args, "events", "stats", "plot", "report", "checkpoint")
+    check_output_paths(args, "events", "stats", "plot", "report", "checkpoint", inputs=("log", "config"),
+                       labels={"log": "LOG"})
     if args.follow:
         if args.json:
             raise DataError("--follow prints one JSON line per announcement; it does not take --json")

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..base import interrupt
 from ..errors import DataError
 from .can import LogSignals, SignalInfo, convert_units
 from .timebase import time_unit_hint, times_to_seconds
@@ -25,9 +26,13 @@ def _cells_to_float(cells: list[str], where: str, column: str) -> np.ndarray:
     na = np.fromiter((c.lower() in NA_TEXTS for c in cells), bool, len(cells))
     work = np.where(na, "nan", arr)
     try:
-        return work.astype(float)
+        out = work.astype(float)
     except ValueError:
-        pass
+        out = None
+    # NumPy's text cast clears a KeyboardInterrupt raised in it and goes on: stop here instead
+    interrupt.check()
+    if out is not None:
+        return out
     out = np.empty(len(cells))
     for k, x in enumerate(work.tolist()):
         try:

@@ -22,6 +22,7 @@ the records of a crashed run plus those of its resumed run equal an uninterrupte
 from __future__ import annotations
 
 import csv
+import fcntl
 import itertools
 import json
 import os
@@ -118,8 +119,22 @@ class EventLog:
     """
 
     def __init__(self, path: str | os.PathLike):
+        from ..base.outputs import io_error, open_device
+
         self.path = path
-        self.fh = open(path, "a+b")  # closed in close()
+        self.fh = open_device(path, "wb")  # a device or a FIFO someone reads: written as it is
+        self.device = self.fh is not None
+        if self.fh is None:
+            try:
+                self.fh = open(path, "a+b", buffering=0)  # closed in close(); unbuffered
+            except OSError as exc:
+                raise io_error(path, exc) from None
+            try:  # one writer per log: a second follower would write every record twice
+                fcntl.flock(self.fh.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError:
+                self.fh.close()
+                raise DataError(f"{path}: another process (a second follower) writes this event log; "
+                                "give each follower its own --events file") from None
 
     def __enter__(self) -> EventLog:
         return self
@@ -129,6 +144,8 @@ class EventLog:
 
     def start(self, size: int | None = None) -> None:
         """Empty the log (``size`` None) or cut it back to ``size`` bytes (a checkpoint's length)."""
+        if self.device:
+            return
         if size is None:
             self.fh.truncate(0)
             return
@@ -139,18 +156,43 @@ class EventLog:
         self.fh.truncate(size)
 
     def write(self, line: str) -> None:
-        """Append one line (a JSON record, without its newline) and flush it."""
-        self.fh.write(line.encode() + b"\n")
-        self.fh.flush()
+        """Append one line (a JSON record, without its newline) and flush it; a full disk is a
+        DataError naming the file, and the log is cut back to its last whole line."""
+        from ..base.outputs import io_error
+
+        data = memoryview(line.encode() + b"\n")
+        pos = None if self.device else self.fh.seek(0, 2)
+        try:
+            while data:  # unbuffered: a short write goes on where it stopped
+                data = data[self.fh.write(data):]
+            if self.device:
+                self.fh.flush()
+        except OSError as exc:
+            if pos is not None:
+                try:
+                    self.fh.truncate(pos)
+                except OSError:
+                    pass
+            raise io_error(self.path, exc) from None
 
     def sync(self) -> int:
         """Flush the log to disk; returns its length in bytes."""
-        self.fh.flush()
-        os.fsync(self.fh.fileno())
+        from ..base.outputs import io_error
+
+        try:
+            self.fh.flush()
+            if self.device:
+                return 0
+            os.fsync(self.fh.fileno())
+        except OSError as exc:
+            raise io_error(self.path, exc) from None
         return self.fh.seek(0, 2)
 
     def close(self) -> None:
-        self.fh.close()
+        try:
+            self.fh.close()
+        except OSError:
+            pass
 
 
 class LiveMonitor:
@@ -223,6 +265,7 @@ class LiveMonitor:
         self.header: list[str] | None = None
         self.time_first: str | None = None   # CSV: the first timestamp's text (the origin)
         self._resumed: dict | None = None
+        self.counts = {"announcements": 0, "cleared": 0, "invalid": 0, "gaps": 0}  # follow()'s records
         self._since = 0
         self._every: int = 500
         self._hook: Callable[[LiveMonitor], None] | None = None
@@ -458,6 +501,7 @@ class LiveMonitor:
             n = 0
             for rec in self.records(lines, checkpoint_every=checkpoint_every,
                                     on_checkpoint=save if ckpt is not None else None):
+                self._count(rec)
                 if on_record is not None:
                     on_record(rec)
                 if log is not None:
@@ -467,6 +511,24 @@ class LiveMonitor:
         finally:
             if log is not None:
                 log.close()
+
+    def _count(self, rec: dict) -> None:
+        c = self.counts
+        key = ("gaps" if rec.get("gap") else "invalid" if "invalid" in rec
+               else "announcements" if rec.get("kind") == "onset" else "cleared")
+        c[key] += 1
+
+    def summary_line(self) -> str:
+        """One line on what a follow run did so far (printed at its end, and when it is stopped).
+
+        Examples
+        --------
+        >>> LiveMonitor("monitor.toml").summary_line()  # doctest: +SKIP
+        'follow: 0 samples, 0 announcements (0 cleared), 0 invalid lines or samples, 0 gaps'
+        """
+        c = self.counts
+        return (f"follow: {self.samples} samples, {c['announcements']} announcements ({c['cleared']} "
+                f"cleared), {c['invalid']} invalid lines or samples, {c['gaps']} gaps")
 
     def _stepped(self) -> None:
         self.samples += 1

@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 __all__ = ["batch_records", "batch_summary", "event_record", "gap_record", "invalid_record", "record_order",
-           "stats_frame", "status_counts", "step_records", "summary_lines"]
+           "stats_frame", "status_counts", "step_records", "summary_lines", "write_records", "write_stats"]
 
 
 def event_record(e) -> dict:
@@ -211,6 +211,42 @@ def stats_frame(sig, res):
     if status is not None:
         df["status"] = status[0].astype(np.int8)   # STATUS_NAMES[code]: 0 ok, 1 cannot_judge, 2 warmup
     return df
+
+
+def write_records(path, records: list[dict]) -> None:
+    """Write records as JSON Lines (``fdikit monitor --events``), atomically
+    (:func:`fdikit.base.outputs.open_output`: never half a file; a full disk is a DataError naming it).
+
+    Examples
+    --------
+    >>> import os, tempfile
+    >>> p = os.path.join(tempfile.mkdtemp(), "ev.jsonl")
+    >>> write_records(p, [{"t": 0.5, "invalid": "x: NaN"}])
+    >>> open(p).read()
+    '{"t": 0.5, "invalid": "x: NaN"}\n'
+    """
+    import json
+
+    from ..base.outputs import open_output
+
+    with open_output(path, "w") as fh:
+        for rec in records:
+            fh.write(json.dumps(rec) + "\n")
+
+
+def write_stats(path, sig, res) -> None:
+    """Write :func:`stats_frame` as Parquet (``fdikit monitor --stats``), atomically: a stop or a
+    full disk while it is written leaves no file that looks valid.
+
+    Examples
+    --------
+    >>> write_stats("stats.parquet", sig, res)  # doctest: +SKIP
+    """
+    from ..base.outputs import open_output
+
+    frame = stats_frame(sig, res)
+    with open_output(path, "wb") as fh:
+        frame.to_parquet(fh, index=False)
 
 
 def batch_summary(cfg, log: Any, sig, res, *, t_start: float) -> dict:
