@@ -33,7 +33,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import DataError
-from .records import step_records
+from .records import NOT_SEEN, step_records
 
 __all__ = ["EventLog", "LiveClock", "LiveMonitor"]
 
@@ -524,11 +524,11 @@ class LiveMonitor:
         Examples
         --------
         >>> LiveMonitor("monitor.toml").summary_line()  # doctest: +SKIP
-        'follow: 0 samples, 0 announcements (0 cleared), 0 invalid lines or samples, 0 gaps'
+        'follow: 0 samples, 0 announcements (0 not seen any more), 0 invalid lines or samples, 0 gaps'
         """
         c = self.counts
         return (f"follow: {self.samples} samples, {c['announcements']} announcements ({c['cleared']} "
-                f"cleared), {c['invalid']} invalid lines or samples, {c['gaps']} gaps")
+                f"{NOT_SEEN}), {c['invalid']} invalid lines or samples, {c['gaps']} gaps")
 
     def _stepped(self) -> None:
         self.samples += 1

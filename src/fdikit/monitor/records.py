@@ -5,7 +5,11 @@
 A record has ``t``, ``run`` and ``sample``, and one of:
 
 * an event: ``kind`` (``"onset"`` or ``"cleared"``), ``hypothesis``, ``value``, ``size`` (``None``
-  where not estimated), ``episode`` and ``announcement`` (``True`` for an onset);
+  where not estimated), ``episode`` and ``announcement`` (``True`` for an onset); a cleared event
+  also has ``label: "not seen any more"`` -- the alarm stayed below its clear level for the
+  decision's ``clear_after``, which is all the monitor knows: a persistent fault whose residual
+  decays (a sensor bias an observer absorbs) ends its episode the same way, so a cleared episode
+  says the fault is no longer seen, not that it is gone;
 * a gap: ``gap: True``, ``t_start`` and ``n_missing`` (at the first sample after the gap);
 * a held sample: ``invalid`` (the reason).
 
@@ -21,6 +25,10 @@ import numpy as np
 
 __all__ = ["batch_records", "batch_summary", "event_record", "gap_record", "invalid_record", "record_order",
            "stats_frame", "status_counts", "step_records", "summary_lines", "write_records", "write_stats"]
+
+
+#: What a cleared episode means: the alarm stopped, which a fault that persists can do too.
+NOT_SEEN = "not seen any more"
 
 
 def event_record(e) -> dict:
@@ -40,12 +48,17 @@ def event_record(e) -> dict:
     >>> from fdikit.monitor import Event
     >>> event_record(Event(0, 12, 0.24, "sensor:speed", 31.5))["announcement"]
     True
+    >>> event_record(Event(0, 90, 1.8, "sensor:speed", 0.0, "cleared"))["label"]
+    'not seen any more'
     """
     kind = getattr(e, "kind", "onset")
     size = getattr(e, "size", None)
-    return {"t": e.t, "run": e.run, "sample": e.k, "kind": kind, "hypothesis": e.hypothesis,
-            "value": e.value, "size": None if size is None or not np.isfinite(size) else float(size),
-            "episode": int(getattr(e, "episode", 0)), "announcement": kind == "onset"}
+    rec = {"t": e.t, "run": e.run, "sample": e.k, "kind": kind, "hypothesis": e.hypothesis,
+           "value": e.value, "size": None if size is None or not np.isfinite(size) else float(size),
+           "episode": int(getattr(e, "episode", 0)), "announcement": kind == "onset"}
+    if kind == "cleared":
+        rec["label"] = NOT_SEEN
+    return rec
 
 
 def gap_record(g) -> dict:
@@ -223,7 +236,7 @@ def write_records(path, records: list[dict]) -> None:
     >>> p = os.path.join(tempfile.mkdtemp(), "ev.jsonl")
     >>> write_records(p, [{"t": 0.5, "invalid": "x: NaN"}])
     >>> open(p).read()
-    '{"t": 0.5, "invalid": "x: NaN"}\n'
+    '{"t": 0.5, "invalid": "x: NaN"}\\n'
     """
     import json
 
@@ -317,13 +330,13 @@ def summary_lines(summary: dict, records: list[dict]) -> list[str]:
     ...        "episode": 0}
     >>> first, event = summary_lines(summary, [rec])
     >>> first
-    '100 samples, 1 announcements (0 cleared), ... status: 90 ok, 0 cannot judge, 10 warmup'
+    '100 samples, 1 announcements (0 not seen any more), ... status: 90 ok, 0 cannot judge, 10 warmup'
     >>> event
     '  t = 0.500 s  sensor:speed  (31.5)  [episode 0]'
     """
     st = summary["status"]
     out = [f"{summary['samples']} samples, {summary['n_events']} announcements "
-           f"({summary['n_cleared']} cleared), {summary['invalid_samples']} invalid samples held, "
+           f"({summary['n_cleared']} {NOT_SEEN}), {summary['invalid_samples']} invalid samples held, "
            f"{summary['n_gaps']} gaps; status: " + ", ".join(f"{v} {k.replace('_', ' ')}"
                                                           for k, v in st.items())]
     for rec in records:
@@ -332,6 +345,6 @@ def summary_lines(summary: dict, records: list[dict]) -> list[str]:
                        f"t = {rec['t_start']:.3f} s: cannot judge, warm-up after it")
         elif "kind" in rec:
             size = "" if rec["size"] is None else f", size {rec['size']:.4g}"
-            what = "cleared" if rec["kind"] == "cleared" else f"({rec['value']:.4g}{size})"
+            what = NOT_SEEN if rec["kind"] == "cleared" else f"({rec['value']:.4g}{size})"
             out.append(f"  t = {rec['t']:.3f} s  {rec['hypothesis']}  {what}  [episode {rec['episode']}]")
     return out
