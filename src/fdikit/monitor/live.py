@@ -40,6 +40,22 @@ __all__ = ["EventLog", "LiveClock", "LiveMonitor"]
 _FOLLOW_KEYS = ("n", "lines", "t_last", "header", "time_first")
 
 
+def _cells(text: str, lineno: int, strip: bool = True) -> list[str]:
+    """The (stripped) cells of one CSV line; a line the csv module refuses is a DataError."""
+    try:
+        row = next(csv.reader([text]), [])
+        return [c.strip() for c in row] if strip else row
+    except csv.Error as exc:
+        raise DataError(f"follow mode: line {lineno} cannot be read as CSV ({exc})") from None
+
+
+def _digest(text: str) -> str:
+    """A short digest of an input line (its text without surrounding space)."""
+    import hashlib
+
+    return hashlib.sha1(text.strip().encode()).hexdigest()[:16]
+
+
 class LiveClock:
     """A live stream's time column, read by the batch readers' rule (:mod:`fdikit.io.timebase`):
     the unit of ``[log].time_unit``, an absolute clock rebased to its first timestamp, exactly.
@@ -264,6 +280,7 @@ class LiveMonitor:
         self.t_last: float | None = None   # latest time of a consumed input line
         self.header: list[str] | None = None
         self.time_first: str | None = None   # CSV: the first timestamp's text (the origin)
+        self.first: str | None = None        # digest of the first input line (a resume checks it)
         self._resumed: dict | None = None
         self.counts = {"announcements": 0, "cleared": 0, "invalid": 0, "gaps": 0}  # follow()'s records
         self._since = 0
@@ -281,7 +298,7 @@ class LiveMonitor:
         ['follow', 'gridder', 'monitor']
         """
         follow = {"n": self.samples, "lines": self.lines, "t_last": self.t_last, "header": self.header,
-                  "time_first": self.time_first}
+                  "time_first": self.time_first, "first": self.first}
         return {"monitor": self.monitor.state(), "follow": follow,
                 "gridder": None if self.gridder is None else self.gridder.state()}
 
@@ -320,9 +337,10 @@ class LiveMonitor:
         self.samples, self.lines, self.t_last = n, lines, f["t_last"]
         self.header = f.get("header")
         self.time_first = f.get("time_first")
+        self.first = f.get("first")
         if self.gridder is not None:
             self.gridder.restore(state["gridder"])
-        self._resumed = {"lines": self.lines, "t_last": self.t_last}
+        self._resumed = {"lines": self.lines, "t_last": self.t_last, "first": self.first}
 
     def save_checkpoint(self, path: str | os.PathLike, *, events_bytes: int = 0) -> None:
         """Write :meth:`state` to ``path`` atomically (:func:`fdikit.base.state.save_state`).
@@ -342,7 +360,7 @@ class LiveMonitor:
         st = self.state()
         f = st["follow"]
         st["follow"] = {"n": f["n"], "lines": f["lines"], "t_last": f["t_last"], "events_bytes": events_bytes,
-                        "header": f["header"], "time_first": f["time_first"]}
+                        "header": f["header"], "time_first": f["time_first"], "first": f["first"]}
         save_state(path, st, meta={"kind": "follow", "input": self.kind,
                                    "config": str(self.cfg.path.resolve())})
 
@@ -372,7 +390,7 @@ class LiveMonitor:
         return dict(state["follow"])
 
     # ------------------------------------------------------------------ the stream
-    def _skip(self, index: int, t: float | None) -> bool:
+    def _skip(self, index: int, t: float | None, text: str = "") -> bool:
         """Was input line ``index`` (0-based) consumed before the restored state?
 
         Yes while the line is among the first ``lines`` and not later than the last consumed
@@ -383,11 +401,17 @@ class LiveMonitor:
         if r is None:
             return False
         done = index < r["lines"] and (t is None or r["t_last"] is None or t <= r["t_last"])
+        if done and index == 0 and r.get("first") and _digest(text) != r["first"]:
+            raise DataError(f"--resume: the input's first line {text.strip()[:60]!r} is not the first line "
+                            "of the checkpointed run: a different log (replay the same input, or start "
+                            "without --resume)")
         if not done:
             self._resumed = None  # past the checkpoint: nothing more is skipped
         return done
 
-    def _consumed(self, index: int, t: float | None) -> None:
+    def _consumed(self, index: int, t: float | None, text: str = "") -> None:
+        if index == 0 and self._resumed is None:
+            self.first = _digest(text)
         self.lines = index + 1
         if t is not None and (self.t_last is None or t > self.t_last):
             self.t_last = t
@@ -559,14 +583,14 @@ class LiveMonitor:
             try:
                 frame = parse_candump_line(line, lineno)
             except DataError as exc:
-                if not self._skip(index, None):
+                if not self._skip(index, None, line):
                     yield {"line": lineno, "invalid": str(exc)}
-                    self._consumed(index, None)
+                    self._consumed(index, None, line)
                 continue
             t = None if frame is None else frame[0]
-            if self._skip(index, t):
+            if self._skip(index, t, line):
                 continue
-            self._consumed(index, t)
+            self._consumed(index, t, line)
             if frame is None:
                 continue
             t, bus, fid, data = frame
@@ -587,10 +611,10 @@ class LiveMonitor:
         lines = iter(stream)
         header = self.header
         first = next(lines, None)
-        if header is None or (first is not None and [h.strip() for h in next(csv.reader([first]))] == header):
+        if header is None or (first is not None and _cells(first, 1) == header):
             if first is None:
                 raise DataError("follow mode: no header line on the input")
-            header = [h.strip() for h in next(csv.reader([first]))]
+            header = _cells(first, 1)
             lines_iter = lines
         else:  # resumed on a stream that goes on without repeating its header
             lines_iter = itertools.chain([first], lines) if first is not None else lines
@@ -600,7 +624,13 @@ class LiveMonitor:
         it = header.index(tcol)
         for index, text in enumerate(lines_iter):
             lineno = index + 2
-            row = next(csv.reader([text]), [])
+            try:
+                row = _cells(text, lineno, strip=False)
+            except DataError as exc:  # e.g. a field longer than the CSV module's limit
+                if not self._skip(index, None, text):
+                    self._consumed(index, None, text)
+                    yield {"line": lineno, "invalid": str(exc)}
+                continue
             if not row:
                 continue
             t_row = None
@@ -611,9 +641,9 @@ class LiveMonitor:
                     t_row = None
                 if t_row is not None and not np.isfinite(t_row):
                     t_row = None
-            if self._skip(index, t_row):
+            if self._skip(index, t_row, text):
                 continue
-            self._consumed(index, t_row)
+            self._consumed(index, t_row, text)
             if len(row) != len(header):
                 yield {"line": lineno, "invalid": f"{len(row)} fields, expected {len(header)}"}
                 continue
