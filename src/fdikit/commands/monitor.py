@@ -21,6 +21,7 @@ import sys
 import time
 from pathlib import Path
 
+from ..base.outputs import io_error
 from ..errors import DataError
 from ._output import print_json
 
@@ -29,14 +30,16 @@ __all__ = ["register"]
 
 def _design(args) -> int:
     from ..monitor.config import load_config, run_design
-
-    t0 = time.perf_counter()
     from ..report.progress import progress_steps, progress_wanted
 
+    t0 = time.perf_counter()
     cfg = load_config(args.config)
     with progress_steps(progress_wanted(args.json), 1, "fdikit design") as steps:
         steps.step(f"recipe {cfg.design.get('recipe') or 'declarative [design]'}")
-        paths = run_design(cfg)
+        try:
+            paths = run_design(cfg)
+        except OSError as exc:  # a full disk: one message naming the artifacts' folder
+            raise io_error(exc.filename or cfg.artifacts, exc) from None
     out = {"config": str(cfg.path), "artifacts": {k: str(v) for k, v in paths.items()},
            "wall_seconds": round(time.perf_counter() - t0, 3)}
     if args.json:
@@ -72,8 +75,11 @@ def _batch(args, cfg) -> int:
         if args.plot:
             from ..report.figures import monitor_figure
 
-            summary["plot"] = monitor_figure(sig, res, args.plot, thresholds=monitor_thresholds(mon),
-                                             level=mon.decision.level if mon.decision else None)
+            try:
+                summary["plot"] = monitor_figure(sig, res, args.plot, thresholds=monitor_thresholds(mon),
+                                                 level=mon.decision.level if mon.decision else None)
+            except OSError as exc:
+                raise io_error(args.plot, exc) from None
     if args.json:
         print_json(summary)
     else:
