@@ -25,11 +25,13 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
+import fdikit
 from fdikit.errors import DataError
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLE = ROOT / "examples" / "two-mass" / "monitor.toml"
-ENV = {**os.environ, "PYTHONPATH": str(ROOT / "src")}
+# the subprocesses run the fdikit this test imports (a source tree on PYTHONPATH or the installed one)
+ENV = {**os.environ, "PYTHONPATH": str(Path(fdikit.__file__).resolve().parents[1])}
 
 
 def _log(path: Path, duration: float = 10.0, seed: int = 5) -> Path:
