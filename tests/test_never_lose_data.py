@@ -315,3 +315,14 @@ def test_outputs_refused_before_any_computation(setup, tmp_path, monkeypatch):
     monkeypatch.setattr(config, "build_monitor", boom)
     assert cli("monitor", setup / "log.csv", "--config", setup / "monitor.toml", "--events",
                setup / "log.csv") == 2
+
+
+def test_a_half_written_checkpoint_is_a_clear_error(setup, tmp_path):
+    from fdikit.monitor.live import LiveMonitor
+
+    ck = tmp_path / "ck.npz"
+    LiveMonitor(setup / "monitor.toml").follow(open(setup / "log.csv"), checkpoint=ck)
+    half = tmp_path / "half.npz"
+    half.write_bytes(ck.read_bytes()[: ck.stat().st_size // 3])
+    with pytest.raises(DataError, match="not a readable fdikit checkpoint"):
+        LiveMonitor(setup / "monitor.toml").load_checkpoint(half)

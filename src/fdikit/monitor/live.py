@@ -26,6 +26,7 @@ import fcntl
 import itertools
 import json
 import os
+import zipfile
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from typing import Any
@@ -379,7 +380,11 @@ class LiveMonitor:
         """
         from ..base.state import load_state
 
-        state, meta = load_state(path)
+        try:
+            state, meta = load_state(path)
+        except (zipfile.BadZipFile, EOFError, ValueError, KeyError) as exc:  # e.g. half written by hand
+            raise DataError(f"{path}: not a readable fdikit checkpoint (truncated or corrupt: {exc})"
+                            ) from None
         if meta.get("kind") != "follow" or meta.get("input") != self.kind:
             raise DataError(f"{path}: not a follow-mode checkpoint of {self.kind} input "
                             f"(kind {meta.get('kind')!r}, input {meta.get('input')!r})")
