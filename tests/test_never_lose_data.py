@@ -326,3 +326,24 @@ def test_a_half_written_checkpoint_is_a_clear_error(setup, tmp_path):
     half.write_bytes(ck.read_bytes()[: ck.stat().st_size // 3])
     with pytest.raises(DataError, match="not a readable fdikit checkpoint"):
         LiveMonitor(setup / "monitor.toml").load_checkpoint(half)
+
+
+@pytest.mark.parametrize("kind, word", [("gzip", "gzip-compressed"), ("xlsx", "ZIP archive"),
+                                        ("parquet", "Parquet file")])
+def test_a_binary_file_named_csv_says_what_it_is(setup, tmp_path, kind, word):
+    import gzip
+    import zipfile
+
+    from fdikit.io import read_csv
+
+    p = tmp_path / "log.csv"
+    text = (setup / "log.csv").read_bytes()
+    if kind == "gzip":
+        p.write_bytes(gzip.compress(text))
+    elif kind == "xlsx":
+        with zipfile.ZipFile(p, "w") as z:
+            z.writestr("xl/workbook.xml", "<workbook/>")
+    else:
+        pd.read_csv(setup / "log.csv").to_parquet(p)
+    with pytest.raises(DataError, match=word):
+        read_csv(p, time="time")
