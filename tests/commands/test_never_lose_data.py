@@ -28,7 +28,7 @@ import pytest
 import fdikit
 from fdikit.errors import DataError
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 EXAMPLE = ROOT / "examples" / "two-mass" / "monitor.toml"
 # the subprocesses run the fdikit this test imports (a source tree on PYTHONPATH or the installed one)
 ENV = {**os.environ, "PYTHONPATH": str(Path(fdikit.__file__).resolve().parents[1])}
