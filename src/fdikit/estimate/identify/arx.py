@@ -50,8 +50,9 @@ def arx_pooled(segs: list[Segment], lags: int, regularization: float = 0.0):
     segs : list of Segment
     lags : int
     regularization : float
-        Ridge weight ``lambda`` (relative to the mean diagonal of ``Phi' Phi``): the coefficients
-        minimise ``||Y - Phi Theta||^2 + lambda tr(Phi' Phi)/d ||Theta||^2``; 0 is least squares.
+        Ridge weight ``lambda`` on the standardised regressors: with ``s_j`` the root mean square of
+        regressor ``j``, the coefficients minimise ``||Y - Phi Theta||^2 + lambda N ||diag(s) Theta||^2``
+        (``N`` rows); 0 is least squares.
 
     Returns
     -------
@@ -63,9 +64,13 @@ def arx_pooled(segs: list[Segment], lags: int, regularization: float = 0.0):
     Phi = np.concatenate([_rows(s.u, s.y, L) for s in segs if s.n > L])
     Y = np.concatenate([s.y[L:] for s in segs if s.n > L])
     if regularization > 0:
-        G = Phi.T @ Phi
-        lam = regularization * np.trace(G) / G.shape[0]
-        Theta = np.linalg.solve(G + lam * np.eye(G.shape[0]), Phi.T @ Y)
+        # ridge on the standardised regressors (unit mean square), so the weight means the same for
+        # every channel whatever its unit
+        sc = np.sqrt(np.mean(Phi * Phi, axis=0))
+        sc = np.where(sc > 0, sc, 1.0)
+        Ps = Phi / sc
+        G = Ps.T @ Ps
+        Theta = np.linalg.solve(G + regularization * Ps.shape[0] * np.eye(G.shape[0]), Ps.T @ Y) / sc[:, None]
     else:
         Theta, *_ = np.linalg.lstsq(Phi, Y, rcond=None)            # (L p + L m, p)
     E = Y - Phi @ Theta

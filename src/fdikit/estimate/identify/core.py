@@ -28,6 +28,8 @@ __all__ = ["CRITERIA", "Identification", "identify"]
 
 #: Order-selection criteria of :func:`identify`.
 CRITERIA = ("bic", "aic", "prediction", "simulation")
+#: ARX ridge weights tried in turn by ``regularization="auto"``.
+RIDGE_GRID = (0.0, 1e-6, 1e-5, 1e-4, 1e-3, 1e-2, 1e-1, 1.0)
 
 
 @dataclass
@@ -135,6 +137,15 @@ def _lift(mod, sd, P, cov_perp):
     return (A, B, Ds @ P @ C, Ds @ P @ D, Q, Ds @ (P @ R @ P.T + cov_perp) @ Ds, S @ P.T @ Ds)
 
 
+def _free_run(A, B, C, D, val: list[Segment], Yv: np.ndarray, outputs: list[str]) -> dict[str, Any]:
+    """Held-out free-run simulation fit (initial state fitted per record)."""
+    with np.errstate(all="ignore"):
+        ys = [simulate_free(A, B, C, D, s.u, estimate_x0=s.y) for s in val]
+        fs = fit_percent(Yv, np.concatenate(ys))
+    return {"fit_free_run": dict(zip(outputs, fs.tolist())),
+            "mean_fit_free_run": float(np.mean(fs)) if np.all(np.isfinite(fs)) else -math.inf}
+
+
 def _loglik_terms(E: np.ndarray) -> float:
     """``N log det(E' E / N)`` of innovations E (N, p)."""
     N = E.shape[0]
@@ -153,7 +164,7 @@ def identify(
     criterion: str = "bic",
     block_rows: int | None = None,
     reduce_outputs: int | str | None = "auto",
-    regularization: float = 0.0,
+    regularization: float | str = "auto",
     validation: float = 0.3,
     held_out: Any = None,
     order_tol: float = 1.0,
@@ -187,8 +198,11 @@ def identify(
     reduce_outputs : int, "auto" or None
         N4SID on the ``k`` leading principal components of the (standardised) outputs; ``"auto"``
         does so only when the samples cannot support enough block rows for all outputs.
-    regularization : float
-        ARX ridge weight (relative to the mean diagonal of the normal equations); 0 = least squares.
+    regularization : float or "auto"
+        ARX ridge weight on the standardised regressors (0: least squares; see
+        :func:`~fdikit.estimate.identify.arx.arx_pooled`); ``"auto"``: least squares unless its model
+        is unstable beyond a marginal mode, else the smallest weight of ``RIDGE_GRID`` that is not
+        (``info["regularization"]``: lags -> weight used).
     validation : float
         Fraction at the end of every record held out for validation, in (0, 1).
     held_out : records, optional
@@ -313,13 +327,22 @@ def identify(
         cand = [int(order)] if order is not None else list(orders or range(1, 7))
         if any(n < 1 for n in cand):
             raise DataError(f"ARX lags must be >= 1, got {cand}")
+        ridge: dict[int, float] = {}
         for n in cand:
-            A, B, C, D, Q, R, S, K = arx_pooled(est, n, regularization)
+            grid = RIDGE_GRID if regularization == "auto" else [float(regularization)]
+            for lam in grid:
+                A, B, C, D, Q, R, S, K = arx_pooled(est, n, lam)
+                # collinear channels (many outputs, few samples) make least squares unstable:
+                # "auto" takes the smallest ridge weight whose model is stable up to a marginal mode
+                if np.all(np.isfinite(A)) and np.max(np.abs(np.linalg.eigvals(A))) <= 1.0 + marginal_tol:
+                    break
+            ridge[n] = lam
             models[n] = (A, B, C, D, Q, R, S, K, R, "arx")
-        info.update(lags=None, regularization=regularization)
+        info.update(lags=None, regularization=ridge)
     # ------------------------------------------------------------------ score every candidate
     tried: dict[int, dict[str, Any]] = {}
     Yv = np.concatenate([s.y for s in val])
+    warm = min(min(s.n for s in est) // 4, 2 * info.get("block_rows", max(models)) + 2)
     for n, (A, B, C, D, _q, _r, _s, K, _re, _how) in models.items():
         eig = np.linalg.eigvals(A) if A.size else np.zeros(0)
         rho = float(np.max(np.abs(eig))) if eig.size else 0.0
@@ -332,17 +355,17 @@ def identify(
         yp = [predict_one_step(A, B, C, D, K, s.u, s.y) for s in val]
         fit = fit_percent(Yv, np.concatenate(yp))
         per_rec = {int(s.record): dict(zip(outputs, fit_percent(s.y, yh).tolist())) for s, yh in zip(val, yp)}
-        with np.errstate(all="ignore"):
-            ys = [simulate_free(A, B, C, D, s.u, estimate_x0=s.y) for s in val]
-            fs = fit_percent(Yv, np.concatenate(ys))
-        E = np.concatenate([s.y - predict_one_step(A, B, C, D, K, s.u, s.y) for s in est])
+        # innovations on the estimation data from x0 = 0, past the predictor's start
+        E = np.concatenate([(s.y - predict_one_step(A, B, C, D, K, s.u, s.y, estimate_x0=False))[warm:]
+                            for s in est])
         npar = n * (2 * p + m) + p * m if method == "n4sid" else n * p * (p + m)
         ll = _loglik_terms(E)
         tried[n] = {"fit": dict(zip(outputs, fit.tolist())), "mean_fit": float(np.mean(fit)),
-                    "fit_per_record": per_rec, "fit_free_run": dict(zip(outputs, fs.tolist())),
-                    "mean_fit_free_run": float(np.mean(fs)) if np.all(np.isfinite(fs)) else -math.inf,
-                    "aic": ll + 2.0 * npar, "bic": ll + math.log(E.shape[0]) * npar, "parameters": npar,
-                    "spectral_radius": rho, "predictor_spectral_radius": rho_p}
+                    "fit_per_record": per_rec, "aic": ll + 2.0 * npar,
+                    "bic": ll + math.log(E.shape[0]) * npar, "parameters": npar, "spectral_radius": rho,
+                    "predictor_spectral_radius": rho_p}
+        if criterion == "simulation":
+            tried[n].update(_free_run(A, B, C, D, val, Yv, outputs))
     ok = {n: v for n, v in tried.items() if v["fit"] is not None}
     if not ok:
         raise DataError(f"every candidate model is unstable beyond a marginal mode (|pole| > 1 + "
@@ -356,6 +379,8 @@ def identify(
         best = max(scores.values())
         chosen = min(n for n, s in scores.items() if s >= best - order_tol)
     A, B, C, D, Q, R, S, K, Re, how = models[chosen]
+    if "fit_free_run" not in tried[chosen]:
+        tried[chosen].update(_free_run(A, B, C, D, val, Yv, outputs))
     eig = np.linalg.eigvals(A) if A.size else np.zeros(0)
     marginal = eig[np.abs(np.abs(eig) - 1.0) <= marginal_tol]
     info.update(order=chosen, orders_tried=tried, order_scores=scores, fit=tried[chosen]["fit"],

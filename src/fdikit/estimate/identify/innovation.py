@@ -78,10 +78,9 @@ def predict_one_step(A: Any, B: Any, C: Any, D: Any, K: Any, u: Any, y: Any, *,
         x = Ap @ x + Bp @ u[k] + K @ y[k]
     if estimate_x0 and n:
         O = np.empty((T, p, n))
-        M = np.eye(n)
-        for k in range(T):
-            O[k] = C @ M
-            M = Ap @ M
+        O[0] = C
+        for k in range(1, T):
+            O[k] = O[k - 1] @ Ap                                 # C (A - K C)^k
         x0 = np.linalg.lstsq(O.reshape(-1, n), (y - yh).ravel(), rcond=None)[0]
         yh = yh + O @ x0
     return yh
