@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 import scipy.linalg as sla
 
-from fdikit.estimate import identify, ljung_box
+from fdikit.estimate import identify
 
 TEP = Path("../shared/data/tep")
 
@@ -49,6 +49,8 @@ LB_LAGS, LB_LEVEL = 20, 0.01
 
 
 def test_three_records_give_the_innovation_model_and_a_white_kalman_residual():
+    from fdikit.estimate import ljung_box
+
     records = [_simulate(T, seed) for T, seed in ((700, 1), (1100, 2), (900, 3))]     # different lengths
     ident = identify(records, ["u"], ["y1", "y2"], orders=range(1, 7))
     n = ident.model.n_states
@@ -91,7 +93,10 @@ def test_an_integrator_is_identified_and_named(method):
     Bi = np.array([[0.0], [0.2]])
     Ci = np.eye(2)
     rec = _simulate(3000, 4, Ai, Bi, Ci, np.diag([1e-6, 1e-6]), np.diag([1e-4, 1e-4]))
-    ident = identify(rec, ["u"], ["h", "c"], method=method, dt=0.1, orders=[2] if method == "n4sid" else None)
+    from fdikit.signals import Signals
+
+    sig = Signals(np.arange(len(rec)) * 0.1, rec[None], ["u", "h", "c"])
+    ident = identify(sig, ["u"], ["h", "c"], method=method, orders=[2] if method == "n4sid" else None)
     poles = np.linalg.eigvals(ident.model.A)
     assert np.min(np.abs(poles - 1.0)) < 1e-2, poles
     assert ident.info["integrators"] >= 1 and "integrator" in ident.info["note"]
@@ -173,6 +178,8 @@ def test_toml_identify_design_runs_end_to_end(tmp_path):
     write("nominal_b.csv", sim(1200, 12))
     write("test_nominal.csv", sim(1500, 13))
     write("test_fault.csv", sim(1500, 14), fault_at=1000, bias=5.0)
+    ident_line = ('identify = { logs = ["nominal_a.csv", "$IDENT_TEST_DIR/nominal_b.csv"], inputs = ["u"], '
+                  'outputs = ["y1", "y2", "y3"], order = "auto", method = "n4sid" }')     # one line (TOML)
     (tmp_path / "monitor.toml").write_text(f"""
 [monitor]
 name = "identified plant"
@@ -191,7 +198,7 @@ time = "t"
 sample_time = {dt}
 
 [design.plant]
-identify = {{ logs = ["nominal_a.csv", "$IDENT_TEST_DIR/nominal_b.csv"], inputs = ["u"], outputs = ["y1", "y2", "y3"], order = "auto", method = "n4sid" }}
+{ident_line}
 
 [design.faults]
 names = ["sensor:y1", "sensor:y2", "sensor:y3"]
@@ -217,7 +224,8 @@ hold = 5
         for log in ("test_nominal.csv", "test_fault.csv"):
             buf = io.StringIO()
             with redirect_stdout(buf):
-                rc = main(["monitor", str(tmp_path / log), "--config", str(tmp_path / "monitor.toml"), "--json"])
+                rc = main(["monitor", str(tmp_path / log), "--config", str(tmp_path / "monitor.toml"),
+                           "--json"])
             assert rc == 0
             out[log] = json.loads(buf.getvalue().strip().splitlines()[-1])
     finally:

@@ -146,10 +146,11 @@ def _free_run(A, B, C, D, val: list[Segment], Yv: np.ndarray, outputs: list[str]
             "mean_fit_free_run": float(np.mean(fs)) if np.all(np.isfinite(fs)) else -math.inf}
 
 
-def _loglik_terms(E: np.ndarray) -> float:
-    """``N log det(E' E / N)`` of innovations E (N, p)."""
+def _loglik_terms(E: np.ndarray, yvar: np.ndarray) -> float:
+    """``N log det(E' E / N + 1e-10 diag(var y))`` of innovations E (N, p): the floor (far below any
+    measured noise) makes exact fits of noiseless data tie, so the penalty decides between them."""
     N = E.shape[0]
-    sign, logdet = np.linalg.slogdet(E.T @ E / N)
+    sign, logdet = np.linalg.slogdet(E.T @ E / N + np.diag(1e-10 * yvar))
     return float(N * logdet) if sign > 0 else -math.inf
 
 
@@ -242,9 +243,12 @@ def identify(
     >>> for k in range(1, 600):
     ...     y[k] = 0.9 * y[k - 1] + 0.5 * u[k - 1]
     >>> sig = Signals(np.arange(600) * 0.1, np.c_[u, y], ["u", "y"])
-    >>> model, info = identify(sig, ["u"], ["y"], method="arx")
+    >>> model, info = identify(sig, ["u"], ["y"], method="arx", criterion="prediction")
     >>> info["order"], info["fit"]["y"] > 99.0, model.dt
     (1, True, 0.1)
+    >>> ident = identify([sig, sig], ["u"], ["y"], method="arx", order=1)    # many records
+    >>> ident.K.shape, ident.info["records"]
+    ((2, 1), 2)
     """
     inputs, outputs = [str(s) for s in inputs], [str(s) for s in outputs]
     if method not in ("n4sid", "arx"):
@@ -342,6 +346,7 @@ def identify(
     # ------------------------------------------------------------------ score every candidate
     tried: dict[int, dict[str, Any]] = {}
     Yv = np.concatenate([s.y for s in val])
+    yvar = np.maximum(np.concatenate([s.y for s in est]).var(axis=0), 1e-300)
     warm = min(min(s.n for s in est) // 4, 2 * info.get("block_rows", max(models)) + 2)
     for n, (A, B, C, D, _q, _r, _s, K, _re, _how) in models.items():
         eig = np.linalg.eigvals(A) if A.size else np.zeros(0)
@@ -359,7 +364,7 @@ def identify(
         E = np.concatenate([(s.y - predict_one_step(A, B, C, D, K, s.u, s.y, estimate_x0=False))[warm:]
                             for s in est])
         npar = n * (2 * p + m) + p * m if method == "n4sid" else n * p * (p + m)
-        ll = _loglik_terms(E)
+        ll = _loglik_terms(E, yvar)
         tried[n] = {"fit": dict(zip(outputs, fit.tolist())), "mean_fit": float(np.mean(fit)),
                     "fit_per_record": per_rec, "aic": ll + 2.0 * npar,
                     "bic": ll + math.log(E.shape[0]) * npar, "parameters": npar, "spectral_radius": rho,

@@ -29,7 +29,7 @@ def kalman_gain(A: Any, C: Any, Q: Any, R: Any, S: Any) -> tuple[np.ndarray, np.
     --------
     >>> K, Re, how = kalman_gain([[0.9]], [[1.0]], [[1.0]], [[1.0]], [[0.0]])
     >>> round(float(K[0, 0]), 4), round(float(Re[0, 0]), 4), how
-    (0.5786, 2.5574, 'riccati')
+    (0.5377, 2.4839, 'riccati')
     """
     import scipy.linalg as sla
 
@@ -58,8 +58,8 @@ def predict_one_step(A: Any, B: Any, C: Any, D: Any, K: Any, u: Any, y: Any, *,
     Examples
     --------
     >>> import numpy as np
-    >>> y = np.array([[1.0], [2.0], [3.0]])
-    >>> predict_one_step([[1.0]], [[0.0]], [[1.0]], [[0.0]], [[1.0]], np.zeros((3, 0)), y,
+    >>> y = np.array([[1.0], [2.0], [3.0]])          # a random walk: the prediction is the last output
+    >>> predict_one_step([[1.0]], [[0.0]], [[1.0]], [[0.0]], [[1.0]], np.zeros((3, 1)), y,
     ...                  estimate_x0=False).ravel().tolist()
     [0.0, 1.0, 2.0]
     """
