@@ -587,7 +587,11 @@ def design_monitor(design: Mapping[str, Any], base_dir: str | Path = ".", *, whe
     for w in caught:
         warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
     raw = bank.design
-    groups = {name: bank.channels(name) for name in bank.residual_names}
+    # one feature (norm) per residual; a residual of one channel would give the feature its
+    # channel's name, and the monitor refuses two channels of one name: ":norm" then
+    chans_of = {name: bank.channels(name) for name in bank.residual_names}
+    taken = set(bank.design.residual_names)
+    groups = {(f"{name}:norm" if name in taken else name): ch for name, ch in chans_of.items()}
     # nominal operation: noise only (the residuals are decoupled from the known inputs)
     md = model.discretize(dt) if model.dt is None else model
     hours = 0.05 if nominal_hours is None else float(nominal_hours)
