@@ -97,7 +97,8 @@ def detect_format(path) -> str:
                     f"{head[:16]!r} are not BLF, Parquet, MDF, ULog, ROS bag, MCAP, ASC or candump")
 
 
-_FORMAT_OPTIONS = {"blf": (), "asc": ("strict", "encoding", "channel"), "candump": ("channel",),
+_FORMAT_OPTIONS = {"blf": ("plausibility",), "asc": ("strict", "encoding", "channel", "plausibility"),
+                   "candump": ("channel", "plausibility"),
                    "parquet": ("time", "source_units", "time_unit", "rebase"),
                    "csv": ("time", "source_units", "time_unit", "rebase"), "mdf": ("channel",),
                    "ulog": ("strict", "source_units", "max_age", "age"),
