@@ -200,6 +200,10 @@ def _cut_clock_gaps(out: LoadedSignals, t0: float, steps) -> LoadedSignals:
         if ": gap, no sample from " in why:
             in_gap[a:b, col[n]] = True
     dead = in_gap.all(axis=1)
+    if dead.any():  # with it the edge samples at which some channel is still in that gap
+        part = in_gap.any(axis=1)
+        run_id = np.cumsum(np.r_[True, part[1:] != part[:-1]])
+        dead = part & np.isin(run_id, np.unique(run_id[dead]))
     breaks = []
     grid = out.t
     d = np.diff(np.r_[0, dead.astype(np.int8), 0])
