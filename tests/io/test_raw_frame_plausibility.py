@@ -62,7 +62,8 @@ def spiked(msgs, tmp_path_factory):
     db = cantools.database.load_file(str(DBC), strict=False)
     kin = db.get_message_by_name("KINEMATICS")
     t_first = msgs[0].timestamp
-    k = next(i for i, m in enumerate(msgs) if m.arbitration_id == kin.frame_id and m.timestamp - t_first > 40.0)
+    k = next(i for i, m in enumerate(msgs)
+             if m.arbitration_id == kin.frame_id and m.timestamp - t_first > 40.0)
     vals = kin.decode(bytes(msgs[k].data), decode_choices=False)
     vals["YAW_RATE"] = 120.0
     data = kin.encode(vals, strict=False)
@@ -184,7 +185,7 @@ def _run(monitor, log):
 def test_the_monitor_announces_nothing_for_a_spike_frame_refused_before_resampling(spiked, monitor):
     from fdikit.io import read_log
 
-    path, t_spike = spiked
+    path, _t_spike = spiked
     res = _run(monitor, read_log(path, DBC, SIGNALS, rate=50.0, plausibility={YAW: {"spike": 8.0}}))
     assert res.events == []
     assert 1 <= len(res.invalid) <= 2

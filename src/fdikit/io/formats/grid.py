@@ -531,7 +531,8 @@ def _invalid_spans(name, t, fin, grid, ok, method, max_gap, period,
         for a, b in _runs(by_imp):
             lo, hi = grid[max(a - 1, 0)], grid[min(b, grid.size - 1)]
             sel = [w for w, x in zip(why, ti) if lo <= x <= hi] or why[:1]
-            out.append((name, a, b, f"{name}: interpolated from an implausible source sample ({'; '.join(sel)})"))
+            out.append((name, a, b,
+                        f"{name}: interpolated from an implausible source sample ({'; '.join(sel)})"))
     gap = bad & ~outside & ~touches & ~(_touches_bad(t, ~implausible[0], grid, method)
                                         if implausible is not None else False)
     for a, b in _runs(outside):

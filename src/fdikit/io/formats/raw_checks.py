@@ -148,14 +148,15 @@ def implausible_samples(t: np.ndarray, v: np.ndarray, rule: Any, resolution: flo
             m, s = _spike_scale(win, res)
             lim = k * s
             d_in, d_out = d[j - 1] - m, d[j] - m
-            spike = ((s > 0) & (np.abs(d_in) > lim) & (np.abs(d_out) > lim) & (np.sign(d_in) != np.sign(d_out))
+            spike = ((s > 0) & (np.abs(d_in) > lim) & (np.abs(d_out) > lim)
+                     & (np.sign(d_in) != np.sign(d_out))
                      & (np.abs(x[j + 1] - x[j - 1] - 2 * m) <= lim * np.sqrt(2.0)))
             for jj in np.flatnonzero(spike):
                 i = int(idx[j[jj]])
                 if i not in why:
                     why[i] = (f"{where} at {t[i]:.6g} s: {v[i]:g} is a single-sample spike, the increment "
-                              f"{d[j[jj] - 1]:.4g} lies {abs(d_in[jj]) / s[jj]:.3g} robust deviations from the "
-                              f"median of the last {W} (limit spike = {k:g}, plausibility on the source "
-                              "samples)")
+                              f"{d[j[jj] - 1]:.4g} lies {abs(d_in[jj]) / s[jj]:.3g} robust deviations "
+                              f"from the median of the last {W} (limit spike = {k:g}, plausibility on "
+                              "the source samples)")
                 bad[i] = True
     return bad, [why[i] for i in sorted(why)]
