@@ -112,3 +112,9 @@ def test_declarative_fallback_is_announced():
                                          r"nominal data \(20 runs.*Gaussian chi bound"):
         out = design_monitor(design, ex)
     assert out["_report"]["threshold_design"]["method"] == "gaussian chi bound"
+
+
+def test_gpd_method_per_unit_of_time():
+    x = _ar1(np.random.default_rng(5), (2, 30_000))
+    d = design_threshold(x, 100.0, per="minute", dt=0.01, method="gpd")    # failed on min_events = inf
+    assert d.method == "gpd" and d.ci[0] < d.ci[1] and "per minute" in d.note

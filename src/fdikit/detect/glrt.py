@@ -436,7 +436,7 @@ def _design_channel(m: np.ndarray, pfa: float, per, unit: float | None, dt: floa
     after the end of a record shorter than ``T``); ``lengths`` (runs,) the samples of each record."""
     from .tail import block_length, block_rate_ci
 
-    R, T = m.shape
+    R = m.shape[0]
     n = int(lengths.sum())
     out: dict = {"channel": name, "samples": n, "runs": R}
     if per == "run":
@@ -510,7 +510,8 @@ def _design_channel(m: np.ndarray, pfa: float, per, unit: float | None, dt: floa
             return out
     else:  # per unit of operating time: alarm onsets per `unit` seconds
         p = pfa * dt / unit  # onsets per sample
-        rate_unit, what = unit / dt, f"per {unit:g} s"
+        named = {v: k for k, v in TIME_UNITS.items()}.get(unit)
+        rate_unit, what = unit / dt, (f"per {named}" if named else f"per {unit:g} s")
         if pfa == 0:
             q = float(np.nextafter(m.max(), np.inf))
             out.update(threshold=_apply_margin(q, margin), achieved=0.0, method="max", ci=(0.0, 0.0),
@@ -546,9 +547,10 @@ def _design_channel(m: np.ndarray, pfa: float, per, unit: float | None, dt: floa
         # an exceedance episode), measured at the highest level with >= min_events onsets (episodes
         # shorten as the level rises, so the ratio nearest the target is the one to use)
         srt = np.sort(fin)[::-1]
-        levels = srt[: min(srt.size, int(max(50 * min_events, 1000)) * max(1, int(np.ceil(tau))))]
+        me = min_events if np.isfinite(min_events) else 10.0  # method="gpd": the default count
+        levels = srt[: min(srt.size, int(max(50 * me, 1000)) * max(1, int(np.ceil(tau))))]
         cnt = _onset_counts(m, levels)
-        hit = np.nonzero(cnt >= max(min_events, 1.0))[0]
+        hit = np.nonzero(cnt >= max(me, 1.0))[0]
         u0 = float(levels[hit[0]]) if hit.size else float(levels[-1])
         k_exc = max(int(np.sum(m > u0)), 1)
         ratio = float(_onset_counts(m, np.array([u0]))[0]) / k_exc
@@ -578,8 +580,8 @@ def _design_channel(m: np.ndarray, pfa: float, per, unit: float | None, dt: floa
                      f"(p_u = {fit['tail']['p_u']:.3g}, xi = {fit['tail']['xi']:.3g}, extrapolated "
                      f"{fit['tail']['extrapolation']:.3g}x)"
                      + ("" if per == "sample" else f", onsets per exceedance {ratio:.3g}")
-                     + f"; {100 * level:g} % interval of the rate at the threshold [{ci[0]:.3g}, {ci[1]:.3g}] "
-                       f"{what}"))
+                     + f"; {100 * level:g} % interval of the rate at the threshold "
+                       f"[{ci[0]:.3g}, {ci[1]:.3g}] {what}"))
     return out
 
 
@@ -826,7 +828,7 @@ def design_threshold(
     if pfa < 0 or not np.isfinite(pfa) or (kind != "time" and pfa >= 1):
         raise DataError(f"target false-alarm {'rate' if kind == 'time' else 'probability'} must be in "
                         f"[0, {'inf' if kind == 'time' else '1'}), got {pfa}")
-    if kind != "run" and g.shape[1] == 1 and g.shape[0] > 1 and not isinstance(nominal, _Signals | list | tuple):
+    if kind != "run" and g.shape[1] == 1 and g.shape[0] > 1 and not (pooled or isinstance(nominal, _Signals)):
         raise DataError(f"nominal array of shape {np.shape(nominal)} is {g.shape[0]} runs of ONE sample "
                         f"each, and a target per {per} is judged over time; for one record of one channel "
                         f"pass a 1-D array ({g.shape[0]},) or shape (1, {g.shape[0]}); for channels over "
@@ -857,7 +859,7 @@ def design_threshold(
                         "(a disconnected or saturated signal?) or leave it out")
     from numpy.lib.stride_tricks import sliding_window_view
 
-    R, T, C = g.shape
+    R, _, C = g.shape
     held = sliding_window_view(g, int(Z), axis=1).min(axis=3) if Z > 1 else g
     m = np.concatenate([np.full((R, int(Z) - 1, C), -np.inf), held], axis=1) if Z > 1 else g
     if pooled:  # after a record's end: never alarms (and no window reaches past it)
