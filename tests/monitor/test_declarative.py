@@ -105,10 +105,12 @@ def test_alarm_target_semantics():
     a = alarm_from_config({"alarm": {"pfa": 1e-3, "per": "hour", "hold": 5}})
     assert a == AlarmTarget(1e-3, "hour", None, 5)
     dt = 0.01
-    # per hour -> per sample: the probability of no alarm over an hour is (1 - p)^(3600 / dt)
-    assert (3600 / dt) * np.log1p(-a.per_sample(dt)) == pytest.approx(np.log1p(-1e-3), rel=1e-12)
+    # per hour: the expected number of false alarms (onsets) per hour, as in design_threshold
+    assert a.per_sample(dt) * 3600 / dt == pytest.approx(1e-3, rel=1e-12)
+    assert AlarmTarget(2.0, "hour").per_sample(dt) * 3600 / dt == pytest.approx(2.0, rel=1e-12)
     assert AlarmTarget(0.01, "sample").per_sample(dt) == pytest.approx(0.01)
     assert AlarmTarget(0.05, "run", 10.0).per_sample(dt) == pytest.approx(1 - 0.95 ** (1 / 1000))
-    for bad in ({"pfa": 0.0}, {"pfa": 2.0}, {"per": "day"}, {"per": "run"}, {"hold": 0}):
+    for bad in ({"pfa": 0.0}, {"pfa": float("inf")}, {"pfa": 2.0, "per": "sample"},
+                {"pfa": 1.0, "per": "sample"}, {"per": "day"}, {"per": "run"}, {"hold": 0}):
         with pytest.raises(DataError):
             alarm_from_config({"alarm": {"pfa": 1e-3, **bad}})

@@ -349,12 +349,13 @@ class _Refused(Exception):
 
 def _tail_fit(x: np.ndarray, p: float, n: int, n_eff: float, block: int, *, tail_events: float,
               max_extrapolation: float, n_boot: int, level: float, seed: int, onset_ratio: float = 1.0,
-              rate_unit: float = 1.0, what: str) -> dict:
+              rate_unit: float = 1.0, what: str, lengths: np.ndarray | None = None) -> dict:
     """GPD design of the level with marginal exceedance probability ``p / onset_ratio``.
 
     ``x`` (records, T) values (``-inf`` never exceeds), ``n`` the denominator (samples), ``n_eff``
-    the effective sample size, ``block`` the bootstrap block length. Raises ``_Refused`` with the
-    reason when the data cannot support the target.
+    the effective sample size, ``block`` the bootstrap block length, ``lengths`` (records,) the
+    samples of each record (default all ``T``; a shorter record is padded with ``-inf``). Raises
+    ``_Refused`` with the reason when the data cannot support the target.
     """
     from .tail import fit_gpd, fit_gpd_weighted, gpd_level, gpd_rate
 
@@ -384,12 +385,13 @@ def _tail_fit(x: np.ndarray, p: float, n: int, n_eff: float, block: int, *, tail
     q = gpd_level(u, pu_hat, xi, sig, pm)
     # block bootstrap of the fit: non-overlapping blocks within the records
     R, T = x.shape
+    L = np.full(R, T) if lengths is None else np.asarray(lengths)
     b = int(max(1, min(block, T)))
-    nbr = T // b  # blocks per record (the remainder joins the last block)
-    bid_t = np.minimum(np.arange(T) // b, nbr - 1)
-    bid = (np.arange(R)[:, None] * nbr + bid_t[None, :]).ravel()
-    nb = R * nbr
-    blen = np.bincount(bid, minlength=nb).astype(float)
+    nbr = np.maximum(L // b, 1)  # blocks per record (the remainder joins the last block)
+    bid_t = np.minimum(np.arange(T)[None, :] // b, (nbr - 1)[:, None])
+    bid = ((np.cumsum(nbr) - nbr)[:, None] + bid_t).ravel()  # never spans two records
+    nb = int(nbr.sum())
+    blen = np.bincount(bid[(np.arange(T)[None, :] < L[:, None]).ravel()], minlength=nb).astype(float)
     bcnt = np.bincount(bid[above], minlength=nb).astype(float)
     eb = bid[above]
     rng = np.random.default_rng(seed)
@@ -429,12 +431,13 @@ def _onsets(alarm: np.ndarray) -> np.ndarray:
 
 def _design_channel(m: np.ndarray, pfa: float, per, unit: float | None, dt: float | None, *, margin: float,
                     method: str, min_events: float, tail_events: float, max_extrapolation: float,
-                    level: float, n_boot: int, seed: int, name: str) -> dict:
-    """Design one channel. ``m`` (runs, T): the held statistic (-inf where no alarm is possible)."""
+                    level: float, n_boot: int, seed: int, name: str, lengths: np.ndarray) -> dict:
+    """Design one channel. ``m`` (runs, T): the held statistic (-inf where no alarm is possible and
+    after the end of a record shorter than ``T``); ``lengths`` (runs,) the samples of each record."""
     from .tail import block_length, block_rate_ci
 
-    R, T = m.shape
-    n = R * T
+    R = m.shape[0]
+    n = int(lengths.sum())
     out: dict = {"channel": name, "samples": n, "runs": R}
     if per == "run":
         crit = m.max(axis=1)
@@ -483,7 +486,7 @@ def _design_channel(m: np.ndarray, pfa: float, per, unit: float | None, dt: floa
         if pfa == 0:
             q = float(np.nextafter(m.max(), np.inf))
             out.update(threshold=_apply_margin(q, margin), achieved=0.0, method="max",
-                       ci=block_rate_ci(m > q, b, level=level, n_boot=n_boot, seed=seed),
+                       ci=block_rate_ci(m > q, b, level=level, n_boot=n_boot, seed=seed, lengths=lengths),
                        note=f"threshold above the largest of {n} nominal samples")
             return out
         if p * n >= np.isfinite(m).sum():
@@ -494,9 +497,9 @@ def _design_channel(m: np.ndarray, pfa: float, per, unit: float | None, dt: floa
                                f"target of {p:g} per sample: {events:.3g} effective false alarms, the "
                                f"empirical design needs >= {min_events:g}")
             q = _apply_margin(_upper_level(m.ravel(), p * n), margin)
-            ach = float(np.mean(m > q))
+            ach = float(np.count_nonzero(m > q) / n)
             out.update(threshold=q, achieved=ach, method="empirical",
-                       ci=block_rate_ci(m > q, b, level=level, n_boot=n_boot, seed=seed),
+                       ci=block_rate_ci(m > q, b, level=level, n_boot=n_boot, seed=seed, lengths=lengths),
                        note=(f"empirical quantile of {n} samples ({n_eff:.0f} effective, autocorrelation "
                              f"time {tau:.3g} samples, bootstrap blocks of {b})"))
             if events < 1:   # min_events = 0 below one expected alarm: the data show no rate this small
@@ -507,7 +510,8 @@ def _design_channel(m: np.ndarray, pfa: float, per, unit: float | None, dt: floa
             return out
     else:  # per unit of operating time: alarm onsets per `unit` seconds
         p = pfa * dt / unit  # onsets per sample
-        rate_unit, what = unit / dt, f"per {unit:g} s"
+        named = {v: k for k, v in TIME_UNITS.items()}.get(unit)
+        rate_unit, what = unit / dt, (f"per {named}" if named else f"per {unit:g} s")
         if pfa == 0:
             q = float(np.nextafter(m.max(), np.inf))
             out.update(threshold=_apply_margin(q, margin), achieved=0.0, method="max", ci=(0.0, 0.0),
@@ -519,7 +523,8 @@ def _design_channel(m: np.ndarray, pfa: float, per, unit: float | None, dt: floa
             if events < min_events:
                 raise _Refused(f"{n} samples ({n * dt / unit:.3g} units of {unit:g} s) for a target of "
                                f"{pfa:g} {what}: {events:.3g} expected false alarms, the empirical design "
-                               f"needs >= {min_events:g}")
+                               f"needs >= {min_events:g}, i.e. >= {min_events / p * dt / 3600:.3g} h of "
+                               f"nominal data (given: {n * dt / 3600:.3g} h)")
             levels = np.unique(fin)[::-1]  # descending
             cnt = _onset_counts(m, levels)
             env = np.maximum.accumulate(cnt)
@@ -527,7 +532,7 @@ def _design_channel(m: np.ndarray, pfa: float, per, unit: float | None, dt: floa
             q = float(levels[ok[-1]]) if ok.size else float(np.nextafter(levels[0], np.inf))
             q = _apply_margin(q, margin)
             on = _onsets(m > q)
-            lo, hi = block_rate_ci(on, b, level=level, n_boot=n_boot, seed=seed)
+            lo, hi = block_rate_ci(on, b, level=level, n_boot=n_boot, seed=seed, lengths=lengths)
             out.update(threshold=q, achieved=float(on.sum() / n * rate_unit), method="empirical",
                        ci=(lo * rate_unit, hi * rate_unit),
                        note=(f"empirical: {int(on.sum())} alarm onsets in {n * dt / unit:.3g} units of "
@@ -542,9 +547,10 @@ def _design_channel(m: np.ndarray, pfa: float, per, unit: float | None, dt: floa
         # an exceedance episode), measured at the highest level with >= min_events onsets (episodes
         # shorten as the level rises, so the ratio nearest the target is the one to use)
         srt = np.sort(fin)[::-1]
-        levels = srt[: min(srt.size, int(max(50 * min_events, 1000)) * max(1, int(np.ceil(tau))))]
+        me = min_events if np.isfinite(min_events) else 10.0  # method="gpd": the default count
+        levels = srt[: min(srt.size, int(max(50 * me, 1000)) * max(1, int(np.ceil(tau))))]
         cnt = _onset_counts(m, levels)
-        hit = np.nonzero(cnt >= max(min_events, 1.0))[0]
+        hit = np.nonzero(cnt >= max(me, 1.0))[0]
         u0 = float(levels[hit[0]]) if hit.size else float(levels[-1])
         k_exc = max(int(np.sum(m > u0)), 1)
         ratio = float(_onset_counts(m, np.array([u0]))[0]) / k_exc
@@ -552,13 +558,19 @@ def _design_channel(m: np.ndarray, pfa: float, per, unit: float | None, dt: floa
     try:
         fit = _tail_fit(m, p, n, n_eff, b, tail_events=tail_events, max_extrapolation=max_extrapolation,
                         n_boot=n_boot, level=level, seed=seed, onset_ratio=ratio, rate_unit=rate_unit,
-                        what=what)
+                        what=what, lengths=lengths)
     except _Refused as exc:
+        hours = ""
+        if per != "sample":  # the nominal operating time the target needs, from these data's tau
+            eff = max(10 * tail_events, tail_events * ratio / (p * max_extrapolation))
+            hours = (f"; a target of {pfa:g} {what} needs >= {eff * tau * dt / 3600:.3g} h of nominal data "
+                     f"like these for the GPD tail (>= {min_events / p * dt / 3600:.3g} h for the "
+                     f"empirical design), given {n * dt / 3600:.3g} h in {R} record(s)")
         raise _Refused(f"{n} samples ({n_eff:.0f} effective, autocorrelation time {tau:.3g} samples) for a "
-                       f"target of {pfa:g} {what}: {exc}") from None
+                       f"target of {pfa:g} {what}: {exc}{hours}") from None
     thr = _apply_margin(fit["threshold"], margin)
     if per == "sample":
-        ach = float(np.mean(m > thr))
+        ach = float(np.count_nonzero(m > thr) / n)
     else:
         ach = float(_onsets(m > thr).sum() / n * rate_unit)
     ci = (fit["ci"][0] * rate_unit, fit["ci"][1] * rate_unit)
@@ -567,8 +579,54 @@ def _design_channel(m: np.ndarray, pfa: float, per, unit: float | None, dt: floa
                      f"alarms < min_events = {min_events:g}): GPD tail above u = {fit['tail']['u']:.6g} "
                      f"(p_u = {fit['tail']['p_u']:.3g}, xi = {fit['tail']['xi']:.3g}, extrapolated "
                      f"{fit['tail']['extrapolation']:.3g}x)"
-                     + ("" if per == "sample" else f", onsets per exceedance {ratio:.3g}")))
+                     + ("" if per == "sample" else f", onsets per exceedance {ratio:.3g}")
+                     + f"; {100 * level:g} % interval of the rate at the threshold "
+                       f"[{ci[0]:.3g}, {ci[1]:.3g}] {what}"))
     return out
+
+
+def _pool_records(nominal: list | tuple, dt: float | None, channels) -> tuple:
+    """Records of different lengths, each (T_i,), (T_i, channels) or a Signals (each run a record),
+    padded with NaN to the longest: ``(g (R, T, C), lengths (R,), names, dt, single)``."""
+    from ..signals import Signals as _Signals
+
+    if not len(nominal):
+        raise DataError("nominal data: an empty list of records")
+    recs, names, dts = [], None, []
+    for i, x in enumerate(nominal):
+        if isinstance(x, _Signals):
+            if names is not None and list(x.names) != names:
+                raise DataError(f"record {i} has the channels {list(x.names)}, record 0 {names}")
+            names = list(x.names)
+            if x.n_samples > 1:
+                dts.append(float((x.t[-1] - x.t[0]) / (x.n_samples - 1)))
+            recs.extend(np.asarray(v, float) for v in x.values)
+            continue
+        if isinstance(x, _Signals | list | tuple) or np.ma.isMaskedArray(x):
+            raise DataError(f"record {i} is a {type(x).__name__}: each record is an array (T_i,) or "
+                            "(T_i, channels) or a Signals")
+        a = np.asarray(x, float)
+        if a.ndim not in (1, 2):
+            raise DataError(f"record {i} must be (T_i,) or (T_i, channels), got shape {a.shape}")
+        recs.append(a[:, None] if a.ndim == 1 else a)
+    single = all(not isinstance(x, _Signals) and np.ndim(x) == 1 for x in nominal)
+    C = {r.shape[1] for r in recs}
+    if len(C) != 1:
+        raise DataError(f"the records have different numbers of channels: {[r.shape[1] for r in recs]}")
+    C = C.pop()
+    if names is None:
+        names = [str(c) for c in channels] if channels is not None else [f"ch{i}" for i in range(C)]
+        if len(names) != C:
+            raise DataError(f"{len(names)} channel names for {C} channels")
+    if dts:
+        if max(dts) - min(dts) > 1e-6 * max(dts):
+            raise DataError(f"the records are sampled at different periods: {sorted(set(dts))} s")
+        dt = dts[0] if dt is None else dt
+    lengths = np.array([r.shape[0] for r in recs], np.int64)
+    g = np.full((len(recs), int(lengths.max()), C), np.nan)
+    for r, a in enumerate(recs):
+        g[r, : a.shape[0]] = a
+    return g, lengths, names, dt, single
 
 
 def design_threshold(
@@ -630,10 +688,15 @@ def design_threshold(
 
     Parameters
     ----------
-    nominal : Signals, or array (T,), (runs, T) or (runs, T, channels)
+    nominal : Signals, array (T,), (runs, T) or (runs, T, channels), or a list of records
         Nominal statistics or residuals. A 1-D array is ONE residual over time (one record, one
         channel); a 2-D array is runs of one channel; a 3-D array and a Signals give one threshold
-        per channel (Signals: named by its channels, ``dt`` from its time).
+        per channel (Signals: named by its channels, ``dt`` from its time). A list holds records
+        of different lengths, each (T_i,) (one channel), (T_i, channels) or a Signals (each of its
+        runs a record): they are pooled without bridging their boundaries (the hold never spans
+        two records, a record's first sample counts as after a quiet one, bootstrap blocks stay
+        inside a record, the samples and effective samples add up), so records of equal length
+        give the same design as the same records stacked as runs.
     pfa : float
         Target (``>= 0``; ``< 1`` for a probability). ``0`` puts the threshold above the largest
         nominal value (no rate is claimed).
@@ -718,7 +781,10 @@ def design_threshold(
     from ..signals import Signals as _Signals
 
     unit = None
-    if isinstance(nominal, _Signals):
+    lengths = None
+    if isinstance(nominal, list | tuple):
+        g, lengths, names, dt, single = _pool_records(nominal, dt, channels)
+    elif isinstance(nominal, _Signals):
         g = nominal.values
         names = list(nominal.names)
         if dt is None and nominal.n_samples > 1:
@@ -742,7 +808,11 @@ def design_threshold(
         names = [str(c) for c in channels] if channels is not None else [f"ch{i}" for i in range(g.shape[2])]
         if len(names) != g.shape[2]:
             raise DataError(f"{len(names)} channel names for {g.shape[2]} channels")
-    one_d = not isinstance(nominal, _Signals) and np.ndim(nominal) == 1
+    pooled = lengths is not None
+    one_d = not pooled and not isinstance(nominal, _Signals) and np.ndim(nominal) == 1
+    if lengths is None:
+        lengths = np.full(g.shape[0], g.shape[1], np.int64)
+    valid = np.arange(g.shape[1])[None, :] < lengths[:, None]  # (R, T): a record's own samples
     if isinstance(per, str) and per in TIME_UNITS:
         unit = TIME_UNITS[per]
     elif not isinstance(per, str):
@@ -758,7 +828,7 @@ def design_threshold(
     if pfa < 0 or not np.isfinite(pfa) or (kind != "time" and pfa >= 1):
         raise DataError(f"target false-alarm {'rate' if kind == 'time' else 'probability'} must be in "
                         f"[0, {'inf' if kind == 'time' else '1'}), got {pfa}")
-    if kind != "run" and g.shape[1] == 1 and g.shape[0] > 1 and not isinstance(nominal, _Signals):
+    if kind != "run" and g.shape[1] == 1 and g.shape[0] > 1 and not (pooled or isinstance(nominal, _Signals)):
         raise DataError(f"nominal array of shape {np.shape(nominal)} is {g.shape[0]} runs of ONE sample "
                         f"each, and a target per {per} is judged over time; for one record of one channel "
                         f"pass a 1-D array ({g.shape[0]},) or shape (1, {g.shape[0]}); for channels over "
@@ -767,10 +837,11 @@ def design_threshold(
         raise DataError(f"method must be 'auto', 'empirical' or 'gpd', got {method!r}")
     if int(Z) != Z or Z < 1:
         raise DataError(f"Z must be an integer >= 1, got {Z}")
-    if g.shape[1] < Z:
-        raise DataError(f"records of {g.shape[1]} samples are shorter than the hold Z = {Z}")
-    if not np.all(np.isfinite(g)):
-        run, k, c = np.argwhere(~np.isfinite(g))[0]
+    if lengths.min() < Z:
+        raise DataError(f"records of {lengths.min()} samples are shorter than the hold Z = {Z}"
+                        + (f" (record {int(np.argmin(lengths))})" if pooled else ""))
+    if not np.all(np.isfinite(g[valid])):
+        run, k, c = np.argwhere(~np.isfinite(g) & valid[:, :, None])[0]
         raise DataError(f"nominal statistic {names[c]!r} is not finite at run {run}, sample {k}")
     if one_d and kind == "run":
         raise DataError(f"a 1-D array is one residual over time (one record of {g.shape[1]} samples): a "
@@ -778,7 +849,7 @@ def design_threshold(
                         "with dt), or runs as a (runs, T) array")
     if absolute:
         g = np.abs(g)
-    flat = g.reshape(-1, g.shape[2])
+    flat = g[valid]  # (samples, C)
     const = np.nonzero(np.all(flat == flat[:1], axis=0))[0]
     if const.size:
         c = int(const[0])
@@ -788,9 +859,12 @@ def design_threshold(
                         "(a disconnected or saturated signal?) or leave it out")
     from numpy.lib.stride_tricks import sliding_window_view
 
-    R, T, C = g.shape
+    R, _, C = g.shape
     held = sliding_window_view(g, int(Z), axis=1).min(axis=3) if Z > 1 else g
     m = np.concatenate([np.full((R, int(Z) - 1, C), -np.inf), held], axis=1) if Z > 1 else g
+    if pooled:  # after a record's end: never alarms (and no window reaches past it)
+        m = np.where(valid[:, :, None], m, -np.inf)
+    n = int(lengths.sum())
     target = pfa / C if family_wise else pfa
     designs = []
     for c in range(C):
@@ -800,7 +874,7 @@ def design_threshold(
                 method="auto" if method == "gpd" else method,
                 min_events=np.inf if method == "gpd" else min_events, tail_events=tail_events,
                 max_extrapolation=max_extrapolation, level=confidence, n_boot=int(n_boot), seed=seed + c,
-                name=names[c]))
+                name=names[c], lengths=lengths))
         except _Refused as exc:
             raise DataError(f"channel {names[c]!r}: {exc}") from None
     thr = np.array([d["threshold"] for d in designs])
@@ -810,9 +884,9 @@ def design_threshold(
     if kind == "run":
         fam = float(np.mean(anyal.any(axis=1)))
     elif kind == "sample":
-        fam = float(np.mean(anyal))
+        fam = float(np.count_nonzero(anyal) / n)
     else:
-        fam = float(_onsets(anyal).sum() / (R * T) * unit / dt)
+        fam = float(_onsets(anyal).sum() / n * unit / dt)
 
     def col(key, default=None):
         v = [d.get(key, default) for d in designs]
@@ -823,7 +897,7 @@ def design_threshold(
         achieved_pfa=col("achieved"), achieved=col("achieved"),
         ci=np.array(designs[0]["ci"]) if single else np.array([d["ci"] for d in designs]),
         method=col("method"), note=col("note"), tail=col("tail"),
-        samples=R * T, runs=R, n_eff=col("n_eff"), tau=col("tau"), block_length=col("block_length"),
+        samples=n, runs=R, n_eff=col("n_eff"), tau=col("tau"), block_length=col("block_length"),
         target=target if single else [target] * C, pfa=float(pfa), per=per, unit=unit, dt=dt, Z=int(Z),
         absolute=bool(absolute), channels=names, family_wise=bool(family_wise), family_achieved=fam,
         confidence=float(confidence))

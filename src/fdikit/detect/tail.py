@@ -151,8 +151,11 @@ def _block_starts(lengths: np.ndarray, b: int) -> np.ndarray:
     return np.concatenate(starts) if starts else np.zeros(0, np.int64)
 
 
-def block_rate_ci(events, block: int, *, level: float = 0.95, n_boot: int = 400, seed: int = 0) -> tuple:
+def block_rate_ci(events, block: int, *, level: float = 0.95, n_boot: int = 400, seed: int = 0,
+                  lengths=None) -> tuple:
     """Moving-block bootstrap confidence interval of the rate (mean) of an event indicator.
+
+    Blocks never span two records.
 
     Parameters
     ----------
@@ -166,6 +169,9 @@ def block_rate_ci(events, block: int, *, level: float = 0.95, n_boot: int = 400,
         Bootstrap replicates.
     seed : int
         Seed of the resampling.
+    lengths : array (records,) of int, optional
+        Samples of each record when they differ (record ``r`` is ``events[r, :lengths[r]]``; the
+        rest is padding). Default: all ``T``.
 
     Returns
     -------
@@ -183,20 +189,26 @@ def block_rate_ci(events, block: int, *, level: float = 0.95, n_boot: int = 400,
     e = np.atleast_2d(np.asarray(events, bool))
     R, T = e.shape
     b = int(max(1, min(block, T)))
-    S = np.concatenate([np.r_[0, np.cumsum(r, dtype=np.int64)] for r in e])
-    lengths = np.full(R, T)
-    # cumulative sums per record with a leading 0: record r occupies S[r (T+1) : (r+1)(T+1)]
-    starts = _block_starts(lengths, b)
-    rec = starts // T
+    L = np.full(R, T) if lengths is None else np.asarray(lengths, np.int64)
+    S = np.concatenate([np.r_[0, np.cumsum(r[:n], dtype=np.int64)] for r, n in zip(e, L)])
+    # cumulative sums per record with a leading 0: record r occupies S[off_r + r : off_r + r + L_r + 1]
+    starts = _block_starts(L, b)
+    rec = np.searchsorted(np.cumsum(L), starts, side="right")  # the record of each block start
     sums = S[starts + rec + b] - S[starts + rec]
-    nb = max(1, round(R * T / b))
+    size = np.full(sums.size, b)
+    short = np.flatnonzero(L < b)  # a record shorter than a block is one block of its own length
+    if short.size:
+        ends = np.cumsum(L + 1) - 1
+        sums = np.concatenate([sums, S[ends[short]]])
+        size = np.concatenate([size, L[short]])
+    nb = max(1, round(int(L.sum()) / b))
     rng = np.random.default_rng(seed)
     est = np.empty(n_boot)
     chunk = max(1, 4_000_000 // nb)
     for i in range(0, n_boot, chunk):
         k = min(chunk, n_boot - i)
         pick = rng.integers(0, sums.size, size=(k, nb))
-        est[i : i + k] = sums[pick].sum(axis=1) / (nb * b)
+        est[i : i + k] = sums[pick].sum(axis=1) / (size[pick].sum(axis=1) if short.size else nb * b)
     a = (1 - level) / 2
     return float(np.quantile(est, a)), float(np.quantile(est, 1 - a))
 

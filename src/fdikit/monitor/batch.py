@@ -64,6 +64,22 @@ class _BatchPath:
         r = Signals(t, r.values, r.names, r.units, check=False)
         status = np.zeros((signals.runs, T), np.int8)
         n_w = min(self._warm_samples(dt), T) if (self.warmup and dt is not None) else 0
+        n_max = min(self._start_warm_samples(dt), T)
+        if n_max > 0:
+            # the default start-up warm-up: the filters' settling time, ended early once every alarm
+            # channel has stayed below its clear level for clear_after (as streaming does)
+            first = self._processors(Signals(t[:n_max], r.values[:, :n_max], r.names, check=False))
+            pool = self._decision_pool(Signals(t[:n_max], r.values[:, :n_max], r.names, check=False), first)
+            v = pool.values[:, :, pool.index(self.decision.alarm_channels)]
+            quiet = np.all(v < self.decision.low_level, axis=(0, 2))
+            n_clear = self.decision.clear_samples(dt)
+            run_len = np.zeros(n_max, np.int64)
+            c = 0
+            for k, q in enumerate(quiet):
+                c = c + 1 if q else 0
+                run_len[k] = c
+            done = np.flatnonzero(run_len >= n_clear)
+            n_w = int(done[0]) + 1 if done.size else n_max
         if n_w and self.processors:
             status[:, :n_w] = _WARM
             parts = [self._processors(Signals(t[a:b], r.values[:, a:b], r.names, check=False))

@@ -101,8 +101,12 @@ class Monitor(_BatchPath, _StreamingPath, _Checkpointing, _TimePolicy):
         A gap of step ``s`` stands for ``max(1, round(s / dt) - 1)`` missing samples.
     warmup : float, optional
         Warm-up length (s), counted in samples (``round(warmup / dt)``); given, it is fixed and
-        also applies at the start of a record; ``0``: no warm-up. Default (``None``): after a
-        gap or held samples only, at most the generators' settling time -- a ``settling_time``
+        also applies at the start of a record; ``0``: no warm-up. Default (``None``): at the start
+        of a record, when there is a decision, the settling time of the generators that tell it
+        (:meth:`start_warmup`; none for generators without one), ended early once every alarm
+        channel has stayed below its clear level for ``clear_after``, so the filters' start-up
+        transient announces nothing; after a gap or held samples, at most the generators' settling
+        time -- a ``settling_time``
         attribute, or for linear filters the 0.1 % settling time of the residual's free response
         ``C A^k`` (the residual transient of the stale state a gap leaves decays by a factor
         1000), at most :data:`MAX_DEFAULT_WARMUP` = 10 s, ``20 * dt`` for a generator that tells
@@ -126,12 +130,13 @@ class Monitor(_BatchPath, _StreamingPath, _Checkpointing, _TimePolicy):
     path steps such a sample as one period.
 
     **Warm-up.** At the first good sample after a gap or after held samples every component
-    with a ``resume(n_held)`` method is told, the status is ``"warmup"`` for the warm-up's
-    samples (components run, their state evolves, nothing is announced and no episode is
-    cleared), and before the first sample after it every processor is reset to its initial
-    state (posteriors back to the prior, windows and counters empty), so no statistic carries
-    the gap's transient. Generators keep their state: they were held, and re-converge during
-    the warm-up.
+    with a ``resume(n_held)`` method is told. Then, and at the start of a record (a given
+    ``warmup``, or by default with a decision the start-up warm-up above), the status is
+    ``"warmup"`` for the warm-up's samples (components run, their state evolves, nothing is
+    announced and no episode is cleared), and before the first sample after it every processor
+    is reset to its initial state (posteriors back to the prior, windows and counters empty), so
+    no statistic carries the start-up's or the gap's transient. Generators keep their state:
+    they were held (or start from their initial state), and converge during the warm-up.
 
     Batch (:meth:`run`) and streaming (:meth:`reset` / :meth:`step`) give identical outputs
     and events.

@@ -46,8 +46,8 @@ The ``[design]`` table of a monitor config (:mod:`fdikit.monitor.config`) may de
     # nominal_log = "nominal.csv"      # ... or estimated from a nominal log (see estimate_noise)
 
     [design.alarm]                     # the false-alarm target
-    pfa = 1e-3
-    per = "hour"                       # "sample", "run" or "hour"
+    pfa = 1e-3                         # per "hour": expected false alarms (onsets) per hour;
+    per = "hour"                       # per "sample" or "run": a probability in (0, 1)
     run_length = 60.0                  # s: the length of a "run" when per = "run"
     hold = 5                           # samples over the threshold before an alarm
 
@@ -463,18 +463,23 @@ def noise_from_config(design: Mapping[str, Any], model: LinearFaultModel, base_d
 
 @dataclass(frozen=True)
 class AlarmTarget:
-    """A false-alarm target with explicit semantics.
+    """A false-alarm target with explicit semantics, those of :func:`~fdikit.detect.design_threshold`.
 
-    ``pfa`` is the probability of at least one false alarm per ``per``: one ``"sample"``, one
-    ``"run"`` of ``run_length`` seconds, or one ``"hour"`` of operation; ``hold`` samples over the
+    Per ``"hour"``, ``pfa`` is the expected number of false alarms (alarm onsets: an episode
+    counts once) per hour of operation, any rate ``> 0`` (``1.0``: one an hour). Per ``"sample"``
+    it is the probability that a sample is alarmed, per ``"run"`` the probability of at least one
+    false alarm in a run of ``run_length`` seconds, both in (0, 1). ``hold`` samples over the
     threshold make an alarm. :meth:`per_sample` converts it, for a sample time ``dt``, to the
-    per-sample probability of a new alarm, ``1 - (1 - pfa)^(dt / T)``.
+    per-sample probability of a new alarm: ``pfa dt / 3600`` per hour, ``1 - (1 - pfa)^(dt / T)``
+    per run of ``T`` s.
 
     Examples
     --------
     >>> a = AlarmTarget(1e-3, "hour")
     >>> f"{a.per_sample(0.01):.3e}"
-    '2.779e-09'
+    '2.778e-09'
+    >>> AlarmTarget(1.0, "hour").per_sample(0.01) * 3600 / 0.01     # one expected alarm an hour
+    1.0
     """
 
     pfa: float
@@ -483,10 +488,14 @@ class AlarmTarget:
     hold: int = 1
 
     def __post_init__(self):
-        if not (0 < self.pfa < 1):
-            raise DataError(f"the false-alarm target pfa must lie in (0, 1), got {self.pfa}")
         if self.per not in ("sample", "run", "hour"):
             raise DataError(f"per must be 'sample', 'run' or 'hour', got {self.per!r}")
+        if self.per == "hour" and not (0 < self.pfa < math.inf):
+            raise DataError(f"the false-alarm target per hour is an expected number of false alarms "
+                            f"per hour of operation, > 0 and finite; got pfa = {self.pfa}")
+        if self.per != "hour" and not (0 < self.pfa < 1):
+            raise DataError(f"the false-alarm target per {self.per} is a probability: pfa must lie in "
+                            f"(0, 1), got {self.pfa}")
         if self.per == "run" and not (self.run_length and self.run_length > 0):
             raise DataError("a per-run target needs run_length (s) > 0")
         if int(self.hold) != self.hold or self.hold < 1:
@@ -497,15 +506,19 @@ class AlarmTarget:
         return {"sample": float(dt), "run": float(self.run_length or 0.0), "hour": 3600.0}[self.per]
 
     def per_sample(self, dt: float) -> float:
-        """The per-sample probability of a false alarm that meets the target."""
+        """The per-sample probability of a new false alarm that meets the target (per hour: the
+        expected onsets per sample, ``pfa dt / 3600``, at most 1)."""
         if not dt > 0:
             raise DataError(f"the sample time must be > 0, got {dt}")
+        if self.per == "hour":
+            return float(min(self.pfa * float(dt) / 3600.0, 1.0))
         n = self.span(dt) / float(dt)
         return float(-math.expm1(math.log1p(-self.pfa) / max(n, 1.0)))
 
 
 def alarm_from_config(design: Mapping[str, Any], *, where: str = "design") -> AlarmTarget:
-    """The :class:`AlarmTarget` of ``[design.alarm]`` (default: 1e-3 per hour, hold 5)."""
+    """The :class:`AlarmTarget` of ``[design.alarm]`` (default: 1e-3 expected false alarms per hour,
+    hold 5)."""
     spec = _check(design.get("alarm", {}), DESIGN_KEYS["alarm"], f"{where}.alarm")
     run_length = None if "run_length" not in spec else float(spec["run_length"])
     return AlarmTarget(float(spec.get("pfa", 1e-3)), str(spec.get("per", "hour")), run_length,
@@ -555,7 +568,8 @@ def design_monitor(design: Mapping[str, Any], base_dir: str | Path = ".", *, whe
        Gaussian bound instead: each feature is the norm of a whitened Gaussian residual of
        dimension ``k``, chi-distributed, and its ``1 - p`` quantile (``p`` the per-sample target,
        Bonferroni over the residuals) bounds the samples over the threshold, hence the alarms.
-       The report says which method set each threshold and why.
+       That fallback is announced with a :class:`UserWarning` naming the target, the data and
+       why, and the report says which method set each threshold and why.
     5. Isolation: :class:`fdikit.isolate.SignatureDecision` on the alarms with the bank's signature.
 
     Returns
@@ -641,6 +655,14 @@ def design_monitor(design: Mapping[str, Any], base_dir: str | Path = ".", *, whe
             dims.append(int(np.linalg.matrix_rank(W[np.ix_(ix, ix)])))
         thr = np.array([np.sqrt(chi2.isf(p_each, k)) for k in dims])
         td = {"method": "gaussian chi bound", "reason": str(exc), "per_sample_each": p_each, "dims": dims}
+        unit = {"hour": "expected false alarms per hour", "sample": "per sample"}.get(
+            alarm.per, f"per run of {alarm.run_length} s")
+        warnings.warn(f"design: the false-alarm target pfa = {alarm.pfa:g} {unit} (hold {alarm.hold}) "
+                      f"cannot be shown by the simulated nominal data ({runs} runs, "
+                      f"{runs * duration / 3600:.3g} h at dt = {dt:g} s): {exc}. Falling back to the "
+                      f"Gaussian chi bound: thresholds {np.round(thr, 4).tolist()} at a per-sample "
+                      f"probability {p_each:.3g} per residual (conservative; nominal_hours sets the "
+                      "simulated data)", UserWarning, stacklevel=2)
     hold = Hold(feats.output_names, thr if thr.size > 1 else float(thr[0]), Z=alarm.hold, absolute=True)
     sig = bank.signature
     iso = SignatureDecision(np.asarray(sig.matrix, int), list(sig.faults), hold.output_names)

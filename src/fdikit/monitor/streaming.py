@@ -55,10 +55,13 @@ class _StreamingPath:
         self._limit = self._gap_limit(dt)
         self._n_warm = self._warm_samples(dt)
         self._n_clear = self.decision.clear_samples(dt) if self.decision is not None else 1
-        # an explicit warm-up also covers the start of the record
-        start = self._n_warm if self.warmup else 0
+        # an explicit warm-up also covers the start of the record; by default, with a decision, the
+        # start-up transient of the filters is a warm-up too, ended early once every alarm channel
+        # has been quiet for clear_after
+        n_start = self._start_warm_samples(dt)
+        start = self._n_warm if self.warmup else n_start
         self._warm_left, self._reset_due = start, start > 0
-        self._warm_min, self._quiet = 0, -1  # -1: a fixed warm-up (no early end)
+        self._warm_min, self._quiet = 0, (0 if n_start else -1)  # -1: a fixed warm-up (no early end)
         if self._checker is not None:
             self._checker.dt = dt
 

@@ -1,5 +1,5 @@
-"""The Monitor's time policy: the sample period, regular steps and gaps, and the warm-up after
-a gap (its default from the generators' settling time)."""
+"""The Monitor's time policy: the sample period, regular steps and gaps, and the warm-up at the
+start and after a gap (its default from the generators' settling time)."""
 
 from __future__ import annotations
 
@@ -135,6 +135,24 @@ class _TimePolicy:
                                 f"resample the log onto a {dt:g} s grid ([log].rate = {1 / dt:g} Hz)")
         ks = np.flatnonzero(gap)
         return [(int(k) + 1, max(1, round(float(s[k]) / dt) - 1)) for k in ks]
+
+    def start_warmup(self, dt: float) -> float:
+        """The default warm-up (s) at the start of a record: the settling time of the generators
+        that tell it (a ``settling_time``, or a linear filter's), at most :data:`MAX_DEFAULT_WARMUP`;
+        0 when none does (a generator without state has no start-up transient)."""
+        key = ("start", dt)
+        if key not in self._settle:
+            cap = max(MAX_DEFAULT_WARMUP, 20 * dt)
+            vals = [v for v in (_settling_time(g, dt, cap) for g in self.generators) if v is not None]
+            self._settle[key] = float(min(max(vals, default=0.0), cap))
+        return self._settle[key]
+
+    def _start_warm_samples(self, dt: float | None) -> int:
+        """Samples of the default start-up warm-up: with ``warmup=None``, a decision (which could
+        announce the filters' start-up transient) and a known sample period; else 0."""
+        if self.warmup is not None or self.decision is None or dt is None:
+            return 0
+        return round(self.start_warmup(dt) / dt)
 
     def _warm_samples(self, dt: float) -> int:
         w = self.default_warmup(dt) if self.warmup is None else self.warmup

@@ -308,7 +308,7 @@ def series_to_grid(
     LoadedSignals
         One run, ``T`` samples; ``valid`` is ``False`` exactly where a value is NaN. A grid
         sample inside a gap (its neighbouring source samples more than ``max_gap`` periods
-        apart) is NaN and invalid, never held or bridged; :meth:`LoadedSignals.invalid_reasons`
+        apart) is NaN and invalid, never held or bridged; :meth:`LoadedSignals.invalid_reason`
         says why each invalid sample is invalid.
 
     Examples
