@@ -1,5 +1,5 @@
 """Residual processors: threshold rules, GLRT, directional GLRT, MHSSPT (also from labelled real data,
-pre-whitened), feature norms, sensor-fault detectors (stuck, drift, gain, intermittent:
+pre-whitened), feature norms, peer checks of redundant sensors (:mod:`.redundancy`), sensor-fault detectors (stuck, drift, gain, intermittent:
 :mod:`.sensor`), banks of tests designed together, and threshold design for a target per
 sample, per run or per hour (:mod:`.tail`: block bootstrap and GPD tails)."""
 
@@ -22,6 +22,7 @@ from .mhsspt import (
     final_diagnosis,
     floor_std,
 )
+from .redundancy import PeerCheck, design_peer_check
 from .sensor import (
     DriftDetector,
     GainDetector,
@@ -47,6 +48,7 @@ __all__ = [
     "IntermittentDetector",
     "LineMeanGaussian",
     "MHSSPTCalibration",
+    "PeerCheck",
     "StuckDetector",
     "TestBank",
     "TestSpec",
@@ -63,6 +65,7 @@ __all__ = [
     "design_gain",
     "design_intermittent",
     "design_mhsspt",
+    "design_peer_check",
     "design_stuck",
     "design_threshold",
     "detection_time",
