@@ -6,13 +6,14 @@ same quantity (the four wheel speeds; the yaw rate and the yaw rates that the ac
 steering model and the wheels say). Each member ``m`` of a group is compared with the mean of
 the other members and the group's reference signals, with an affine map fitted on nominal data::
 
-    e_m = x_m - (c_0 + c_1 mean_{j != m} x_j + sum_k d_k ref_k)
+    e_m = x_m - (c_0 + c_1 median_{j != m} x_j + sum_k d_k ref_k)
 
 The residual is low-passed (first order, ``band_hz``) and divided by its threshold, designed from
 the nominal residual (:func:`~fdikit.detect.design_threshold`); the member whose normalised
 residual is the largest of its group, and at least 1, is *isolated*. A fault of size ``f`` on one
-member moves its own residual by ``f`` and each peer's by about ``-f / (n - 1)``: the faulty member
-is the largest; no side is ever inferred from a sign.
+member moves its own residual by ``f``; the peers' references are medians (of at least 3 peers),
+which one faulty member does not move once it is outside their spread: the faulty member is the
+largest; no side is ever inferred from a sign.
 """
 
 from __future__ import annotations
@@ -37,7 +38,7 @@ class PeerCheck(ResidualProcessor):
     groups : mapping str -> sequence of str
         Group name -> its member channels (at least 2 each; a channel belongs to one group).
     coef : mapping str -> sequence of float
-        Member -> ``[c_0, c_1, d_1, ..., d_K]`` (offset, gain on the peers' mean, one per reference).
+        Member -> ``[c_0, c_1, d_1, ..., d_K]`` (offset, gain on the peers' median, one per reference).
     thresholds : mapping str -> float
         Member -> threshold of its low-passed residual (its unit), > 0.
     dt : float
@@ -52,7 +53,8 @@ class PeerCheck(ResidualProcessor):
         Samples at the start (and after :meth:`resume`) during which nothing is isolated.
 
     Outputs, per member ``m``: ``peer:m`` (|low-passed residual| / threshold), ``peer:m:r`` (the
-    low-passed residual, signed, in the member's unit), ``peer:m:x`` (the member's signal) and, for
+    low-passed residual, signed, in the member's unit), ``peer:m:ref`` (the reference the peers give,
+    ``x_m - e_m``: what a gain of the member scales), ``peer:m:e`` (the unfiltered residual) and, for
     announced members, ``peer:m:isolated`` (1 where ``m`` is its group's largest ``peer:m`` and
     that is >= 1, else 0).
 
@@ -61,7 +63,7 @@ class PeerCheck(ResidualProcessor):
     >>> pc = PeerCheck({"w": ["a", "b", "c"]}, {m: [0.0, 1.0] for m in "abc"}, {m: 0.1 for m in "abc"},
     ...                0.01, band_hz=1000.0)
     >>> pc.reset(1)
-    >>> out = pc.step([[1.0, 1.0, 1.6]])[0]        # c reads 0.6 high: e_c = 0.6, e_a = e_b = -0.3
+    >>> out = pc.step([[1.0, 1.0, 1.6]])[0]        # c reads 0.6 high: e_c = 0.6, e_a = e_b = -0.3 (median of 2 = mean)
     >>> [round(float(out[pc.output_names.index(f"peer:{m}:isolated")]), 1) for m in "abc"]
     [0.0, 0.0, 1.0]
     """
@@ -108,40 +110,37 @@ class PeerCheck(ResidualProcessor):
         refs = [r for g in self.groups for r in self.references[g] if r not in members]
         self.input_names = members + list(dict.fromkeys(refs))
         self.output_names = ([f"peer:{m}" for m in members] + [f"peer:{m}:r" for m in members]
-                             + [f"peer:{m}:x" for m in members] + [f"peer:{m}:isolated" for m in self.announce])
+                             + [f"peer:{m}:ref" for m in members] + [f"peer:{m}:e" for m in members]
+                             + [f"peer:{m}:isolated" for m in self.announce])
         self._build()
         self.reset(1)
 
     def _build(self) -> None:
-        """The residual as one linear map of the inputs: e = x W + c0 (W: (n_in, M))."""
+        """e = x[m] - c_1 median(x[peers]) - x[refs] d - c_0, per member."""
         ix = {n: i for i, n in enumerate(self.input_names)}
-        M = len(self.members)
-        W = np.zeros((len(self.input_names), M))
-        c0 = np.zeros(M)
-        alpha = np.zeros(M)
-        h = np.zeros(M)
-        for g, ms in self.groups.items():
-            a = 1.0 - np.exp(-2.0 * np.pi * self.band_hz[g] * self.dt)
-            for m in ms:
-                j = self.members.index(m)
-                c = self.coef[m]
-                W[ix[m], j] += 1.0
-                for p in ms:
-                    if p != m:
-                        W[ix[p], j] -= c[1] / (len(ms) - 1)
-                for r, d in zip(self.references[g], c[2:], strict=True):
-                    W[ix[r], j] -= d
-                c0[j] = -c[0]
-                alpha[j] = a
-                h[j] = self.thresholds[m]
-        self._W, self._c0, self._alpha, self._h = W, c0, alpha, h
+        self._self = np.array([ix[m] for m in self.members], np.int64)
+        self._peers = [np.array([ix[p] for p in ms if p != m], np.int64)
+                       for ms in self.groups.values() for m in ms]
+        self._refs = [np.array([ix[r] for r in self.references[g]], np.int64)
+                      for g, ms in self.groups.items() for _m in ms]
+        self._c = [np.asarray(self.coef[m], float) for m in self.members]
+        self._alpha = np.array([1.0 - np.exp(-2.0 * np.pi * self.band_hz[g] * self.dt)
+                                for g, ms in self.groups.items() for _m in ms])
+        self._h = np.array([self.thresholds[m] for m in self.members])
         self._gidx = [[self.members.index(m) for m in ms] for ms in self.groups.values()]
         self._ann = np.array([self.members.index(m) for m in self.announce], np.int64)
-        self._xidx = np.array([ix[m] for m in self.members], np.int64)
+        self._xidx = self._self
 
     def residuals(self, x: np.ndarray) -> np.ndarray:
         """The unfiltered residuals e (..., M) of inputs x (..., n_in)."""
-        return x @ self._W + self._c0
+        out = np.empty((*x.shape[:-1], len(self.members)))
+        for j in range(len(self.members)):
+            c = self._c[j]
+            e = x[..., self._self[j]] - c[0] - c[1] * np.median(x[..., self._peers[j]], axis=-1)
+            for r, d in zip(self._refs[j], c[2:], strict=True):
+                e = e - d * x[..., r]
+            out[..., j] = e
+        return out
 
     def reset(self, runs: int = 1) -> None:
         self._R = int(runs)
@@ -174,7 +173,7 @@ class PeerCheck(ResidualProcessor):
                 iso[np.arange(self._R), np.asarray(gi)[best]] = top >= 1.0
         else:
             stat = np.zeros_like(stat)
-        return np.concatenate([stat, self._z, r[:, self._xidx], iso[:, self._ann]], axis=1)
+        return np.concatenate([stat, self._z, r[:, self._xidx] - e, e, iso[:, self._ann]], axis=1)
 
     def __repr__(self) -> str:
         return (f"PeerCheck(groups={self.groups}, references={self.references}, band_hz={self.band_hz}, "
@@ -198,7 +197,7 @@ def design_peer_check(nominal: Signals, groups: Mapping[str, Sequence[str]], *,
                       margin: float = 0.0) -> PeerCheck:
     """A :class:`PeerCheck` fitted and thresholded on nominal (fault-free) data.
 
-    Each member's coefficients are the least-squares fit of the member on the mean of its peers,
+    Each member's coefficients are the least-squares fit of the member on the median of its peers,
     the references and a constant (samples from ``skip`` on); each threshold is the level of the
     member's low-passed nominal |residual| for ``pfa`` false alarms per ``per``
     (:func:`~fdikit.detect.design_threshold`; on a record too short for the target, the nominal
@@ -237,7 +236,7 @@ def design_peer_check(nominal: Signals, groups: Mapping[str, Sequence[str]], *,
     coef: dict[str, list[float]] = {}
     for g, ms in groups.items():
         for m in ms:
-            peers = np.mean([nominal[p][:, skip:] for p in ms if p != m], axis=0).ravel()
+            peers = np.median([nominal[p][:, skip:] for p in ms if p != m], axis=0).ravel()
             X = np.column_stack([np.ones_like(peers), peers]
                                 + [nominal[r][:, skip:].ravel() for r in refs[g]])
             c = np.linalg.lstsq(X, nominal[m][:, skip:].ravel(), rcond=None)[0]

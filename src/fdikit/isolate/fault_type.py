@@ -81,8 +81,9 @@ class FaultTypeClassifier(ResidualProcessor):
     channels : mapping, optional
         Templates of the input channels with ``{m}`` for the member: ``isolated`` (the isolation
         flag, default ``"peer:{m}:isolated"``), ``stat`` (the normalised residual, >= 1 is out,
-        ``"peer:{m}"``), ``r`` (the residual, ``"peer:{m}:r"``), ``x`` (the signal a gain scales,
-        ``"peer:{m}:x"``).
+        ``"peer:{m}"``), ``r`` (the residual, ``"peer:{m}:e"``), ``x`` (the signal a gain scales,
+        ``"peer:{m}:ref"``: the fault-free value the peers give, so that a gain ``g`` makes
+        ``r = (g - 1) x``).
     raw : mapping str -> str, optional
         Member -> channel of its raw signal for the stuck check (members without one have none).
     stuck_after : mapping str -> int, optional
@@ -133,7 +134,7 @@ class FaultTypeClassifier(ResidualProcessor):
         self.window, self.lookback, self.min_len = int(window), int(lookback), int(min_len)
         self.spike_max, self.burst_gap, self.clear_after = int(spike_max), int(burst_gap), int(clear_after)
         self.release, self.prefer = float(release), float(prefer)
-        ch = {"isolated": "peer:{m}:isolated", "stat": "peer:{m}", "r": "peer:{m}:r", "x": "peer:{m}:x"}
+        ch = {"isolated": "peer:{m}:isolated", "stat": "peer:{m}", "r": "peer:{m}:e", "x": "peer:{m}:ref"}
         ch.update(dict(channels or {}))
         self.channels = ch
         self.raw = {str(k): str(v) for k, v in (raw or {}).items()}

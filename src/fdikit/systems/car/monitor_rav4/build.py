@@ -24,6 +24,7 @@ from .filters import Rav4LateralFilter, _design_sets
 from .fit import _linear_model, _preprocessing
 from .injection import _inject_raw
 from .mhsspt import MHSSPT_TABLE, Rav4FeatureNorms, Rav4MHSSPT, real_densities
+from .peers import Rav4PeerSignals, design_peer_stages
 from .sensor_checks import design_sensor_detectors, fit_sensor_channels
 
 __all__ = ["CLEAR_AFTER", "Rav4Monitor", "decision_for", "design", "rav4_monitor"]
@@ -91,7 +92,7 @@ def rav4_monitor(path: str | None = None, *, rate: float = 50.0, q_weight: float
                  inflate: float = 2.5, hold: int = 10, tau: float = 0.0, n_speeds: int = 4,
                  band_hz: float = 3.0, h0_window: float = 0.2, warmup: float = 2.0,
                  level: float = 0.95, nuisance: tuple[str, ...] = (), settle: float = 0.04,
-                 sensor_checks: bool = True, sensor_warmup: float = 5.0) -> Rav4Monitor:
+                 sensor_checks: bool = True, sensor_warmup: float = 5.0, peer_checks: bool = True) -> Rav4Monitor:
     """Design and calibrate the RAV4 lateral monitor on the first half of the real minute.
 
     Parameters
@@ -134,6 +135,14 @@ def rav4_monitor(path: str | None = None, *, rate: float = 50.0, q_weight: float
     sensor_warmup : float
         Seconds at the start (and after a gap) during which the sensor detectors take nothing in
         (the low-pass transients of :class:`Rav4SensorChannels`; at least ``warmup``).
+    peer_checks : bool
+        With ``sensor_checks``: isolate the sensor by the generic peer checks of its redundant
+        group (:class:`~fdikit.detect.PeerCheck` on :class:`Rav4PeerSignals`: each wheel against
+        the other three; the yaw rate, the accelerometer and the steering against each other and
+        the wheels) and type its fault (:class:`~fdikit.isolate.FaultTypeClassifier`: bias, drift,
+        gain, stuck, intermittent, spike), announced ``"wheel_rr:gain"``, ``"yaw_rate:stuck"`` ...
+        (issue 27); of the issue-16 detectors only the steering stuck check stays (the others named
+        a wheel from a sign and called every yaw-rate fault a drift). False: the issue-16 detectors.
 
     Examples
     --------
@@ -192,6 +201,11 @@ def rav4_monitor(path: str | None = None, *, rate: float = 50.0, q_weight: float
         dets, sensor_names = design_sensor_detectors(
             chk.run(Signals(raw.t[cal_t], raw.values[:, cal_t], raw.names, check=False)), dt,
             skip=round(max(warmup, sensor_warmup) / dt), nominal_coef=chk.coef)
+        if peer_checks:
+            from ....detect import StuckDetector
+
+            dets = [d for d in dets if isinstance(d, StuckDetector)]
+            sensor_names = {k: v for k, v in sensor_names.items() if k in {n for d in dets for n in d.output_names}}
         sensor_hold = Hold([n for d in dets for n in d.output_names if n in sensor_names], 1.0,
                            Z=max(1, int(hold)), absolute=False)
         gens.append(chk)
@@ -199,6 +213,19 @@ def rav4_monitor(path: str | None = None, *, rate: float = 50.0, q_weight: float
         arts_extra = {"sensor_channels": chk, **{f"sensor_{i}": d for i, d in enumerate(dets)},
                       "sensor_hold": sensor_hold}
         rec["sensor_checks"] = {"coef": chk.coef, "detectors": [repr(d) for d in dets]}
+        if peer_checks:
+            psig = Rav4PeerSignals(pre, chk.coef["steer"], rec["k_f"], rec["k_r"])
+            sk = round(max(warmup, sensor_warmup) / dt)
+            pc, ftc, type_names = design_peer_stages(
+                psig.run(Signals(raw.t[cal_t], raw.values[:, cal_t], raw.names, check=False)), dt, skip=sk,
+                warmup=sk)
+            type_hold = Hold(list(type_names), 0.5, Z=max(1, int(hold)), absolute=False)
+            gens.append(psig)
+            procs.extend([pc, ftc, type_hold])
+            sensor_names.update(type_names)
+            arts_extra.update(peer_signals=psig, peer_check=pc, fault_type=ftc, type_hold=type_hold)
+            rec["peer_checks"] = {"thresholds": pc.thresholds, "coef": pc.coef, "sigma": ftc.sigma,
+                                  "stuck_after": ftc.stuck_after}
     dec = decision_for(faults, sensor_names)
     mon = Monitor(gens, procs, dec)
     rec["filter_methods"] = {f"set{s}/{t_}": d.info.get("method") for s, ds in designs.items()
