@@ -4,11 +4,14 @@ grows.
 
 Once a sensor is isolated (an isolation stage's flag, e.g. :class:`~fdikit.detect.PeerCheck`'s
 ``peer:m:isolated``) its fault is *active*; the type is decided at every sample over the window
-since the onset (``lookback`` samples before the first flag, at most ``window``):
+since the onset (from ``lookback`` samples before the first flag; the first ``window`` samples
+of it, so that evidence grows until then):
 
 * **stuck** -- the sensor's raw signal has not changed (zero increments) for longer than the
   longest frozen run of the nominal data (``stuck_after``); checked on every sensor that has it,
   isolated or not;
+* **gain** first when its GLR (below) beats the bias one by ``prefer`` (a gain's residual comes and
+  goes with the signal, which would else look like bursts);
 * **intermittent** -- at least two episodes of the normalised residual above 1 in the window,
   separated by ``burst_gap`` samples below ``release``; **spike** -- one episode no longer than
   ``spike_max`` samples, followed by ``burst_gap`` samples below ``release``;
@@ -177,10 +180,11 @@ class FaultTypeClassifier(ResidualProcessor):
         """After held samples: start again (the window would span the gap)."""
         self.reset(self._R)
 
-    def _segment(self, run: int, j: int, n: int) -> tuple[np.ndarray, np.ndarray]:
-        """The last n samples of run's member j, oldest first."""
+    def _segment(self, run: int, j: int, n: int, k0: int) -> tuple[np.ndarray, np.ndarray]:
+        """n samples of run's member j from sample k0 (still in the buffer), oldest first."""
         W = self.window
-        idx = (np.arange(self._k - n, self._k) % W)
+        k0 = max(k0, self._k - W)
+        idx = (np.arange(k0, k0 + n) % W)
         return self._rb[run, j, idx], self._xb[run, j, idx]
 
     def _classify(self, run: int, j: int) -> tuple[int, float]:
@@ -189,9 +193,12 @@ class FaultTypeClassifier(ResidualProcessor):
             z = float(self._zero[run, j])
             return _STUCK, z / (z + self._stuck[j])
         n = int(min(self.window, self._k - self._onset[run, j]))
-        r, x = self._segment(run, j, n)
-        s = self.sigma[m]
-        st = self._stat_seg(run, j, n)
+        r, x = self._segment(run, j, n, int(self._onset[run, j]))
+        S = _glr_scores(r, x, self.sigma[m], self.min_len)
+        e = np.exp(0.5 * (S - S.max()))
+        if S[2] > S[0] + self.prefer and S[2] >= S[1]:
+            return _GAIN, float(e[_GAIN] / e.sum())   # bursts in step with the signal: a gain
+        st = self._stat_seg(run, j, n, int(self._onset[run, j]))
         on = np.flatnonzero(st >= 1.0)
         if on.size:
             # episodes of the residual out, separated by at least burst_gap samples below release
@@ -203,15 +210,12 @@ class FaultTypeClassifier(ResidualProcessor):
             quiet_end = cq[-1] - cq[on[-1] + 1]
             if on[-1] - on[0] < self.spike_max and quiet_end >= self.burst_gap:
                 return _SPIKE, min(1.0, quiet_end / (2.0 * self.burst_gap))
-        S = _glr_scores(r, x, s, self.min_len)
-        best = _BIAS
-        if max(S[1], S[2]) > S[0] + self.prefer:
-            best = _DRIFT if S[1] >= S[2] else _GAIN
-        e = np.exp(0.5 * (S - S.max()))
+        best = _DRIFT if S[1] > S[0] + self.prefer else _BIAS
         return best, float(e[best] / e.sum())
 
-    def _stat_seg(self, run: int, j: int, n: int) -> np.ndarray:
-        idx = (np.arange(self._k - n, self._k) % self.window)
+    def _stat_seg(self, run: int, j: int, n: int, k0: int) -> np.ndarray:
+        k0 = max(k0, self._k - self.window)
+        idx = (np.arange(k0, k0 + n) % self.window)
         return self._sb[run, j, idx]
 
     def _step(self, v: np.ndarray) -> np.ndarray:
@@ -234,7 +238,6 @@ class FaultTypeClassifier(ResidualProcessor):
         stuck = (self._stuck > 0) & (self._zero >= self._stuck)
         start = ~self._active & ((iso >= 1.0) | stuck)
         self._onset = np.where(start, np.maximum(self._k - 1 - self.lookback, 0), self._onset)
-        self._onset = np.maximum(self._onset, self._k - self.window)
         self._active |= start
         self._below = np.where(self._active & (stat < self.release) & ~stuck, self._below + 1, 0)
         self._active &= self._below < self.clear_after

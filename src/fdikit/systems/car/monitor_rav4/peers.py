@@ -105,7 +105,7 @@ class Rav4PeerSignals(ResidualGenerator):
 
 
 def design_peer_stages(sig: Signals, dt: float, *, skip: int, warmup: int, band_hz=None, stuck_margin: float = 1.0,
-                       window_s: float = 10.0, lookback_s: float = 10.0, clear_after_s: float = 5.0,
+                       window_s: float = 30.0, lookback_s: float = 5.0, clear_after_s: float = 5.0,
                        pfa: float = 1.0, per="hour", margin: float = 0.0):
     """The peer check and the fault-type classifier designed on nominal :class:`Rav4PeerSignals`
     outputs ``sig`` (the calibration half).
