@@ -134,7 +134,8 @@ def test_wheel_gain_names_that_wheel(run, wheel, gain):
     assert res["false_announcements"] == []
 
 
-@pytest.mark.parametrize(("spec", "kind"), [("bias:YAW_RATE:2@40", "bias"), ("drift:YAW_RATE:0.2/s@40", "drift"),
+@pytest.mark.parametrize(("spec", "kind"), [("bias:YAW_RATE:2@40", "bias"),
+                                             ("drift:YAW_RATE:0.2/s@40", "drift"),
                                              ("gain:YAW_RATE:3@10", "gain"), ("stuck:YAW_RATE@40", "stuck")])
 def test_yaw_rate_fault_type(run, spec, kind):
     res = run(spec)

@@ -1,5 +1,6 @@
 """Residual processors: threshold rules, GLRT, directional GLRT, MHSSPT (also from labelled real data,
-pre-whitened), feature norms, peer checks of redundant sensors (:mod:`.redundancy`), sensor-fault detectors (stuck, drift, gain, intermittent:
+pre-whitened), feature norms, peer checks of redundant sensors (:mod:`.redundancy`),
+sensor-fault detectors (stuck, drift, gain, intermittent:
 :mod:`.sensor`), banks of tests designed together, and threshold design for a target per
 sample, per run or per hour (:mod:`.tail`: block bootstrap and GPD tails)."""
 

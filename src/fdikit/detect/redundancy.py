@@ -63,7 +63,7 @@ class PeerCheck(ResidualProcessor):
     >>> pc = PeerCheck({"w": ["a", "b", "c"]}, {m: [0.0, 1.0] for m in "abc"}, {m: 0.1 for m in "abc"},
     ...                0.01, band_hz=1000.0)
     >>> pc.reset(1)
-    >>> out = pc.step([[1.0, 1.0, 1.6]])[0]        # c reads 0.6 high: e_c = 0.6, e_a = e_b = -0.3 (median of 2 = mean)
+    >>> out = pc.step([[1.0, 1.0, 1.6]])[0]        # c reads 0.6 high: e_c = 0.6, e_a = e_b = -0.3
     >>> [round(float(out[pc.output_names.index(f"peer:{m}:isolated")]), 1) for m in "abc"]
     [0.0, 0.0, 1.0]
     """

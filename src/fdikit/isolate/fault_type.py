@@ -118,7 +118,8 @@ class FaultTypeClassifier(ResidualProcessor):
     1.0
     """
 
-    _state_attrs = ("_rb", "_xb", "_sb", "_k", "_active", "_onset", "_type", "_conf", "_below", "_zero", "_last")
+    _state_attrs = ("_rb", "_xb", "_sb", "_k", "_active", "_onset", "_type", "_conf", "_below", "_zero",
+                    "_last")
 
     def __init__(self, members: Sequence[str], sigma: Mapping[str, float], window: int, *,
                  channels: Mapping[str, str] | None = None, raw: Mapping[str, str] | None = None,
