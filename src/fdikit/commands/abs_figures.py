@@ -1,405 +1,60 @@
-"""``fdikit abs figure N --plot FILE``: the figures of luo-et-al, one command each.
-
-=======  =============================================================================  ==========
-figure   what                                                                           cost
-=======  =============================================================================  ==========
-3        an ABS stop: speeds, wheel slip, brake torque, pressures (also ``abs simulate``)  < 1 s
-7        GLRT of the observer residual r3 (G_O1): nominal, R_w -2 % (F2.1), sensor -2 %   a few s
-         (F1.1), with the designed threshold
-8        the same for r4 (G_O2)                                                          a few s
-9        GLRT of r3 with a tau_m fault (F5 +30 %) against nominal                          a few s
-10       histogram of the detection time of G_P1 for F1.2 and F2.2                       ~10 s
-15       contour of the Pd of G_P1 for F1.2 and F2.2 over SNR and GLRT window (gp1_grid)  ~30 s
-16       contour of the Pd of the SVM tests S_Kf and S_Iw over SNR and fault size        ~1 min
-=======  =============================================================================  ==========
-
-Every figure has units on its axes (dimensionless statistics say so: ``(–)``) and marks its
-events (brake applied, ABS engaged, the threshold). Sizes (``--runs``, ``--design-runs``,
-``--per-size``) default to a few minutes at most on 2 cores; the paper's sizes are larger.
-``--json`` prints the numbers behind the figure.
-"""
+"""``fdikit abs figure N --plot FILE``: the figures of luo-et-al, one command each; the figures are
+:mod:`fdikit.systems.abs.figures`."""
 
 from __future__ import annotations
 
 import argparse
 import time
-from typing import Any
-
-import numpy as np
+from typing import TYPE_CHECKING
 
 from ..errors import DataError
 
+if TYPE_CHECKING:
+    from ..systems.abs.figures import FIGURES, abs_stop_figure, abs_stop_panels
+
 __all__ = ["FIGURES", "abs_stop_figure", "abs_stop_panels", "add_figure_parser"]
 
-
-def abs_stop_panels(res) -> tuple[np.ndarray, list[dict], list[tuple[float, str]]]:
-    """The panels of luo-et-al Fig. 3 for the first run of an ABS simulation (``keep_states=True``):
-    ``(t, panels, events)`` with speeds (m/s), wheel slip (–, the desired slip 0.2 as a threshold),
-    brake torque (N·m) and pressures (MPa), and the brake application, ABS engagement, ABS off and
-    stop as events. The panels are dicts that both :func:`fdikit.report.figures.panel_figure` (a
-    matplotlib figure) and :func:`fdikit.report.stacked_time_figure` (an HTML report) read."""
-    from ..systems.abs.plant import slip
-
-    x = res.x.values[0]
-    t = res.x.t
-    R_w = float(np.broadcast_to(res.params["R_w"], (res.y.runs,))[0])
-    sc = res.scenario
-    ev = res.events
-    events = [(float(sc.t_brake), "brake applied")]
-    for key, label in (("t_abs_on", "ABS engaged"), ("t_abs_off", "ABS off"), ("t_stop", "stopped")):
-        v = float(np.asarray(ev.get(key, [np.nan]))[0]) if key in ev else np.nan
-        if np.isfinite(v):
-            events.append((v, label))
-    panels = [
-        {
-            "title": "speeds",
-            "ylabel": "speed",
-            "unit": "m/s",
-            "traces": [("vehicle speed", x[:, 1] * R_w), ("wheel speed (x R_w)", x[:, 0] * R_w)],
-        },
-        {
-            "title": "wheel slip",
-            "ylabel": "slip",
-            "unit": "–",
-            "ylim": (-0.05, 1.05),
-            "range": (-0.05, 1.05),
-            "thresholds": [("desired slip 0.2", 0.2)],
-            "traces": [("slip", slip(x[:, 0], x[:, 1]))],
-            "legend": False,
-        },
-        {
-            "title": "brake torque",
-            "ylabel": "brake torque",
-            "unit": "N·m",
-            "traces": [("T_b", x[:, 2])],
-            "legend": False,
-        },
-        {
-            "title": "pressures",
-            "ylabel": "pressure",
-            "unit": "MPa",
-            "traces": [("wheel cylinder P_s", x[:, 4]), ("master cylinder P_m", x[:, 5])],
-        },
-    ]
-    return t, panels, events
-
-
-def abs_stop_figure(res, path: str | None = None):
-    """luo-et-al Fig. 3 for the first run of an ABS simulation (``keep_states=True``): speeds,
-    slip, brake torque and pressures, with the brake application, the ABS engagement and the
-    stop marked. Returns the saved path (or the figure when ``path`` is None)."""
-    from ..report.figures import panel_figure, save
-
-    t, panels, events = abs_stop_panels(res)
-    sc = res.scenario
-    fig = panel_figure(
-        t,
-        panels,
-        title=f"ABS stop, fault {sc.fault} (magnitude {res.magnitudes[0]:+.3f}) (luo-et-al Fig. 3)",
-        events=events,
-        panel_size=(7.0, 2.0),
-    )
-    return fig if path is None else save(fig, path)
-
-
-# ----------------------------------------------------------------------------------- figures
-def _fig3(args, steps) -> tuple[Any, dict]:
-    from ..systems.abs.plant import Scenario, simulate, summarize
-
-    steps.step("simulate one stop")
-    res = simulate(
-        None, Scenario(fault=args.fault or "F0", snr_db=args.snr), runs=1, seed=args.seed, keep_states=True
-    )
-    return abs_stop_figure(res), summarize(res)
-
-
-def _bank(args, steps):
-    from ..systems.abs.campaign import design_tests, paper_tests
-
-    steps.step(f"design the tests on {args.design_runs} nominal stops")
-    return design_tests(
-        paper_tests(), design_runs=args.design_runs, snr_db=args.snr, seed=args.seed, pfa=0.0, margin=0.1
-    )
-
-
-def _glrt_runs(args, bank, cases, test: str):
-    from ..systems.abs.campaign import abs_residuals
-    from ..systems.abs.plant import Scenario, simulate
-
-    spec = next(s for s in bank.specs if s.name == test)
-    out = []
-    for i, (label, fault, mag) in enumerate(cases):
-        res = simulate(
-            None, Scenario(fault=fault, magnitude=mag, snr_db=args.snr), runs=1, seed=args.seed + 1 + i
-        )
-        st = bank.statistic(abs_residuals(res.y.concat_channels(res.u)), spec)
-        t_on = float(np.asarray(res.events["t_abs_on"])[0])
-        out.append((label, st.t, st.values[0, :, 0], t_on))
-    return spec, out
-
-
-def _glrt_figure(args, steps, residual: str, test: str, cases, fig_no: int):
-    from ..report.figures import panel_figure
-
-    bank = _bank(args, steps)
-    steps.step(f"simulate {len(cases)} stops and run {test}")
-    spec, runs = _glrt_runs(args, bank, cases, test)
-    thr = float(bank.thresholds[test])
-    panels = []
-    data = {"test": test, "residual": residual, "W": spec.W, "Z": spec.Z, "threshold": thr, "runs": {}}
-    for label, t, g, t_on in runs:
-        panels.append(
-            {
-                "title": f"{label}",
-                "ylabel": f"GLRT of {residual}",
-                "unit": "–",
-                "thresholds": [(f"threshold {thr:.3g}", thr)],
-                "traces": [(label, g)],
-                "legend": False,
-                "log": bool(np.nanmax(g) > 50 * thr),
-            }
-        )
-        above = np.flatnonzero(g > thr)
-        data["runs"][label] = {
-            "max": float(np.nanmax(g)),
-            "first_above_threshold_s": float(t[above[0]]) if above.size else None,
-            "abs_engaged_s": t_on,
-        }
-    t = runs[0][1]
-    events = [(0.5, "brake applied")] + ([(runs[0][3], "ABS engaged")] if np.isfinite(runs[0][3]) else [])
-    fig = panel_figure(
-        t,
-        panels,
-        title=f"luo-et-al Fig. {fig_no}: GLRT {test} of residual {residual} (W = {spec.W}, {args.snr} dB)",
-        events=events,
-        panel_size=(7.0, 1.9),
-    )
-    return fig, data
-
-
-def _fig7(args, steps):
-    cases = [
-        ("nominal (F0)", "F0", None),
-        ("R_w -2 % (F2.1)", "F2.1", -0.02),
-        ("wheel-speed sensor -2 % (F1.1)", "F1.1", -0.02),
-    ]
-    return _glrt_figure(args, steps, "r3", "G_O1", cases, 7)
-
-
-def _fig8(args, steps):
-    cases = [
-        ("nominal (F0)", "F0", None),
-        ("R_w -2 % (F2.1)", "F2.1", -0.02),
-        ("wheel-speed sensor -2 % (F1.1)", "F1.1", -0.02),
-    ]
-    return _glrt_figure(args, steps, "r4", "G_O2", cases, 8)
-
-
-def _fig9(args, steps):
-    cases = [("nominal (F0)", "F0", None), ("tau_m +30 % (F5)", "F5", 0.30)]
-    return _glrt_figure(args, steps, "r3", "G_O1", cases, 9)
-
-
-def _fig10(args, steps):
-    from ..report.figures import _plt
-    from ..systems.abs.campaign import abs_residuals
-    from ..systems.abs.plant import Scenario, simulate
-
-    bank = _bank(args, steps)
-    j = bank.names.index("G_P1")
-    times = {}
-    for i, c in enumerate(("F1.2", "F2.2")):
-        steps.step(f"simulate {args.runs} stops of {c}")
-        res = simulate(None, Scenario(fault=c, snr_db=args.snr), runs=args.runs, seed=args.seed + 100 + i)
-        _, first = bank.alarms(abs_residuals(res.y.concat_channels(res.u)))
-        times[c] = first[:, j]
-    plt = _plt()
-    fig, ax = plt.subplots(1, 2, figsize=(10, 3.8), sharey=True, layout="constrained")
-    edges = np.arange(0.0, 12.75, 0.25)
-    data: dict[str, Any] = {
-        "test": "G_P1",
-        "threshold": float(bank.thresholds["G_P1"]),
-        "edges": edges.tolist(),
-    }
-    for a, (c, v) in zip(ax, times.items()):
-        fin = v[np.isfinite(v)]
-        counts, _ = np.histogram(fin, bins=edges)
-        a.bar(edges[:-1], counts, width=0.25, align="edge", color="0.4")
-        a.axvline(0.5, color="tab:red", ls=":", lw=1)
-        a.annotate(
-            "brake applied",
-            (0.5, 1.0),
-            xycoords=("data", "axes fraction"),
-            xytext=(2, -2),
-            textcoords="offset points",
-            fontsize=7,
-            color="tab:red",
-            va="top",
-        )
-        pd7 = float(np.mean(v <= 7.0))
-        a.set_title(f"{c}: Pd within 7 s = {pd7:.3f} ({args.runs} runs)", fontsize=9)
-        a.set_xlabel("detection time (s)")
-        data[c] = {
-            "counts": counts.tolist(),
-            "pd_within_7s": pd7,
-            "detected": int(fin.size),
-            "runs": int(v.size),
-        }
-    ax[0].set_ylabel("runs (count)")
-    fig.suptitle(f"luo-et-al Fig. 10: detection time of G_P1 ({args.snr} dB)", fontsize=10)
-    return fig, data
-
-
-def _contour(ax, x, y, z, xlabel, ylabel, title):
-    cs = ax.contourf(x, y, z, levels=np.linspace(0, 1, 11), cmap="viridis", vmin=0, vmax=1)
-    ax.contour(x, y, z, levels=[0.5, 0.9, 0.99], colors="w", linewidths=0.8)
-    ax.set_xlabel(xlabel)
-    ax.set_ylabel(ylabel)
-    ax.set_title(title, fontsize=9)
-    return cs
-
-
-#: Fig. 15 grid. The paper sweeps the process-noise SNR over 17, 20 and 23 dB and the GLRT window
-#: over Table III's W = 30, 40, 50 (our text copy of the paper has no image of the contour). In this
-#: plant G_P1 detects both faults within 7 s in every run over all of that grid (measured with the
-#: previous grid: Pd = 1.000 in all 9 cells, 200 runs per class, F1.2 and F2.2 sizes drawn per run,
-#: pfa 1e-3), so that figure showed no contour: our parity residual r1 is much less noisy than the
-#: paper's (nominal variance 0.18 (rad/s^2)^2 at 23 dB against Table III's 1.26e3), and the region
-#: where Pd goes from low to 1 lies at lower SNRs. The grid therefore adds 0, 3, 6 and 10 dB to the
-#: paper's three levels, and W = 10 and 20 to its three windows. Measured with the defaults (``fdikit
-#: abs figure 15``: 200 runs per class and cell, 300 design runs, seed 0; 16-23 s on 2 cores): Pd of F1.2
-#: rises from 0.12-0.28 at 0 dB to >= 0.985 from 6 dB on, Pd of F2.2 from 0.04-0.08 at 0 dB to >= 0.97
-#: from 10 dB on (Pd = 1 in the paper's cells; paper at 23 dB, W = 50: 0.994 and 0.979, Fig. 10).
-#: Along W it rises from W = 10 to W = 30 (F1.2 at 3 dB: 0.60 -> 0.83; F2.2 at 6 dB: 0.38 -> 0.69) and
-#: is flat or slightly lower beyond (F2.2 at 6 dB: 0.61 at W = 40, 0.55 at W = 50): the threshold
-#: designed for the same false-alarm rate grows faster than W there (threshold / W at 6 dB: 2.08 at
-#: W = 30, 2.44 at W = 50), as r1's nominal noise is not white (lag-50 autocorrelation about 0.06 at
-#: 23 dB) and has a deterministic transient at the brake application (about 1 rad/s^2 at 1-1.5 s),
-#: which a longer window does not average out. So the paper's "as the window sizes increase and noise
-#: level decrease, the detection probability increases" holds here for the noise everywhere and for
-#: the window up to W = 30; between W = 30 and 50 it is flat within the Monte Carlo error at 200 runs
-#: (about 0.03) or, at the steepest SNR, drops by up to 0.14. ``tests/test_fig15.py`` checks the trend.
-FIG15_SNRS = (0.0, 3.0, 6.0, 10.0, 17.0, 20.0, 23.0)
-FIG15_WINDOWS = (10, 20, 30, 40, 50)
-#: Fault sizes of Fig. 15: the paper does not print them for Fig. 15; its Fig. 5 shows G_P1 for a 5 %
-#: wheel-speed decrease (F1.2's lower bound in Table II) and a 25 % R_w decrease (F2.2), and Fig. 10's
-#: Monte Carlo uses the 25 % R_w fault. We use these two sizes, so that each cell is one fault size
-#: (not a mixture drawn inside the class, as ``gp1_grid`` does without ``magnitudes``).
-FIG15_MAGNITUDES = {"F1.2": -0.05, "F2.2": -0.25}
-#: Detection horizon (s, Fig. 10's "maximum detection delay of 7 s") and per-run false-alarm
-#: probability of each designed threshold (the paper designs for zero false alarms in 5000 runs;
-#: with a few hundred design runs 1e-3 is the nearest measurable target).
-FIG15_T_DETECT, FIG15_PFA = 7.0, 1e-3
-
-
-def _fig15(args, steps):
-    from ..report.figures import _plt
-    from ..systems.abs.campaign import gp1_grid
-
-    snrs, windows = FIG15_SNRS, FIG15_WINDOWS
-    steps.step(f"G_P1 grid: {len(snrs)} SNRs x {len(windows)} windows, {args.runs} runs per class")
-    g = gp1_grid(
-        snrs,
-        windows,
-        runs=args.runs,
-        design_runs=args.design_runs,
-        seed=args.seed,
-        pfa=FIG15_PFA,
-        t_detect=FIG15_T_DETECT,
-        magnitudes=FIG15_MAGNITUDES,
-    )
-    plt = _plt()
-    fig, ax = plt.subplots(1, 2, figsize=(11, 4.4), layout="constrained")
-    for a, c in zip(ax, ("F1.2", "F2.2")):
-        z = np.asarray(g["pd"][c])
-        what = {"F1.2": "wheel-speed sensor", "F2.2": "R_w"}[c]
-        cs = _contour(
-            a,
-            windows,
-            snrs,
-            z,
-            "GLRT window W (samples)",
-            "process-noise SNR (dB)",
-            f"Pd of G_P1 within {FIG15_T_DETECT:g} s, {c} ({what} {100 * FIG15_MAGNITUDES[c]:+g} %)",
-        )
-        for i, snr in enumerate(snrs):  # the measured Pd of every cell (edge cells written inside)
-            for j, w in enumerate(windows):
-                ha = "left" if j == 0 else "right" if j == len(windows) - 1 else "center"
-                va = "bottom" if i == 0 else "top" if i == len(snrs) - 1 else "center"
-                a.text(
-                    w, snr, f" {z[i, j]:.2f} ", ha=ha, va=va, fontsize=7, color="k" if z[i, j] > 0.6 else "w"
-                )
-        # the paper's grid (W 30-50, 17-23 dB)
-        a.add_patch(plt.Rectangle((30, 17), 20, 6, fill=False, ls="--", lw=1.2, ec="tab:red"))
-        a.text(40, 18.5, "paper's grid", ha="center", va="center", fontsize=7, color="tab:red")
-        a.set_yticks(list(snrs))
-        a.set_xticks(list(windows))
-    cb = fig.colorbar(cs, ax=list(ax))
-    cb.set_label("detection probability Pd (–)")
-    fig.suptitle(
-        f"luo-et-al Fig. 15 ({args.runs} runs per class and cell; thresholds for a false-alarm probability "
-        f"{FIG15_PFA:g} per run from {args.design_runs} nominal stops; max Pf {np.max(g['pf']):.3f})",
-        fontsize=10,
-    )
-    return fig, g
-
-
-def _fig16(args, steps):
-    from ..isolate import SVMIsolator
-    from ..report.figures import _plt
-    from ..systems.abs.svm import SIZES, abs_patterns, abs_pipeline
-
-    snrs = (17.0, 20.0, 23.0)
-    mags = sorted({abs(m) for m in SIZES})
-    pd = {"S_Kf": np.zeros((len(snrs), len(mags))), "S_Iw": np.zeros((len(snrs), len(mags)))}
-    for i, snr in enumerate(snrs):
-        steps.step(f"SVM at {snr} dB: {args.per_size * 36} training and as many test patterns")
-        Xtr, ztr, _ = abs_patterns(args.per_size, args.seed + 1, snr_db=snr)
-        Xte, zte, mte = abs_patterns(args.per_size, args.seed + 2, snr_db=snr)
-        pred = SVMIsolator(abs_pipeline("paper")).fit(Xtr, ztr).predict(Xte)
-        for j, m in enumerate(mags):
-            sel = np.isclose(np.abs(mte), m)
-            for test, lab in (("S_Kf", "K_f"), ("S_Iw", "I_w")):
-                k = sel & (zte == lab)
-                pd[test][i, j] = float(np.mean(pred[k] == lab)) if k.any() else np.nan
-    plt = _plt()
-    fig, ax = plt.subplots(1, 2, figsize=(10, 4), layout="constrained")
-    x = [100 * m for m in mags]
-    for a, test in zip(ax, ("S_Kf", "S_Iw")):
-        cs = _contour(a, x, snrs, pd[test], "fault size |change| (%)", "SNR (dB)", f"Pd of {test}")
-    cb = fig.colorbar(cs, ax=list(ax))
-    cb.set_label("detection probability Pd (–)")
-    fig.suptitle(f"luo-et-al Fig. 16 ({args.per_size} patterns per size and fault)", fontsize=10)
-    return fig, {"snr_db": list(snrs), "size_pct": x, "pd": {k: v.tolist() for k, v in pd.items()}}
-
-
-#: figure number -> (function, number of progress steps, one-line description)
-FIGURES = {
-    3: (_fig3, 1, "an ABS stop: speeds, slip, brake torque, pressures"),
-    7: (_fig7, 2, "GLRT of r3 (G_O1): nominal, R_w -2 %, sensor -2 %"),
-    8: (_fig8, 2, "GLRT of r4 (G_O2): nominal, R_w -2 %, sensor -2 %"),
-    9: (_fig9, 2, "GLRT of r3 with a tau_m fault"),
-    10: (_fig10, 3, "histogram of the detection time of G_P1 for F1.2 and F2.2"),
-    15: (_fig15, 1, "Pd of G_P1 over SNR and GLRT window (contour)"),
-    16: (_fig16, 3, "Pd of S_Kf and S_Iw over SNR and fault size (contour)"),
+#: The figures the command offers, for its help (the same lines as the descriptions in
+#: :data:`fdikit.systems.abs.figures.FIGURES`, here so that building the parser imports no system).
+_FIGURE_HELP = {
+    3: "an ABS stop: speeds, slip, brake torque, pressures",
+    7: "GLRT of r3 (G_O1): nominal, R_w -2 %, sensor -2 %",
+    8: "GLRT of r4 (G_O2): nominal, R_w -2 %, sensor -2 %",
+    9: "GLRT of r3 with a tau_m fault",
+    10: "histogram of the detection time of G_P1 for F1.2 and F2.2",
+    15: "Pd of G_P1 over SNR and GLRT window (contour)",
+    16: "Pd of S_Kf and S_Iw over SNR and fault size (contour)",
 }
+
+#: Names that moved to :mod:`fdikit.systems.abs.figures`, still importable from here (lazily).
+_MOVED = ("FIGURES", "FIG15_MAGNITUDES", "FIG15_PFA", "FIG15_SNRS", "FIG15_T_DETECT", "FIG15_WINDOWS",
+          "abs_stop_figure", "abs_stop_panels")
+
+
+def __getattr__(name: str):
+    if name in _MOVED:
+        from ..systems.abs import figures
+
+        return getattr(figures, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def _cmd(args) -> int:
     from ..report.figures import save
     from ..report.progress import progress_steps, progress_wanted
+    from ..systems.abs.figures import FIGURES, luo_figure
     from ._output import check_output_paths, print_json
 
-    if args.number not in FIGURES:
-        raise DataError(f"luo-et-al figure {args.number} is not reproduced; figures: {sorted(FIGURES)}")
+    if args.number not in _FIGURE_HELP:
+        raise DataError(f"luo-et-al figure {args.number} is not reproduced; figures: {sorted(_FIGURE_HELP)}")
     check_output_paths(args, "plot", "report")
     for k in ("runs", "design_runs", "per_size"):
         if getattr(args, k) < 1:
             raise DataError(f"--{k.replace('_', '-')} must be >= 1, got {getattr(args, k)}")
-    func, n, what = FIGURES[args.number]
     t0 = time.perf_counter()
-    with progress_steps(progress_wanted(args.json), n, f"luo-et-al Fig. {args.number}") as steps:
-        fig, data = func(args, steps)
+    with progress_steps(progress_wanted(args.json), FIGURES[args.number][1],
+                        f"luo-et-al Fig. {args.number}") as steps:
+        fig, data, what = luo_figure(args.number, args, steps)
     out = {
         "figure": args.number,
         "what": what,
@@ -421,11 +76,11 @@ def add_figure_parser(abs_actions) -> argparse.ArgumentParser:
         "figure",
         help="reproduce a figure of luo-et-al (3, 7, 8, 9, 10, 15, 16)",
         description="Reproduce one figure of luo-et-al and write it to an image file:\n"
-        + "\n".join(f"  {k:>2}  {v[2]}" for k, v in FIGURES.items())
+        + "\n".join(f"  {k:>2}  {v}" for k, v in _FIGURE_HELP.items())
         + "\n--json prints one JSON object with the numbers behind the figure.",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("number", type=int, help=f"figure number: {', '.join(map(str, FIGURES))}")
+    p.add_argument("number", type=int, help=f"figure number: {', '.join(map(str, _FIGURE_HELP))}")
     p.add_argument(
         "--plot",
         required=True,

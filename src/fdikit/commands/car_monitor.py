@@ -5,12 +5,10 @@
   monitor, summarise: detection time, isolated fault, peak probability of every hypothesis, false
   announcements); ``--plot`` draws paper Figs. 4-7, ``--report`` writes the HTML report;
 * ``fdikit car monitor-log PATH --inject SPEC [--json] [--plot FILE] [--report FILE.html]``: the lateral
-  monitor designed for the RAV4 (:mod:`fdikit.systems.car.monitor_rav4`) on the real minute in PATH with
-  faults of any type injected into the real signals (SPEC :data:`INJECT_HELP`:
-  ``stuck:STEER_ANGLE_SENSOR@15``, ``drift:YAW_RATE:0.02/s@10`` (deg/s per s),
-  ``gain:WHEEL_SPEED_FL:1.01@20``,
-  ``bias:ACCEL_Y:1.0@25``, ``intermittent:WHEEL_SPEED_RL:1.0@12``, ``yaw_rate:0.03@40`` = a bias of 0.03 rad/s
-  on the internal yaw-rate channel; comma-separated for several; ``none`` for the unaltered log).
+  RAV4 monitor on the real minute in PATH with faults injected into the real signals (SPEC
+  :data:`INJECT_HELP`, e.g. ``stuck:STEER_ANGLE_SENSOR@15``; ``none`` for the unaltered log).
+
+The runs, figures and reports are :mod:`fdikit.systems.car.runs` and :mod:`~fdikit.systems.car.monitor_rav4`.
 """
 
 from __future__ import annotations
@@ -32,7 +30,6 @@ INJECT_HELP = (
     "drift:YAW_RATE:0.02/s@10, gain:WHEEL_SPEED_FL:1.01@20, bias:ACCEL_Y:1.0@25, "
     "intermittent:WHEEL_SPEED_RL:1.0@12;period=2;duty=0.25, yaw_rate:0.03@40 (a 0.03 rad/s bias). "
     "'none' (default) runs the unaltered log")
-
 
 
 def add_monitor_parsers(car_actions) -> None:
@@ -108,6 +105,7 @@ def _check_outputs(args) -> None:
     """Output paths are checked before any computation."""
     from ..errors import DataError
     from ..report import check_output_path
+    from ._output import IMAGE_SUFFIXES
 
     if getattr(args, "report", None):
         check_output_path(args.report)
@@ -115,23 +113,13 @@ def _check_outputs(args) -> None:
         p = Path(args.plot)
         if not (p.parent if str(p.parent) else Path(".")).is_dir():
             raise DataError(f"{p}: the folder {str(p.parent)!r} does not exist")
-        if p.suffix.lower() not in (
-            ".png",
-            ".pdf",
-            ".svg",
-            ".jpg",
-            ".jpeg",
-            ".eps",
-            ".ps",
-            ".tif",
-            ".tiff",
-            ".webp",
-        ):
+        if p.suffix.lower() not in IMAGE_SUFFIXES:
             raise DataError(f"{p}: unknown image format {p.suffix!r} (use .png, .pdf, .svg, ...)")
 
 
 def _scenario(args: argparse.Namespace) -> int:
     from ..report.progress import progress_wanted
+    from ..systems.car.runs import scenario_report
     from ..systems.car.scenarios import SCENARIOS, plot_scenario, run_scenario
     from ._output import print_json
 
@@ -149,173 +137,27 @@ def _scenario(args: argparse.Namespace) -> int:
     if args.plot:
         s["plot"] = plot_scenario(out, args.plot)
     if args.report:
-        s["report"] = str(_scenario_report(out, args.report))
+        s["report"] = str(scenario_report(out, args.report))
     if args.json:
         print_json(s)
-    else:
-        print(f"{s['name']}: {s['description']}")
-        print(
-            f"  detection delay {s['detection_delay_s']} s, isolated {s['isolated']}, "
-            f"false announcements {len(s['false_announcements'])}"
-        )
-        for f, p in s["peak_probability"].items():
-            print(f"  peak P({f}) = {p:.4f}")
-        for k in ("plot", "report"):
-            if k in s:
-                print(f"  {k}: {s[k]}")
+        return 0
+    print(f"{s['name']}: {s['description']}")
+    print(
+        f"  detection delay {s['detection_delay_s']} s, isolated {s['isolated']}, "
+        f"false announcements {len(s['false_announcements'])}"
+    )
+    for f, p in s["peak_probability"].items():
+        print(f"  peak P({f}) = {p:.4f}")
+    for k in ("plot", "report"):
+        if k in s:
+            print(f"  {k}: {s[k]}")
     return 0
-
-
-def _scenario_report(out: dict, path: str):
-    from ..report import monitor_report
-
-    s = out["summary"]
-    sig = out["inputs"].concat_channels(out["measurements"])
-    stats = out["features"].concat_channels(out["probabilities"])
-    meta = {
-        "scenario": s["name"],
-        "description": s["description"],
-        "block": s["block"],
-        "injected": "{target} {magnitude} from {onset_s} s".format(**s["injected"]),
-        "detection delay (s)": s["detection_delay_s"],
-        "isolated": s["isolated"],
-        "false announcements": len(s["false_announcements"]),
-        "design": "calibrated in this run (fdikit.systems.car.monitor.calibrate_monitor)",
-    }
-    return monitor_report(
-        path,
-        signals=sig,
-        statistics=stats,
-        events=out.get("events", []),
-        level=s.get("announcement_level"),
-        title=f"fdikit car scenario: {s['name']}",
-        meta=meta,
-    )
-
-
-#: Units of the RAV4 monitor channels (fdikit.systems.car.monitor_rav4.CHANNELS and the speed).
-_UNITS = {
-    "steer": "rad",
-    "speed": "m/s",
-    "a_y": "m/s^2",
-    "yaw_rate": "rad/s",
-    "w_front_diff": "m/s",
-    "w_rear_diff": "m/s",
-}
-
-
-def _rav4_run(args):
-    """The RAV4 monitor's signals and result for the figure and the report (the design is cached)."""
-    from ..systems.car.monitor_rav4 import inject, parse_inject, rav4_monitor
-
-    mon = rav4_monitor(str(args.path))
-    faults = parse_inject(args.inject)
-    sig = inject(mon.raw, faults, mon.artifacts["filter"].pre)
-    return mon, faults, sig, mon.run(sig)
-
-
-def _rav4_plot(mon, faults, sig, res, path: str) -> str:
-    from ..report.figures import panel_figure, save
-
-    t = sig.t - sig.t[0]
-    chans = mon.artifacts["filter"].monitor_channels(sig)
-    col1 = [
-        {
-            "title": f"monitor channel {n}",
-            "ylabel": n,
-            "unit": u or _UNITS.get(n, ""),
-            "traces": [(n, chans.values[0, :, j])],
-            "legend": False,
-        }
-        for j, (n, u) in enumerate(zip(chans.names, chans.units))
-    ]
-    st = res.statistics
-    feats = [n for n in st.names if n.startswith("|")]
-    col2 = [
-        {"title": n, "ylabel": "residual norm", "unit": "–", "traces": [(n, st[n][0])], "legend": False}
-        for n in feats
-    ]
-    probs = [f"P:{f}" for f in mon.faults if f"P:{f}" in st.names]
-    col2.append(
-        {
-            "title": "fault probabilities (MHSSPT)",
-            "ylabel": "probability",
-            "unit": "–",
-            "ylim": (-0.05, 1.05),
-            "thresholds": [("announce (held 10 samples)", 0.95)],
-            "traces": [(n, st[n][0]) for n in probs],
-        }
-    )
-    events = [(e.t - sig.t[0], e.hypothesis) for e in res.events]
-    shade = [(f.start, float(f.end if f.end is not None else t[-1]), "fault", "tab:red") for f in faults[:1]]
-    half = mon.record.get("half_s")
-    if half:
-        shade.append((0.0, float(half), "calibration", "0.6"))
-    fig = panel_figure(
-        t,
-        [col1, col2],
-        title=f"RAV4 lateral monitor, injected: {args_inject(faults)} "
-        "(grey: calibration half; red: injected fault)",
-        events=events,
-        shade=shade,
-        panel_size=(6.0, 1.35),
-    )
-    return save(fig, path)
-
-
-def args_inject(faults) -> str:
-    """A one-line description of injected faults (Fault objects or (channel, magnitude, start) biases)."""
-    out = []
-    for f in faults:
-        if isinstance(f, tuple):
-            out.append(f"{f[0]} {f[1]:+g} from {f[2]:g} s")
-        else:
-            val = {k: getattr(f, k) for k in ("magnitude", "slope", "gain", "value") if hasattr(f, k)}
-            v = ", ".join(f"{k} {x:g}" for k, x in val.items() if x is not None)
-            what = f"{type(f).__name__.lower()} on {f.target}" + (f" ({v})" if v else "")
-            out.append(f"{what} from {f.start:g} s")
-    return ", ".join(out) or "none"
-
-
-def _rav4_report(args, mon, faults, sig, res) -> str:
-    from ..report import monitor_report, monitor_thresholds
-
-    t0 = sig.t[0]
-    meta = {
-        "data": str(args.path),
-        "injected": args_inject(faults),
-        "calibrated on (s)": mon.record.get("half_s"),
-        "design": "fitted and calibrated in this run (fdikit.systems.car.monitor_rav4.rav4_monitor)",
-    }
-    from ..signals import Signals
-
-    sig0 = Signals(sig.t - t0, sig.values, sig.names, sig.units, check=False)
-    shift = lambda s: Signals(s.t - t0, s.values, s.names, s.units, check=False)  # noqa: E731
-    from ..monitor import MonitorResult
-
-    r0 = MonitorResult(
-        shift(res.residuals),
-        shift(res.statistics),
-        [type(e)(e.run, e.k, e.t - t0, e.hypothesis, e.value) for e in res.events],
-        res.valid,
-        res.invalid,
-    )
-    return str(
-        monitor_report(
-            args.report,
-            signals=sig0,
-            result=r0,
-            thresholds=monitor_thresholds(mon.monitor),
-            level=float(mon.decision.level),
-            title="fdikit car monitor-log: RAV4 lateral monitor",
-            meta=meta,
-        )
-    )
 
 
 def _monitor_log(args: argparse.Namespace) -> int:
     from ..report.progress import progress_steps, progress_wanted
     from ..systems.car.monitor_rav4 import run_rav4_log
+    from ..systems.car.runs import rav4_log_figure, rav4_log_report, rav4_log_run
     from ._output import print_json
 
     _check_outputs(args)
@@ -325,34 +167,34 @@ def _monitor_log(args: argparse.Namespace) -> int:
         res = run_rav4_log(args.path, args.inject)
         if extra:
             steps.step("figure and report")
-            run = _rav4_run(args)
+            run = rav4_log_run(args.path, args.inject)
             if args.plot:
-                res["plot"] = _rav4_plot(*run, args.plot)
+                res["plot"] = rav4_log_figure(*run, args.plot)
             if args.report:
-                res["report"] = _rav4_report(args, *run)
+                res["report"] = rav4_log_report(*run, args.report, data=args.path)
         steps.step("done")
     if args.json:
         print_json(res)
-    else:
-        print(f"{res['data']}: {res['seconds']:.1f} s, calibrated on {res['calibrated_on_s']} s")
-        if "expected_sensor" in res:
-            print(
-                f"  injected {res['inject']}: isolated {res['isolated']} (sensor {res['expected_sensor']}, "
-                f"{'right' if res['isolated_ok'] else 'WRONG'}), "
-                f"detection delay {res['detection_delay_s']} s, "
-                f"announced after {res['announcement_delay_s']} s"
-            )
-        print(f"  false announcements: {len(res['false_announcements'])}")
-        for part in ("calibration", "held_out"):
-            h = res[part]
-            print(
-                f"  {part.replace('_', '-')} half {h['span_s']} s: {h['announcements']} announcements, "
-                f"{len(h['false_announcements'])} false, "
-                f"max wrong probability {h['max_wrong_probability']:.3g}"
-            )
-        for f, p in res["peak_probability"].items():
-            print(f"  peak P({f}) = {p:.4f}")
-        for k in ("plot", "report"):
-            if k in res:
-                print(f"  {k}: {res[k]}")
+        return 0
+    print(f"{res['data']}: {res['seconds']:.1f} s, calibrated on {res['calibrated_on_s']} s")
+    if "expected_sensor" in res:
+        print(
+            f"  injected {res['inject']}: isolated {res['isolated']} (sensor {res['expected_sensor']}, "
+            f"{'right' if res['isolated_ok'] else 'WRONG'}), "
+            f"detection delay {res['detection_delay_s']} s, "
+            f"announced after {res['announcement_delay_s']} s"
+        )
+    print(f"  false announcements: {len(res['false_announcements'])}")
+    for part in ("calibration", "held_out"):
+        h = res[part]
+        print(
+            f"  {part.replace('_', '-')} half {h['span_s']} s: {h['announcements']} announcements, "
+            f"{len(h['false_announcements'])} false, "
+            f"max wrong probability {h['max_wrong_probability']:.3g}"
+        )
+    for f, p in res["peak_probability"].items():
+        print(f"  peak P({f}) = {p:.4f}")
+    for k in ("plot", "report"):
+        if k in res:
+            print(f"  {k}: {res[k]}")
     return 0

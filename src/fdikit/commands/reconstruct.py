@@ -1,5 +1,6 @@
 """``fdikit reconstruct aircraft``: robust actuator fault reconstruction of the aircraft
-(ng-tan-edwards-kuang, Section IV); the experiment is :mod:`fdikit.systems.aircraft.reconstruction`."""
+(ng-tan-edwards-kuang, Section IV); the experiment is :mod:`fdikit.systems.aircraft.reconstruction`,
+its figure and report :mod:`fdikit.systems.aircraft.figures`."""
 
 from __future__ import annotations
 
@@ -28,139 +29,9 @@ def _check_outputs(args) -> None:
                         "(the RMS error is scored after it)")
 
 
-def _figure(res: dict, path: str) -> str:
-    """Ng, Tan, Edwards & Kuang, Fig. 1: the fault (left) and its reconstruction (right), with
-    units, the fault's onset marked and the reconstruction error below."""
-    import numpy as np
-
-    from ..report.figures import panel_figure, save
-
-    t, f, fh, fn = res["t"], res["f"], res["fhat"], res["fhat_nominal"]
-    onset = float(t[np.flatnonzero(f != 0)[0]]) if np.any(f != 0) else None
-    pad = 0.5 * max(float(np.ptp(f)), 1e-3)
-    lim = (float(f.min()) - pad, float(f.max()) + pad)  # clips the observers' initial transient
-    left = [
-        {
-            "title": "fault f (rudder actuator)",
-            "ylabel": "f",
-            "unit": "rad",
-            "ylim": lim,
-            "traces": [("f", f, {"color": "k"})],
-            "legend": False,
-        }
-    ]
-    right = [
-        {
-            "title": f"reconstruction f^ (RMS error ratio {res['rmse_ratio']:.3f} with uncertainty)",
-            "ylabel": "f^",
-            "unit": "rad",
-            "ylim": lim,
-            "traces": [
-                ("with uncertainty", fh, {"color": "tab:blue"}),
-                ("nominal plant", fn, {"color": "tab:red", "ls": "--", "lw": 0.8}),
-            ],
-        },
-        {
-            "title": f"reconstruction error (scored from t = {res['settle_s']:g} s)",
-            "ylabel": "f^ - f",
-            "unit": "rad",
-            "ylim": (-0.25 * pad, 0.25 * pad),
-            "traces": [
-                ("with uncertainty", fh - f, {"color": "tab:blue"}),
-                ("nominal plant", fn - f, {"color": "tab:red", "lw": 0.8}),
-            ],
-        },
-    ]
-    events = [(onset, "fault starts")] if onset is not None else []
-    fig = panel_figure(
-        t,
-        [left, right],
-        title="actuator fault reconstruction, cascaded sliding mode observers (ng-tan-edwards-kuang, Fig. 1)",
-        events=events,
-        panel_size=(5.2, 2.3),
-    )
-    return save(fig, path, dpi=120)
-
-
-def _report(res: dict, path: str) -> str:
-    import numpy as np
-
-    from ..report import Report, add_events, stacked_time_figure
-
-    rep = Report("fdikit reconstruct aircraft: actuator fault reconstruction (ng-tan-edwards-kuang)")
-    rep.section(
-        "Run",
-        "Cascaded sliding mode observers designed by LMIs; the aircraft simulated with and without "
-        "the model uncertainty.",
-    )
-    from .. import __version__
-
-    c = res["conditions"]
-    info = {
-        "fdikit version": __version__,
-        "case": res["case"],
-        "conditions A1, A2, B1, B2": c,
-        "rank CM": res["rank_CM"],
-        "pbar": res["pbar"],
-        "L2 bound gamma-bar": res["l2_bound"],
-        "paper's L2 bound": res["l2_bound_paper"],
-        "H-inf of G(s)": (res["hinf_check"] or {}).get("hinf_bisection"),
-        "RMS(f^ - f) / RMS(f), with uncertainty": res["rmse_ratio"],
-        "RMS(f^ - f) / RMS(f), nominal": res["rmse_ratio_nominal"],
-        "scored from (s)": res["settle_s"],
-        "step h (s)": res["h"],
-        "simulated (s)": res["t_final"],
-        "uncertainty reading": res["uncertainty_reading"],
-        "design (s)": res["design_seconds"],
-        "simulation, two runs (s)": res["sim_seconds_two_runs"],
-    }
-    rep.table(info)
-    rep.data["metadata"] = {k: v for k, v in info.items() if isinstance(v, int | float | str)}
-    t, f = res["t"], res["f"]
-    onset = float(t[np.flatnonzero(f != 0)[0]]) if np.any(f != 0) else None
-    add_events(rep, [], (float(t[0]), float(t[-1])), title="Events")
-    rep.text(
-        "No announcements: a reconstructor estimates the fault signal; the dotted line marks the "
-        "fault's onset."
-    )
-    pad = 0.5 * max(float(np.ptp(f)), 1e-3)
-    marks = [(onset, "fault starts")] if onset is not None else []
-    rep.section(
-        "Fault and reconstruction",
-        "The rudder actuator fault f and its reconstruction f^ (with the "
-        "uncertain plant and the nominal one), and the reconstruction errors (decimated for display, "
-        "keeping each bucket's minimum and maximum).",
-    )
-    panels = [
-        {
-            "title": "fault and reconstruction",
-            "ylabel": "rudder fault",
-            "unit": "rad",
-            "range": [float(f.min()) - pad, float(f.max()) + pad],
-            "traces": [
-                ("f", f),
-                ("f^ (with uncertainty)", res["fhat"]),
-                ("f^ (nominal)", res["fhat_nominal"]),
-            ],
-        },
-        {
-            "title": "reconstruction error",
-            "ylabel": "f^ - f",
-            "unit": "rad",
-            "range": [-0.25 * pad, 0.25 * pad],
-            "traces": [("with uncertainty", res["fhat"] - f), ("nominal", res["fhat_nominal"] - f)],
-        },
-    ]
-    rep.figure(
-        stacked_time_figure(
-            t, panels, title="fault reconstruction", events=marks, max_points=rep.max_points, panel_height=260
-        )
-    )
-    return str(rep.write(path))
-
-
 def _cmd(args: argparse.Namespace) -> int:
     from ..report.progress import progress_steps, progress_wanted
+    from ..systems.aircraft.figures import reconstruction_figure, reconstruction_report
     from ..systems.aircraft.reconstruction import run_aircraft
     from ._output import print_json
 
@@ -174,9 +45,9 @@ def _cmd(args: argparse.Namespace) -> int:
         if keep:
             steps.step("figure and report")
             if args.plot:
-                res["plot"] = _figure(res, args.plot)
+                res["plot"] = reconstruction_figure(res, args.plot)
             if args.report:
-                res["report"] = _report(res, args.report)
+                res["report"] = reconstruction_report(res, args.report)
             for k in ("t", "f", "fhat", "fhat_nominal"):
                 res.pop(k)
     if args.json:

@@ -479,7 +479,47 @@ def secondary_smo_lmi_search(A: np.ndarray, M: np.ndarray, C: np.ndarray, Q: np.
             "LMI", f"secondary observer LMIs (46)-(47) fail at gamma_o = {gamma_o:g} ({first}); "
             f"gamma_o = {go:g} designs them: pass gamma_o={go:g} (or let the design retry)",
             {"gamma_o": gamma_o, "gamma_o_works": go, "gamma_o_tried": tried})
+    why, advice = _explain_secondary_failure(A, C, D1, gamma_o, tried)
     raise ConditionError(
         "LMI", f"secondary observer LMIs (46)-(47) fail at gamma_o = {gamma_o:g} and at every level tried "
-        f"({', '.join(format(t['gamma_o'], 'g') for t in tried)}): {first}",
-        {"gamma_o": gamma_o, "gamma_o_works": None, "gamma_o_tried": tried})
+        f"({', '.join(format(t['gamma_o'], 'g') for t in tried)}): {first}. Why: {why}. "
+        f"What to try: {advice}",
+        {"gamma_o": gamma_o, "gamma_o_works": None, "gamma_o_tried": tried, "why": why, "advice": advice})
+
+
+def _explain_secondary_failure(A: np.ndarray, C: np.ndarray, D1: np.ndarray, gamma_o: float,
+                               tried: list[dict]) -> tuple[str, str]:
+    """Why (46)-(47) failed at every level, and what to change (for the refusal's message).
+
+    (47) carries ``gamma_o C^T (D1 D1^T)^-1 C`` next to ``P A + A^T P``: a weight ``D1`` far from
+    the scale of ``A`` (or badly conditioned) makes the LMIs numerically hopeless for the solver
+    (reported as inaccurate), while a solver that proves infeasibility at every level points at
+    the system: (46) needs a stable sliding motion (condition B2: stable invariant zeros).
+    """
+    D1 = np.asarray(D1, float)
+    C = np.asarray(C, float)
+    a_scale = max(float(np.linalg.norm(A, 2)), 1e-300)
+    dd = D1 @ D1.T
+    cond_d = float(np.linalg.cond(dd))
+    w_scale = float(np.linalg.norm(C.T @ np.linalg.solve(dd, C), 2))
+    ratio = gamma_o * w_scale / a_scale
+    statuses = sorted({str(t.get("status")) for t in tried})
+    inaccurate = any("inaccurate" in str(t.get("message", "")) or "inaccurate" in str(t.get("status"))
+                     for t in tried)
+    parts = [f"solver outcomes {statuses}",
+             f"gamma_o ||C^T (D1 D1^T)^-1 C|| / ||A|| = {ratio:.3g} at gamma_o = {gamma_o:g}",
+             f"cond(D1 D1^T) = {cond_d:.3g}"]
+    advice = []
+    if inaccurate or ratio > 1e6 or ratio < 1e-6 or cond_d > 1e8:
+        parts.insert(0, "the LMIs are badly scaled for the solver (the filter weight of (47) and "
+                        "the dynamics differ by many orders of magnitude)")
+        advice.append("a D1 of the scale of the default 10 I (D1 = None), well conditioned")
+        advice.append("scaling the model's states and outputs to comparable units")
+    else:
+        parts.insert(0, "the solver finds no P, W with a stable sliding motion (46) that also "
+                        "satisfies the filter inequality (47)")
+        advice.append("check condition B2 (info['conditions']: invariant zeros must be stable and "
+                      "not too close to the imaginary axis)")
+        advice.append("another D1 (default 10 I) or gamma_o")
+    advice.append("a narrower uncertainty filter (omega_d / A_Omega) or fewer disturbance channels")
+    return "; ".join(parts), "; ".join(advice)

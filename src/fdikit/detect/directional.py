@@ -265,6 +265,8 @@ class DirectionalGLRT(ResidualProcessor):
     name : str, optional
         Prefix of the outputs (default: the first signature channel).
 
+    Notes
+    -----
     Outputs ``"<name>:dglrt"`` (the statistic ``g_k``) and ``"<name>:eta"`` (the amplitude
     estimate at the maximising change time; the relative parameter change when the signature
     is a :class:`~fdikit.residuals.ParameterSensitivity` channel).

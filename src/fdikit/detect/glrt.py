@@ -116,6 +116,8 @@ class GLRT(ResidualProcessor):
     W : int
         Window length in samples (>= 1).
 
+    Notes
+    -----
     Outputs ``"<input>:glrt"`` per input. The statistic is never negative, so the ``absolute``
     default of :class:`~fdikit.detect.Hold` and :func:`design_threshold`
     (:data:`~fdikit.detect.threshold.ABSOLUTE_DEFAULT`) leaves it unchanged: design the thresholds

@@ -60,6 +60,8 @@ class Hold(ResidualProcessor):
         :func:`~fdikit.detect.design_threshold`'s) or the signed ``x`` with the threshold.
         Default: the design's, else :data:`ABSOLUTE_DEFAULT`.
 
+    Notes
+    -----
     Outputs one alarm channel per input, named ``"<input>:alarm"``, valued 0.0 or 1.0.
 
     Examples

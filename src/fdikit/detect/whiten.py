@@ -59,6 +59,8 @@ class VARWhitener(ResidualProcessor):
     coefs : array (p, C, C)
         ``A_1 .. A_p`` (``p = 0``: only the mean is removed).
 
+    Notes
+    -----
     Outputs ``"<input>:w"`` per input: ``e_k = z_k - sum_i A_i z_{k-i}``, ``z = x - mu``.
 
     Examples

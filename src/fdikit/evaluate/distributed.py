@@ -47,7 +47,7 @@ __all__ = ["Engine", "chunk_bounds", "run_chunked"]
 
 
 def chunk_bounds(n: int, chunk_size: int) -> list[tuple[int, int]]:
-    """``[(start, stop), ...]`` covering ``0 .. n-1`` in chunks of at most ``chunk_size`` runs.
+    """``[(start, stop), ...]`` covering ``range(n)`` in chunks of at most ``chunk_size`` runs.
 
     Examples
     --------
@@ -121,6 +121,8 @@ class Engine:
         RAV4 minute (benchmarks/bench_fleet.py: 26.7 -> 21.7 ms per log on one worker). A running
         cluster (``scheduler``) keeps its own setting (``distributed.worker.profile.enabled``).
 
+    Notes
+    -----
     Use it as a context manager: the pool or cluster is shut down on exit.
     """
 

@@ -6,6 +6,24 @@ __all__ = ["progress_bar"]
 
 
 def progress_bar(enabled: bool, total: int, what: str):
+    """A rich progress bar on stderr for ``total`` steps of ``what``, or nothing.
+
+    Parameters
+    ----------
+    enabled : bool
+        False: no bar.
+    total : int
+        Number of steps.
+    what : str
+        The label shown beside the bar.
+
+    Returns
+    -------
+    progress : rich.progress.Progress or contextlib.nullcontext
+        The context to enter while the work runs.
+    task : (str, int) or None
+        ``(what, total)`` to add as the task of ``progress``; None when disabled.
+    """
     from contextlib import nullcontext
 
     if not enabled:

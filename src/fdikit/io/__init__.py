@@ -3,6 +3,10 @@
 * :func:`read_log` — any supported log, chosen by extension or content: Vector BLF and ASC,
   candump, MDF4 (decoded channels, or raw CAN frames decoded with a DBC), Parquet and CSV tables;
 * :func:`read_can_log` — a CAN log decoded with a DBC onto one time grid;
+* :func:`read_ulog`, :func:`read_rosbag`, :func:`read_topic_folder` — flight and robot logs (PX4
+  ULog, ROS 1 / ROS 2 / MCAP bags, a folder of per-topic CSVs) whose topics come at several rates,
+  gridded causally by :func:`topics_to_grid` (zero-order hold plus each topic's age; linear
+  interpolation only on request, marked non-causal: :class:`MultiRateSignals`);
 * :func:`read_csv` — a CSV recording;
 * per-format readers :func:`read_blf`, :func:`read_asc`, :func:`read_candump`, :func:`read_mdf`,
   :func:`read_parquet`, :func:`read_table_csv`;
@@ -30,6 +34,7 @@ from .decode import FramePayloads, decode_message, read_blf_table, set_signal, w
 from .formats import (
     FORMATS,
     LoadedSignals,
+    MultiRateSignals,
     SignalQuality,
     SourceReport,
     detect_format,
@@ -41,8 +46,12 @@ from .formats import (
     read_log,
     read_mdf,
     read_parquet,
+    read_rosbag,
     read_table_csv,
+    read_topic_folder,
+    read_ulog,
     series_to_grid,
+    topics_to_grid,
 )
 from .stream import FrameGridder, parse_candump_line
 from .timebase import TIME_UNITS, StreamTimes, TimeOrigin, times_to_seconds
@@ -55,6 +64,7 @@ __all__ = [
     "FramePayloads",
     "LoadedSignals",
     "LogSignals",
+    "MultiRateSignals",
     "SignalInfo",
     "SignalQuality",
     "SourceReport",
@@ -74,11 +84,15 @@ __all__ = [
     "read_log",
     "read_mdf",
     "read_parquet",
+    "read_rosbag",
     "read_table_csv",
+    "read_topic_folder",
+    "read_ulog",
     "resample_to_grid",
     "series_to_grid",
     "set_signal",
     "times_to_seconds",
+    "topics_to_grid",
     "write_blf_table",
     "write_csv",
     "write_parquet",

@@ -24,6 +24,7 @@ of live SocketCAN logging.
 
 from __future__ import annotations
 
+import itertools
 import math
 import re
 from collections import deque
@@ -297,3 +298,121 @@ class FrameGridder:
     def flush(self) -> list[tuple[float, dict[str, float], str | None]]:
         """At the end of the stream: release the samples that sit exactly on the last frames."""
         return self._emit(final=True)
+
+    # --------------------------------------------------------------------- checkpoint / restore
+    def state(self) -> dict[str, Any]:
+        """The streaming state as plain data (lists, numbers, ``None``), for a checkpoint.
+
+        The frames each signal still needs, its recent intervals (the period estimate) and first
+        frame time, the bus of every message seen, the stream's first and last frame times, the
+        grid start and index, and the frame counters. :meth:`restore` on a gridder built with the
+        same signals continues bit for bit.
+
+        Examples
+        --------
+        >>> import cantools
+        >>> db = cantools.database.load_string('''VERSION ""
+        ... BO_ 180 SPEED: 8 XXX
+        ...  SG_ SPEED : 47|16@0+ (0.01,0) [0|250] "km/h" XXX
+        ... ''', database_format="dbc")
+        >>> frame = lambda kmh: (int(kmh * 100) << 8).to_bytes(8, "big")
+        >>> g = FrameGridder(db, ["SPEED.SPEED"], rate=10.0)
+        >>> g.push(100.0, 180, frame(10.0))
+        []
+        >>> h = FrameGridder(db, ["SPEED.SPEED"], rate=10.0)
+        >>> h.restore(g.state())
+        >>> [(round(t, 3), round(v["SPEED.SPEED"], 6)) for t, v, _ in h.push(100.1, 180, frame(12.0))]
+        [(0.0, 10.0)]
+        """
+        series = {name: {"t": list(s.t), "v": list(s.v), "intervals": list(s.intervals), "first": s.first}
+                  for name, s in self._series.items()}
+        return {"series": series, "bus": {str(k): v for k, v in self._bus.items()}, "t0": self._t0,
+                "t_last": self._t_last, "start": self._start, "k": self._k, "frames": self.frames,
+                "undecodable": self.undecodable}
+
+    def restore(self, state: dict[str, Any]) -> None:
+        """Continue from a :meth:`state` of a gridder of the same signals.
+
+        The state is checked in full before anything changes: a state of other signals, with a
+        missing key, or with values of the wrong kind is refused and the gridder is left as it was.
+
+        Raises
+        ------
+        DataError
+            Naming the key and what is wrong with it.
+
+        Examples
+        --------
+        >>> import cantools
+        >>> db = cantools.database.load_string('''VERSION ""
+        ... BO_ 180 SPEED: 8 XXX
+        ...  SG_ SPEED : 47|16@0+ (0.01,0) [0|250] "km/h" XXX
+        ... ''', database_format="dbc")
+        >>> FrameGridder(db, ["SPEED.SPEED"], rate=10.0).restore({"series": {}})
+        Traceback (most recent call last):
+        ...
+        fdikit.errors.DataError: FrameGridder state: missing keys ['bus', 'frames', ...]
+        """
+        where = "FrameGridder state"
+        if not isinstance(state, dict):
+            raise DataError(f"{where}: a state must be a dict, got {type(state).__name__}")
+        keys = {"series", "bus", "t0", "t_last", "start", "k", "frames", "undecodable"}
+        if keys - set(state):
+            raise DataError(f"{where}: missing keys {sorted(keys - set(state))}")
+        if set(state) - keys:
+            raise DataError(f"{where}: unknown keys {sorted(set(state) - keys)}")
+        series = state["series"]
+        if not isinstance(series, dict) or sorted(series) != sorted(self._series):
+            got = sorted(series) if isinstance(series, dict) else type(series).__name__
+            raise DataError(f"checkpoint grids signals {got}, the config {sorted(self._series)}")
+
+        def number(x: Any, what: str, optional: bool = False, finite: bool = True) -> float | None:
+            if x is None and optional:
+                return None
+            if isinstance(x, bool) or not isinstance(x, int | float | np.integer | np.floating):
+                none = " or None" if optional else ""
+                raise DataError(f"{where}: {what} must be a number{none}, got {x!r}")
+            if finite and not math.isfinite(x):
+                raise DataError(f"{where}: {what} must be finite, got {x!r}")
+            return float(x)
+
+        def count(name: str) -> int:
+            x = state[name]
+            if isinstance(x, bool) or not isinstance(x, int | np.integer) or x < 0:
+                raise DataError(f"{where}: {name} must be a count (an integer >= 0), got {x!r}")
+            return int(x)
+
+        new = {}
+        for name, d in series.items():
+            what = f"series {name!r}"
+            if not isinstance(d, dict) or set(d) != {"t", "v", "intervals", "first"}:
+                raise DataError(f"{where}: {what} must be a dict with keys first, intervals, t, v")
+            if not all(isinstance(d[k], list | tuple | np.ndarray) for k in ("t", "v", "intervals")):
+                raise DataError(f"{where}: {what}: t, v and intervals must be lists")
+            if len(d["t"]) != len(d["v"]):
+                raise DataError(f"{where}: {what} has {len(d['t'])} frame times and {len(d['v'])} values")
+            t = [number(x, f"{what} frame time") for x in d["t"]]
+            if any(b < a for a, b in itertools.pairwise(t)):
+                raise DataError(f"{where}: {what}: frame times go backwards")
+            v = [number(x, f"{what} value", finite=False) for x in d["v"]]
+            iv = [number(x, f"{what} interval") for x in d["intervals"]]
+            new[name] = (t, v, iv, number(d["first"], f"{what} first", optional=True))
+        bus = state["bus"]
+        if not isinstance(bus, dict):
+            raise DataError(f"{where}: bus must be a dict of message id to bus name")
+        try:
+            bus = {int(k): str(v) for k, v in bus.items()}
+        except (TypeError, ValueError):
+            raise DataError(f"{where}: bus keys must be message ids (integers)") from None
+        t0 = number(state["t0"], "t0", optional=True)
+        t_last = number(state["t_last"], "t_last", optional=True)
+        start = number(state["start"], "start", optional=True)
+        k, frames, undecodable = count("k"), count("frames"), count("undecodable")
+        for name, (t, v, iv, first) in new.items():
+            s = self._series[name]
+            s.t, s.v, s.first = t, v, first
+            s.intervals.clear()
+            s.intervals.extend(iv)
+        self._bus = bus
+        self._t0, self._t_last, self._start = t0, t_last, start
+        self._k, self.frames, self.undecodable = k, frames, undecodable

@@ -308,9 +308,51 @@ class StreamTimes:
                 "origin": None if o is None else [str(o.ticks), o.exponent, o.unit, o.rebased]}
 
     def restore(self, state: dict) -> None:
-        self.time_unit, self.rebase = state["time_unit"], state["rebase"]
+        """Continue from a :meth:`state`; a bad state is refused before anything changes.
+
+        Raises
+        ------
+        DataError
+            A state that is not a dict of ``time_unit``, ``rebase`` and ``origin`` (``None`` or
+            ``[ticks, exponent, unit, rebased]``), naming what is wrong.
+
+        Examples
+        --------
+        >>> st = StreamTimes()
+        >>> st("1700000000.00")
+        0.0
+        >>> st2 = StreamTimes()
+        >>> st2.restore(st.state())
+        >>> st2("1700000000.25")
+        0.25
+        >>> st2.restore({"time_unit": "s"})
+        Traceback (most recent call last):
+        ...
+        fdikit.errors.DataError: StreamTimes state: keys ['time_unit'], expected ['origin', ...]
+        """
+        where = "StreamTimes state"
+        keys = ["origin", "rebase", "time_unit"]
+        if not isinstance(state, dict) or sorted(state) != keys:
+            got = sorted(state) if isinstance(state, dict) else type(state).__name__
+            raise DataError(f"{where}: keys {got}, expected {keys}")
+        unit = _check_unit(state["time_unit"], where)
+        if state["rebase"] not in (None, True, False):
+            raise DataError(f"{where}: rebase must be True, False or None, got {state['rebase']!r}")
         o = state["origin"]
-        self.origin = None if o is None else TimeOrigin(int(o[0]), int(o[1]), str(o[2]), bool(o[3]))
+        origin = None
+        if o is not None:
+            try:
+                ticks, exponent, o_unit, rebased = o
+                ok = (isinstance(exponent, int | np.integer) and o_unit in TIME_UNITS
+                      and isinstance(rebased, bool | np.bool_))
+                origin = TimeOrigin(int(ticks), int(exponent), str(o_unit), bool(rebased)) if ok else None
+            except (TypeError, ValueError):
+                origin = None
+            if origin is None:
+                raise DataError(f"{where}: origin must be None or [ticks, exponent, unit, rebased], "
+                                f"got {o!r}")
+        self.time_unit, self.rebase = unit, state["rebase"]
+        self.origin = origin
         self._base = None if self.origin is None else self._base_of(self.origin)
 
     @staticmethod

@@ -22,8 +22,8 @@ from .online import DMatrixDecision
 from .sequencing import DiagnosticTree, TreeNode, ao_star, exhaustive, huffman_cost
 from .signature import SignatureDecision, SignatureIsolator
 
-_SVM_NAMES = ("SVMDecision", "SVMIsolator", "WindowFeatures", "concat_measurements", "cv_pipeline",
-              "rbf_gamma")
+_SVM_NAMES = ("BlockedStratifiedKFold", "SVMDecision", "SVMIsolator", "WindowFeatures", "concat_measurements",
+              "cv_pipeline", "rbf_gamma")
 
 
 def __getattr__(name: str):
@@ -35,6 +35,7 @@ def __getattr__(name: str):
     raise AttributeError(f"module 'fdikit.isolate' has no attribute {name!r}")
 
 __all__ = [
+    "BlockedStratifiedKFold",
     "FAULT_TYPES",
     "DMatrix",
     "DMatrixDecision",

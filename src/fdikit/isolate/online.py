@@ -48,6 +48,8 @@ class DMatrixDecision(ResidualProcessor):
         Probabilities are clipped to ``[floor, 1 - floor]`` (a contradicted perfect test counts
         as a factor ``floor``).
 
+    Notes
+    -----
     Rows whose firing probabilities are identical cannot be told apart by any outcome: they form
     one output channel, ``fault:A|B``. Every other row has its own channel ``fault:A``. After the
     decision the decided channel holds the posterior probability of its group (uniform prior over

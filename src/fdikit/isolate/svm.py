@@ -7,8 +7,12 @@ binary test outcomes ``S_<label>`` of a D-matrix, and :meth:`SVMIsolator.export`
 evaluates with numpy alone -- no pickle.
 
 The default pipeline (:func:`cv_pipeline`) standardises the features and chooses the RBF width and
-box constraint by stratified cross-validation on the training data, so it needs no tuning for a
-new system. :class:`WindowFeatures` (window means of any linear combination of channels) turns
+box constraint by cross-validation on the training data, so it needs no tuning for a new system.
+Its folds are time-blocked (:class:`BlockedStratifiedKFold`: contiguous blocks of every class, in
+the order given, no shuffling): samples of one record or one long log are autocorrelated, and a
+shuffled fold puts the neighbours of every validation sample in the training part, which rewards
+over-fitting. ``cv_pipeline(shuffle=True)`` gives the shuffled stratified folds back (right for
+independent patterns only). :class:`WindowFeatures` (window means of any linear combination of channels) turns
 records laid end to end (:func:`concat_measurements`) into compact features. The ABS paper's
 pipelines (raw patterns with sigma = 20, C = 1, and the slip-speed window means) are in
 :mod:`fdikit.systems.abs.svm`.
@@ -22,7 +26,7 @@ from typing import Any
 
 import numpy as np
 from sklearn.base import BaseEstimator, TransformerMixin
-from sklearn.model_selection import GridSearchCV, StratifiedKFold
+from sklearn.model_selection import BaseCrossValidator, GridSearchCV, StratifiedKFold
 from sklearn.pipeline import Pipeline
 from sklearn.preprocessing import StandardScaler
 from sklearn.svm import SVC
@@ -30,6 +34,7 @@ from sklearn.svm import SVC
 from ..errors import DataError
 
 __all__ = [
+    "BlockedStratifiedKFold",
     "SVMDecision",
     "SVMIsolator",
     "WindowFeatures",
@@ -37,7 +42,6 @@ __all__ = [
     "cv_pipeline",
     "rbf_gamma",
 ]
-
 
 
 def rbf_gamma(sigma: float) -> float:
@@ -139,20 +143,76 @@ class WindowFeatures(TransformerMixin, BaseEstimator):
         return Z[:, :, : k * w].reshape(n, Z.shape[1], k, w).mean(axis=3).reshape(n, -1)
 
 
+class BlockedStratifiedKFold(BaseCrossValidator):
+    """Time-blocked stratified folds: every class's samples, in the order given, cut into
+    ``n_splits`` contiguous blocks; fold ``k`` validates on block ``k`` of every class.
+
+    No shuffling: a validation block's neighbours in time are not in the training part (up to its
+    two edges; ``gap`` samples on either side of every validation block are left out of the
+    training part as well). Give the samples in time order (records laid end to end).
+
+    Parameters
+    ----------
+    n_splits : int
+        Folds (>= 2).
+    gap : int
+        Samples (positions in the given order) left out of the training part next to each
+        validation sample's block (default 0).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from fdikit.isolate.svm import BlockedStratifiedKFold
+    >>> y = np.array(list("aaaaaabbbb"))
+    >>> [te.tolist() for _, te in BlockedStratifiedKFold(2).split(np.zeros((10, 1)), y)]
+    [[0, 1, 2, 6, 7], [3, 4, 5, 8, 9]]
+    """
+
+    def __init__(self, n_splits: int = 5, gap: int = 0):
+        if int(n_splits) != n_splits or n_splits < 2:
+            raise DataError(f"n_splits must be an integer >= 2 folds, got {n_splits}")
+        if int(gap) != gap or gap < 0:
+            raise DataError(f"gap must be an integer >= 0 samples, got {gap}")
+        self.n_splits, self.gap = int(n_splits), int(gap)
+
+    def get_n_splits(self, X: Any = None, y: Any = None, groups: Any = None) -> int:
+        return self.n_splits
+
+    def split(self, X: Any, y: Any = None, groups: Any = None):
+        n = len(X)
+        lab = np.zeros(n, int) if y is None else np.asarray(y)
+        if lab.shape[0] != n:
+            raise DataError(f"{n} samples but {lab.shape[0]} labels")
+        parts = [np.array_split(np.flatnonzero(lab == c), self.n_splits) for c in np.unique(lab)]
+        for k in range(self.n_splits):
+            test = np.sort(np.concatenate([p[k] for p in parts]))
+            block = np.zeros(n, bool)
+            block[test] = True
+            if self.gap:
+                # leave out the gap next to the validation samples (a dilation of the mask)
+                c = np.convolve(block.astype(int), np.ones(2 * self.gap + 1, int), mode="same")
+                block = c > 0
+            yield np.flatnonzero(~block), test
+
+
 def cv_pipeline(
     features: Any = None,
     *,
     scale: bool = True,
     Cs: Sequence[float] = (0.1, 1.0, 10.0, 100.0, 1000.0),
     gammas: Sequence[Any] = ("scale", 1e-3, 1e-2, 0.1, 1.0),
-    cv: int = 5,
+    cv: Any = 5,
     random_state: int = 0,
+    shuffle: bool = False,
 ) -> GridSearchCV:
     """[features ->] [StandardScaler ->] RBF SVC, with ``C`` and ``gamma`` cross-validated.
 
     The default of :class:`SVMIsolator`: it works for any number of channels and classes, because
     the features are standardised (so no channel's unit dominates the kernel) and the kernel width
-    and box constraint are chosen on the training data by stratified ``cv``-fold cross-validation.
+    and box constraint are chosen on the training data by ``cv``-fold cross-validation. The folds
+    are time-blocked by default (:class:`BlockedStratifiedKFold`: contiguous blocks of each class
+    in the order given, not shuffled), because samples cut from one record are autocorrelated and a
+    shuffled split validates on the neighbours of training samples.
 
     Parameters
     ----------
@@ -163,10 +223,14 @@ def cv_pipeline(
     Cs, gammas : sequences
         Grid of the box constraint and of the RBF ``gamma`` (1/feature-unit^2; ``"scale"`` is
         scikit-learn's ``1 / (n_features · var(X))``).
-    cv : int
-        Folds of the stratified cross-validation (on the training data only).
+    cv : int or scikit-learn splitter
+        Folds of the cross-validation (on the training data only), or a splitter (e.g.
+        :class:`~sklearn.model_selection.TimeSeriesSplit`, ``GroupKFold`` by record).
     random_state : int
-        Seed of the fold shuffling.
+        Seed of the fold shuffling (``shuffle=True`` only).
+    shuffle : bool
+        Shuffled stratified folds (:class:`~sklearn.model_selection.StratifiedKFold`) instead of
+        the time-blocked ones: only for independent patterns (one per independent run).
 
     Examples
     --------
@@ -174,8 +238,13 @@ def cv_pipeline(
     >>> sorted(cv_pipeline().param_grid), [n for n, _ in cv_pipeline().estimator.steps]
     (['svc__C', 'svc__gamma'], ['scale', 'svc'])
     """
-    if int(cv) != cv or cv < 2:
-        raise DataError(f"cv must be an integer >= 2 folds, got {cv}")
+    if hasattr(cv, "split"):
+        folds = cv
+    else:
+        if isinstance(cv, bool) or int(cv) != cv or cv < 2:
+            raise DataError(f"cv must be an integer >= 2 folds or a splitter, got {cv}")
+        folds = (StratifiedKFold(int(cv), shuffle=True, random_state=random_state) if shuffle
+                 else BlockedStratifiedKFold(int(cv)))
     steps: list[tuple[str, Any]] = []
     if features is not None:
         steps.append(("features", features))
@@ -183,13 +252,15 @@ def cv_pipeline(
         steps.append(("scale", StandardScaler()))
     steps.append(("svc", SVC(kernel="rbf")))
     return GridSearchCV(Pipeline(steps), {"svc__C": list(Cs), "svc__gamma": list(gammas)},
-                        cv=StratifiedKFold(int(cv), shuffle=True, random_state=random_state))
+                        cv=folds)
 
 
 def _check_folds(est: Any, lab: np.ndarray) -> None:
     """Refuse, with the counts, a stratified cross-validation that has fewer samples of a class than folds."""
     cv = getattr(est, "cv", None)
     if not isinstance(est, GridSearchCV) or cv is None:
+        return
+    if not isinstance(cv, (int, StratifiedKFold, BlockedStratifiedKFold)):
         return
     k = cv if isinstance(cv, int) else getattr(cv, "n_splits", None)
     if k is None:

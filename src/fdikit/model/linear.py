@@ -35,7 +35,10 @@ _GROUP_NAMES = {"u": "controls", "d": "disturbances", "f": "faults", "w": "noise
 def _mat(M: Any, shape: tuple[int, int], what: str) -> np.ndarray:
     if M is None:
         return np.zeros(shape)
-    M = np.atleast_2d(np.asarray(M, dtype=float))
+    M = np.asarray(M, dtype=float)
+    if M.ndim == 1 and shape[1] == 1 and M.size == shape[0]:
+        M = M.reshape(-1, 1)  # one column given as a 1-D array
+    M = np.atleast_2d(M)
     if M.shape != shape:
         raise ModelError(f"{what} must have shape {shape}, got {M.shape}")
     if not np.all(np.isfinite(M)):
@@ -46,10 +49,25 @@ def _mat(M: Any, shape: tuple[int, int], what: str) -> np.ndarray:
 def _ncols(Bm: Any, Dm: Any, n: int, p: int) -> int:
     """Number of columns of a group given by its B (n rows) and/or D (p rows) matrix."""
     if Bm is not None:
-        return np.asarray(Bm, dtype=float).reshape(n, -1).shape[1]
+        return _as_columns(Bm, n, "B").shape[1]
     if Dm is not None:
-        return np.asarray(Dm, dtype=float).reshape(p, -1).shape[1]
+        return _as_columns(Dm, p, "D").shape[1]
     return 0
+
+
+def _as_columns(M: Any, rows: int, what: str) -> np.ndarray:
+    """``M`` as a matrix of ``rows`` rows (a 1-D array of ``rows`` entries is one column), or a
+    ModelError naming it (never numpy's "cannot reshape")."""
+    M = np.asarray(M, dtype=float)
+    if M.ndim == 1:
+        if M.size != rows:
+            raise ModelError(f"{what} given as a 1-D array of {M.size} entries: a single column needs "
+                             f"{rows} (one per {'state' if what.startswith('B') else 'output'}); "
+                             f"give a ({rows}, k) matrix for k columns")
+        return M.reshape(rows, 1)
+    if M.ndim != 2 or M.shape[0] != rows:
+        raise ModelError(f"{what} must have {rows} rows, got shape {M.shape}")
+    return M
 
 
 def _names(names: Sequence[str] | None, n: int, prefix: str, what: str) -> list[str]:
@@ -141,11 +159,7 @@ class LinearFaultModel:
         if C.shape[1] != n:
             raise ModelError(f"C must have {n} columns (one per state), got shape {C.shape}")
         p = C.shape[0]
-        B = np.asarray(B, dtype=float) if B is not None else np.zeros((n, 0))
-        if B.ndim == 1:
-            B = B.reshape(n, -1)
-        if B.shape[0] != n:
-            raise ModelError(f"B must have {n} rows, got shape {B.shape}")
+        B = _as_columns(B, n, "B") if B is not None else np.zeros((n, 0))
         mu = B.shape[1]
         if dt is not None and not (float(dt) > 0):
             raise ModelError(f"dt must be a positive sample time or None, got {dt}")
@@ -203,6 +217,10 @@ class LinearFaultModel:
             if b.size != n or d.size != p:
                 raise ModelError(f"fault {fname!r}: direction b needs {n} entries and d {p}, "
                                  f"got {b.size} and {d.size}")
+            for key, v in (("b", b), ("d", d)):
+                if not np.all(np.isfinite(v)):
+                    raise ModelError(f"fault {fname!r}: direction {key} contains a non-finite value at "
+                                     f"entry {int(np.flatnonzero(~np.isfinite(v))[0])}: {v.tolist()}")
         g = self._groups["f"]
         self._set_group("f", [*g.names, fname], np.column_stack([g.B, b]) if g.size else b[:, None],
                         np.column_stack([g.D, d]) if g.size else d[:, None])

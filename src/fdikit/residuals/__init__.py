@@ -1,5 +1,6 @@
 """Residual generators: observers, parity equations, fault detection filters, sliding mode observers
-(fault reconstruction), and parameter-signature generators.
+(fault reconstruction), parameter-signature generators, and data-driven monitors (PCA, dynamic
+PCA, CVA) learnt from nominal data alone.
 
 Every linear design returns plain matrices (its implementation form), an info record, and can be
 checked exactly: :func:`internal_form` composes any design with a model and returns the transfer
@@ -15,6 +16,7 @@ from .bank import (
     check_sensitivity,
     design_residual_bank,
 )
+from .datadriven import CVAResidual, DPCAResidual, PCAResidual, q_limit, select_lags, t2_limit
 from .fdf import (
     FaultDetectionFilter,
     FilterDesign,
@@ -63,14 +65,17 @@ __all__ = [
     "SATURATED",
     "SLIDING",
     "BankResidual",
+    "CVAResidual",
     "CausalDerivative",
     "CausalLowPass",
+    "DPCAResidual",
     "FaultDetectionFilter",
     "FaultSignature",
     "FilterDesign",
     "IsolabilityReport",
     "ObserverDesign",
     "ObserverResidual",
+    "PCAResidual",
     "ParameterSensitivity",
     "ResidualBank",
     "SMOConditions",
@@ -97,13 +102,16 @@ __all__ = [
     "internal_form",
     "lowpass",
     "noise_response",
+    "q_limit",
     "reduce_filter",
     "residual_covariance",
+    "select_lags",
     "simulate_plant",
     "sliding_episodes",
     "spline_derivative",
     "spline_derivative_weights",
     "spline_lam",
     "stack_designs",
+    "t2_limit",
     "whiten_design",
 ]

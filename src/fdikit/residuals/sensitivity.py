@@ -40,10 +40,12 @@ class ParameterSensitivity(ResidualGenerator):
         ``1 + steps[label]``; all must read the same channels and write the same outputs as
         ``base``.
     steps : float or mapping label -> float
-        Relative steps ``h`` (non-zero, |h| < 1).
+        Relative steps ``h`` (non-zero, ``|h| < 1``).
     outputs : sequence of str, optional
         Base outputs that get signatures (default: all).
 
+    Notes
+    -----
     Outputs the base outputs followed by ``"sig:<output>:<label>"`` for every label and output:
     the residual change per unit relative change of the plant parameter.
 

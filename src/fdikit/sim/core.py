@@ -690,7 +690,7 @@ def simulate(
         additive faults targeting their names), or an object with ``f(t, x, u, p)``,
         ``h(t, x, u, p)`` vectorised over runs, ``states``, ``inputs``, ``outputs``, ``params``
         (:class:`~fdikit.model.NonlinearModel`).
-    scenario : Scenario
+    scenario : ~fdikit.faults.Scenario
         Duration, steps, faults, initial state, inputs or controller, noise, parameters.
     runs : int, optional
         Number of runs (ids ``0..runs-1``); default 1, or ``len(run_ids)``.

@@ -22,6 +22,7 @@ __all__ = ["DT", "NOISE_STD", "design", "model", "record", "scenario"]
 
 #: Sample time (s) and measurement-noise standard deviation (m) of the example.
 DT = 0.01
+#: Measurement-noise standard deviation (m) of the example.
 NOISE_STD = 0.002
 
 

@@ -109,6 +109,8 @@ class MHSSPT(ResidualProcessor):
         1e-8 at 1/16, measured as ``table_error``), for a test that must agree with the exact
         one; about eight times faster than the exact formula on the RAV4 monitor.
 
+    Notes
+    -----
     Outputs ``"P:<hypothesis>"`` for every hypothesis, then ``"P:<group>"`` for every group.
 
     Examples

@@ -274,6 +274,8 @@ class DriftDetector(_SensorDetector):
         Samples after a reset (and after a gap, :meth:`resume`) that are not taken in: the output
         is 0 there (filter transients at the start of a log).
 
+    Notes
+    -----
     Outputs ``"<input>:drift"`` per input, or ``"<name>:drift"`` with a signature (alarm at >= 1).
 
     Examples

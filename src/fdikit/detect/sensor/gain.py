@@ -301,6 +301,8 @@ class GainDetector(_SensorDetector):
         Samples after a reset (and after a gap, :meth:`resume`) that are not taken in: the output
         is 0 there (filter transients at the start of a log).
 
+    Notes
+    -----
     Outputs per residual (or once, ``"<name>:..."``, with a signature): ``"<residual>:gain"``
     (``g / threshold``, alarm at >= 1), ``"<residual>:gain_est"`` (theta at the most likely change;
     of the first residual of the signature), and the one-sided ``"<residual>:gain+"`` and

@@ -79,6 +79,8 @@ class IntermittentDetector(_SensorDetector):
         Samples after a reset (and after a gap, :meth:`resume`) that are not taken in: the output
         is 0 there (filter transients at the start of a log).
 
+    Notes
+    -----
     Outputs ``"<input>:intermittent"`` per input (alarm at >= 1); with ``signed``,
     ``"<input>:intermittent+"`` and ``"<input>:intermittent-"``.
 

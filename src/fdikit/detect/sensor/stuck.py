@@ -73,6 +73,8 @@ class StuckDetector(_SensorDetector):
         Samples after a reset (and after a gap, :meth:`resume`) that are not taken in: the output
         is 0 there (filter transients at the start of a log).
 
+    Notes
+    -----
     Outputs ``"<measured>:stuck"`` (alarm at >= 1).
 
     Examples

@@ -1,4 +1,5 @@
-"""More log formats onto the same grid: Vector ASC, candump, Parquet, CSV tables, MDF4, and one dispatcher.
+"""More log formats onto the same grid: Vector ASC, candump, Parquet, CSV tables, MDF4, PX4 ULog, ROS
+bags, folders of per-topic CSVs, and one dispatcher.
 
 Every reader here returns a :class:`LoadedSignals` (a :class:`~fdikit.io.LogSignals`) built by the
 same two steps as :func:`fdikit.io.read_can_log`:
@@ -12,6 +13,18 @@ same two steps as :func:`fdikit.io.read_can_log`:
 then each signal is resampled onto one uniform grid at ``rate`` Hz without bridging gaps longer
 than ``max_gap`` source periods (:func:`series_to_grid`, which calls
 :func:`fdikit.io.resample_to_grid`).
+
+**Topic logs** (PX4 ULog :func:`read_ulog`, ROS 1 / ROS 2 / MCAP bags :func:`read_rosbag`, a folder
+of per-topic CSVs :func:`read_topic_folder`) hold topics at several rates. They are gridded by
+:func:`topics_to_grid` (:mod:`.multirate`) with a **causal** default: zero-order hold of each
+topic's last message, plus one ``"<topic>.__age__"`` channel (seconds since that message); linear
+interpolation only on request (``method="linear"``), and then the result says it is not causal
+(:attr:`MultiRateSignals.causal` is ``False``), so a monitor following a live log can refuse it.
+
+**The gridding rule.** A grid value that uses a sample after its own time (linear
+interpolation) cannot be computed live. The CAN, CSV, Parquet and MDF4 readers keep their
+historical default ``method="linear"`` (the papers' numbers rest on it); pass
+``method="previous"`` for a causal grid. The topic-log readers default to the causal hold.
 
 Bad-input policy (never crash, never lie)
 -----------------------------------------
@@ -35,7 +48,8 @@ start move by up to 0.5 us, and a grid value read from them differs from the BLF
 
 Layout, one module per concept: :mod:`.registry` (the formats, :func:`detect_format`,
 :func:`read_log`, :func:`read_can_log`); one module per reader (:mod:`.blf`, :mod:`.asc`,
-:mod:`.candump`, :mod:`.parquet`, :mod:`.csv_table`, :mod:`.mdf`); what readers share
+:mod:`.candump`, :mod:`.parquet`, :mod:`.csv_table`, :mod:`.mdf`, :mod:`.ulog`, :mod:`.rosbag`,
+:mod:`.topics`); the causal multi-rate grid of topic logs (:mod:`.multirate`); what readers share
 (:mod:`.frames`: CAN frames decoded onto the grid, :mod:`.textlog`: text frame logs,
 :mod:`.table`: decoded-signal tables, :mod:`.checks`: argument checks); and the grid step with
 its result types (:mod:`.grid`).
@@ -51,12 +65,18 @@ from .grid import LoadedSignals, SignalQuality, SourceReport, series_to_grid
 from .grid import _longest_constant as _longest_constant  # used by the tests
 from .grid import _longest_constant_rows as _longest_constant_rows
 from .mdf import read_mdf
+from .multirate import AGE_SUFFIX, MultiRateSignals, topics_to_grid
 from .parquet import read_parquet
 from .registry import FORMATS, detect_format, read_can_log, read_log
+from .rosbag import read_rosbag
+from .topics import read_topic_folder
+from .ulog import read_ulog
 
 __all__ = [
+    "AGE_SUFFIX",
     "FORMATS",
     "LoadedSignals",
+    "MultiRateSignals",
     "SignalQuality",
     "SourceReport",
     "detect_format",
@@ -68,6 +88,10 @@ __all__ = [
     "read_log",
     "read_mdf",
     "read_parquet",
+    "read_rosbag",
     "read_table_csv",
+    "read_topic_folder",
+    "read_ulog",
     "series_to_grid",
+    "topics_to_grid",
 ]

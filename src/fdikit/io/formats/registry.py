@@ -18,6 +18,9 @@ from .csv_table import read_table_csv
 from .grid import _COMMON_OPTIONS, LoadedSignals
 from .mdf import read_mdf
 from .parquet import read_parquet
+from .rosbag import read_rosbag
+from .topics import read_topic_folder
+from .ulog import read_ulog
 
 #: Format names understood by :func:`read_log` and the file suffixes that select them.
 FORMATS: dict[str, tuple[str, ...]] = {
@@ -27,15 +30,28 @@ FORMATS: dict[str, tuple[str, ...]] = {
     "parquet": (".parquet", ".pq"),
     "csv": (".csv",),
     "mdf": (".mf4", ".mdf", ".mf3", ".dat"),
+    "ulog": (".ulg", ".ulog"),
+    "rosbag": (".bag", ".db3", ".mcap"),
+    "topics": (),  # a folder of per-topic CSV files
 }
 _FRAME_FORMATS = ("blf", "asc", "candump")
+#: Formats of topics at several rates, gridded by zero-order hold (causal) by default.
+_TOPIC_FORMATS = ("ulog", "rosbag", "topics")
+#: First bytes of each binary format.
+_MAGIC = ((b"LOGG", "blf"), (b"PAR1", "parquet"), (b"MDF ", "mdf"), (b"ULog\x01\x12\x35", "ulog"),
+          (b"#ROSBAG V2.0", "rosbag"), (b"\x89MCAP0\r\n", "rosbag"))
 
 
 _CANDUMP_LINE = re.compile(r"^\(\d+(\.\d+)?\)\s+\S+\s+[0-9A-Fa-f]+#")
 
 
 def detect_format(path) -> str:
-    """The format of a log file, by suffix, else by its first bytes.
+    """The format of a log file or folder, by suffix, else by its first bytes.
+
+    A folder is a ROS 2 bag when it holds ``metadata.yaml``, else a folder of per-topic CSV files
+    (``"topics"``) when it holds ``*.csv`` files. A file is recognised by its suffix, else by its
+    magic bytes: BLF ``LOGG``, Parquet ``PAR1``, MDF ``MDF``, ULog ``ULog\\x01\\x12\\x35``, ROS 1
+    bag ``#ROSBAG V2.0``, MCAP ``\\x89MCAP0\\r\\n``, else the first text line (ASC, candump).
 
     Returns
     -------
@@ -52,6 +68,14 @@ def detect_format(path) -> str:
     >>> detect_format("drive.blf")  # doctest: +SKIP
     'blf'
     """
+    d = Path(path)
+    if d.is_dir():
+        if (d / "metadata.yaml").is_file():
+            return "rosbag"
+        if any(d.glob("*.csv")):
+            return "topics"
+        raise DataError(f"log {str(d)!r} is a directory, not a file, and neither a ROS 2 bag (no "
+                        "metadata.yaml) nor a folder of per-topic CSV files (no *.csv)")
     p = _check_file(path, "log")
     suffix = p.suffix.lower()
     for fmt, sufs in FORMATS.items():
@@ -59,12 +83,9 @@ def detect_format(path) -> str:
             return fmt
     with open(p, "rb") as fh:
         head = fh.read(4096)
-    if head.startswith(b"LOGG"):
-        return "blf"
-    if head.startswith(b"PAR1"):
-        return "parquet"
-    if head.startswith(b"MDF "):
-        return "mdf"
+    for magic, fmt in _MAGIC:
+        if head.startswith(magic):
+            return fmt
     text = head.decode("utf-8", "replace").lstrip()
     first = text.splitlines()[0] if text else ""
     if re.match(r"(date|base|begin\s+triggerblock)\s", first, re.IGNORECASE):
@@ -73,12 +94,15 @@ def detect_format(path) -> str:
         return "candump"
     raise DataError(f"unknown log format for {p.name!r}: the suffix {suffix!r} is none of "
                     f"{sorted(s for v in FORMATS.values() for s in v)} and the first bytes "
-                    f"{head[:16]!r} are not BLF, Parquet, MDF, ASC or candump")
+                    f"{head[:16]!r} are not BLF, Parquet, MDF, ULog, ROS bag, MCAP, ASC or candump")
 
 
 _FORMAT_OPTIONS = {"blf": (), "asc": ("strict", "encoding", "channel"), "candump": ("channel",),
                    "parquet": ("time", "source_units", "time_unit", "rebase"),
-                   "csv": ("time", "source_units", "time_unit", "rebase"), "mdf": ("channel",)}
+                   "csv": ("time", "source_units", "time_unit", "rebase"), "mdf": ("channel",),
+                   "ulog": ("strict", "source_units", "max_age", "age"),
+                   "rosbag": ("time", "source_units", "max_age", "age"),
+                   "topics": ("time", "source_units", "time_unit", "max_age", "age", "pattern")}
 
 
 def read_log(path, dbc=None, signals=None, rate=None, *, format: str | None = None, **kw) -> LoadedSignals:
@@ -87,8 +111,9 @@ def read_log(path, dbc=None, signals=None, rate=None, *, format: str | None = No
     Parameters
     ----------
     path : path-like
-        A Vector BLF or ASC log, a candump log, a Parquet or CSV table of decoded signals, or
-        an MDF4 file (decoded channels or raw CAN bus logging).
+        A Vector BLF or ASC log, a candump log, a Parquet or CSV table of decoded signals, an
+        MDF4 file (decoded channels or raw CAN bus logging), a PX4 ULog file, a ROS 1 bag, a
+        ROS 2 bag (folder, ``.db3`` or ``.mcap``), or a folder of per-topic CSV files.
     dbc : path-like or cantools Database, optional
         Needed for frame logs (BLF, ASC, candump, raw CAN in MDF4).
     signals : sequence of str
@@ -104,8 +129,20 @@ def read_log(path, dbc=None, signals=None, rate=None, *, format: str | None = No
         ``"ns"``) and ``rebase`` for tables (:mod:`fdikit.io.timebase`: an absolute time axis is
         rebased exactly to start at 0, its origin kept in ``t0`` and ``time_origin``; frame
         logs always start at their first frame, ``t0`` its time); ``strict`` and ``encoding`` for ASC;
-        ``channel`` for ASC, candump and MDF4 bus logging. An option that does not apply to
-        the detected format is a :class:`~fdikit.errors.DataError`.
+        ``channel`` for ASC, candump and MDF4 bus logging; ``max_age``, ``age``,
+        ``source_units`` for the topic logs (ULog, ROS bags, topic folders), with ``strict`` for
+        ULog, ``time`` for ROS bags and topic folders, ``time_unit`` and ``pattern`` for topic
+        folders. An option that does not apply to the detected format is a
+        :class:`~fdikit.errors.DataError`.
+
+    Notes
+    -----
+    The gridding rule differs by kind of log: the CAN, CSV, Parquet and MDF4 readers
+    interpolate linearly between samples by default (``method="linear"``, non-causal: a grid
+    value uses the next sample); the topic logs (ULog, ROS bags, topic folders) hold each
+    topic's last message (``method="previous"``, causal) and add its age, and mark a linear
+    grid non-causal (:mod:`fdikit.io.formats.multirate`). A monitor that follows a live log
+    needs a causal grid: pass ``method="previous"`` to the table and CAN readers as well.
 
     Returns
     -------
@@ -132,7 +169,7 @@ def read_log(path, dbc=None, signals=None, rate=None, *, format: str | None = No
         if format not in FORMATS:
             raise DataError(f"unknown log format {format!r}; known formats: {sorted(FORMATS)}")
         fmt = format
-    if fmt not in ("csv", "parquet"):
+    if fmt not in ("csv", "parquet", "topics"):
         # frame logs and MDF count seconds (python-can, asammdf) and start at their first frame
         unit = kw.pop("time_unit", "auto")
         if unit not in ("auto", "s"):
@@ -146,6 +183,11 @@ def read_log(path, dbc=None, signals=None, rate=None, *, format: str | None = No
     if unknown:
         raise DataError(f"option(s) {unknown} do not apply to a {fmt} log {Path(path).name!r}; "
                         f"its options are {sorted(allowed)}")
+    if fmt in _TOPIC_FORMATS:
+        if dbc is not None:
+            raise DataError(f"{Path(path).name!r} is a {fmt} log of topics: it takes no DBC (dbc=)")
+        reader = {"ulog": read_ulog, "rosbag": read_rosbag, "topics": read_topic_folder}[fmt]
+        return reader(path, signals, rate, **kw)
     if fmt in _FRAME_FORMATS:
         if dbc is None:
             raise DataError(f"{Path(path).name!r} is a {fmt} CAN frame log: pass dbc= to decode it")

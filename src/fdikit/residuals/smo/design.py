@@ -18,9 +18,9 @@ from .gains import hinf_norm, injection_peak_gains
 from .noise import _noise_design
 from .runtime import SlidingModeReconstructor
 from .selfcheck import self_check
-from .validation import _mat, _pos
+from .validation import _mat, _pos, _spd
 
-__all__ = ["DELTA_LADDER", "design_reconstructor"]
+__all__ = ["DELTA_LADDER", "MAX_STEP_ERROR", "NOISE_WARN", "design_reconstructor"]
 
 def _as_omega(A_Omega, B_Omega, omega_d, h):
     omega_d = _pos(omega_d, "omega_d")
@@ -29,6 +29,59 @@ def _as_omega(A_Omega, B_Omega, omega_d, h):
     if h and np.linalg.eigvals(A_O).real.max() >= 0:
         raise DataError(f"A_Omega must be stable; eigenvalues {np.linalg.eigvals(A_O)}")
     return A_O, B_O
+
+
+#: Largest relative self-check step error a design may leave: above it the step is too large for
+#: the observer dynamics and the design is refused.
+MAX_STEP_ERROR = 1.0
+
+#: A noise-aware design whose predicted error exceeds this fraction of ``fault_bound`` warns.
+NOISE_WARN = 0.1
+
+
+def _finite_check(sc: dict | None) -> bool:
+    """A self-check with finite numbers (or no self-check)."""
+    if sc is None:
+        return True
+    xg = sc.get("xi_gain")
+    return bool(np.isfinite(sc["step_error"]) and (xg is None or np.isfinite(xg)))
+
+
+def _step_refusal(tried: list, dt: float, details: dict, why: str) -> ConditionError:
+    """The refusal of a design whose sampled observers fail on their own model, with the numbers."""
+    from .noise import _linear_runtime
+
+    eig = []
+    rads = []
+    for _d1, _d2, rec, _sc in tried:
+        Phi = _linear_runtime(rec)[0]
+        rads.append(float(np.abs(np.linalg.eigvals(Phi)).max()) if Phi.size else 0.0)
+    for key, A_, Gl_, C_ in _observer_mats(details):
+        ev = np.linalg.eigvals(A_ - Gl_ @ C_)
+        eig.append((key, float(np.abs(ev).max())))
+    lam = max((v for _k, v in eig), default=0.0)
+    hint = (f"the fastest linear observer mode has |lambda| = {lam:.4g} rad/s, so dt should be well "
+            f"below {1.0 / lam:.3g} s" if lam > 0 else "reduce dt")
+    return ConditionError(
+        "step", f"dt = {dt:g} s is too large for the observer dynamics: {why}; the runtime step's "
+        f"spectral radius is {', '.join(f'{r:.4g}' for r in rads)} for the layers tried (>= 1: "
+        f"unstable); {hint}. Use a smaller dt (resample the data faster) or a smaller D1 / "
+        f"gamma_o (slower observers)",
+        {"dt": dt, "self_checks": [sc for *_x, sc in tried], "step_spectral_radius": rads,
+         "observer_max_abs_eig": dict(eig)})
+
+
+def _observer_mats(details: dict) -> list:
+    """``(name, A, Gl, C)`` of each observer of a design (canonical coordinates)."""
+    out = []
+    if "canonical" in details and "primary_gains" in details:
+        cf, g1 = details["canonical"], details["primary_gains"]
+        out.append(("primary", cf.A, g1.Gl, cf.C))
+    g2 = details.get("secondary_gains")
+    if g2 is not None:
+        A2, C2 = details["secondary_system"]
+        out.append(("secondary", A2, g2.Gl, C2))
+    return out
 
 
 #: Boundary layers tried by the accuracy sizing of :func:`design_reconstructor` (largest first).
@@ -264,8 +317,8 @@ def design_reconstructor(
     aug = augment(l1, A_O, B_O)
     na = aug.n
     V1_given = V1 is not None
-    V1 = 100.0 * np.eye(na) if V1 is None else _mat(V1, (na, na), f"V1 (augmented state: {na})")
-    V2 = np.eye(p) if V2 is None else _mat(V2, (p, p), "V2")
+    V1 = 100.0 * np.eye(na) if V1 is None else _spd(_mat(V1, (na, na), f"V1 (augmented state: {na})"), "V1")
+    V2 = np.eye(p) if V2 is None else _spd(_mat(V2, (p, p), "V2"), "V2")
     info: dict[str, Any] = {"case": case, "conditions": cond.as_dict(), "rank_CM": cond.rank_CM,
                             "n_aug": na, "h": h, "q": q, "p": p}
     details: dict[str, Any] = {"conditions": cond, "lemma1": l1, "augmented": aug, "model": (A, M, C, Q)}
@@ -306,7 +359,7 @@ def design_reconstructor(
         details["primary_gains"], details["fictitious"] = g1, fs
         A2, M2, C2, Q2 = fs.A, fs.M, fs.C, fs.Q
         B2 = np.zeros((A2.shape[0], B.shape[1]))
-        D1m = 10.0 * np.eye(pbar) if D1 is None else _mat(D1, (pbar, pbar), "D1")
+        D1m = 10.0 * np.eye(pbar) if D1 is None else _spd(_mat(D1, (pbar, pbar), "D1"), "D1")
         ts = time.perf_counter()
         g2 = secondary_smo_lmi_search(A2, M2, C2, Q2, D1=D1m, gamma_o=gamma_o, retry=gamma_o_retry)
         t_lmi += time.perf_counter() - ts
@@ -320,7 +373,7 @@ def design_reconstructor(
         pbar, r = p, q
         Af = np.zeros((0, 0))
         A2, M2, C2, Q2, B2 = aug.A, aug.M, aug.C, aug.Q, aug.B
-        D1m = 10.0 * np.eye(pbar) if D1 is None else _mat(D1, (pbar, pbar), "D1")
+        D1m = 10.0 * np.eye(pbar) if D1 is None else _spd(_mat(D1, (pbar, pbar), "D1"), "D1")
         ts = time.perf_counter()
         g2 = secondary_smo_lmi_search(A2, M2, C2, Q2, D1=D1m, gamma_o=gamma_o, retry=gamma_o_retry)
         t_lmi += time.perf_counter() - ts
@@ -329,6 +382,7 @@ def design_reconstructor(
         g1f = g1x = 0.0
     solver["secondary"] = g2.solver
     details["secondary_gains"] = g2
+    details["secondary_system"] = (A2, C2)
     nb, pb = A2.shape[0], C2.shape[0]
     Tb = C2[:, nb - pb:]
     g2f, g2x = injection_peak_gains(A2, M2, Q2, C2, g2.L, g2.Po)
@@ -432,12 +486,18 @@ def design_reconstructor(
             d2 = user["delta2"] if user["delta2"] is not None else dl
             rec, sc = checked(d1, d2, tau0)
             tried.append((d1, d2, rec, sc))
+            if not _finite_check(sc):
+                continue  # a NaN / inf self-check is never chosen (recorded in info)
             if sc is None or (sc["step_error"] <= accuracy and
                               (sc["xi_gain"] is None or sc["xi_gain"] <= 0.5 * gam)):
                 break
-        if tried[-1][3] is not None and len(tried) > 1:
+        usable = [x for x in tried if _finite_check(x[3])]
+        if not usable:
+            raise _step_refusal(tried, dt, details, "every boundary layer tried gives a non-finite "
+                                "self-check (the observers diverge at this step)")
+        if usable[-1][3] is not None and len(usable) > 1:
             # the largest layer that is accurate and claims gamma-bar; else accurate; else the best
-            acc = [x for x in tried if x[3]["step_error"] <= accuracy]
+            acc = [x for x in usable if x[3]["step_error"] <= accuracy]
             claim = [x for x in acc if x[3]["xi_gain"] is None or x[3]["xi_gain"] <= gam]
             if claim:
                 pick = claim[0]
@@ -448,22 +508,47 @@ def design_reconstructor(
             elif acc:
                 pick = acc[0]
             else:
-                pick = min(tried, key=lambda x: x[3]["step_error"])
+                pick = min(usable, key=lambda x: x[3]["step_error"])
             d1, d2, rec, sc = pick
         else:
-            d1, d2, rec, sc = tried[-1]
+            d1, d2, rec, sc = usable[-1]
+        if sc is not None and sc["step_error"] > MAX_STEP_ERROR:
+            raise _step_refusal(tried, dt, details, f"the best self-check leaves a step error of "
+                                f"{sc['step_error']:.3g} (relative to the fault, > {MAX_STEP_ERROR:g})")
         info["noise"] = None
         info["boundary_layers"] = {
             "delta": d1, "delta2": d2, "sized": user["delta"] is None or user["delta2"] is None,
             "accuracy": accuracy,
-            "tried": [{"delta": a, "delta2": b_, **(c or {})} for a, b_, _r, c in tried],
+            "tried": [{"delta": a, "delta2": b_, **(c or {}),
+                       **({} if _finite_check(c) else {"skipped": "non-finite self-check"})}
+                      for a, b_, _r, c in tried],
             "note": "largest layer of DELTA_LADDER whose self-check step error is <= accuracy "
-                    "(relative to fault_bound) and whose xi gain allows claiming gamma-bar"}
+                    "(relative to fault_bound) and whose xi gain allows claiming gamma-bar; a layer "
+                    "whose self-check is not finite is skipped"}
     else:
         rec, info["noise"] = _noise_design(build, sig, user, lpf_tau, fault_rate, rho_v, rho2_v,
                                            g1 if case == "cascade" else None, g2, dt)
+        # white noise moves the output error every step: the transient test of the status
+        # (runtime.TRANSIENT_LEVEL) would flag every sample; fhat is low-passed instead
+        rec.transient_level = 0.0
+        info["noise"]["status_transient_level"] = 0.0
         sc = self_check(rec, fault_bound=f_chk, xi_amplitude=xi_chk if h else 0.0,
                         horizon=check_horizon) if check else None
+        nz = [(info["noise"]["delta"], info["noise"]["delta2"], rec, sc)]
+        if not _finite_check(sc):
+            raise _step_refusal(nz, dt, details, "the noise-sized boundary layers give a non-finite "
+                                "self-check")
+        if sc is not None and sc["step_error"] > MAX_STEP_ERROR:
+            raise _step_refusal(nz, dt, details, f"the noise-sized design leaves a self-check step "
+                                f"error of {sc['step_error']:.3g} (relative to the fault, > "
+                                f"{MAX_STEP_ERROR:g})")
+        pe = info["noise"]["predicted_error"]
+        if pe > NOISE_WARN * fault_bound:
+            warnings.warn(f"with noise_std = {sig.tolist()} the predicted reconstruction error is "
+                          f"{pe:.3g} ({pe / fault_bound:.1%} of fault_bound = {fault_bound:g}; lag "
+                          f"{info['noise']['lag_s']:.3g} s, noise std of fhat "
+                          f"{np.linalg.norm(info['noise']['fhat_noise_std']):.3g}): the estimate is "
+                          f"not accurate at this noise level; info['noise']", stacklevel=2)
     info["self_check"] = sc
     if sc is not None:
         if sig is None and sc["step_error"] > accuracy:

@@ -132,7 +132,7 @@ def _smo_step_py(h, A, B, C, Gl, Gn, rho, delta, SV, Smu, u, y, x, e, started, n
 _smo_step = njit(cache=True, inline="always")(_smo_step_py)
 
 
-def _status_py(e, SV, Smu, delta, level, Vprev, started, settle_n):
+def _status_py(e, SV, Smu, delta, level, Vprev, started, settle_n, e_old, h, rho, tlevel):
     """Sliding status of one observer after its step; updates ``Vprev`` (``[e^T Po e, hold]``).
 
     ``SLIDING`` while ``||nu|| / rho = ||e|| / (||e|| + delta) <= level`` (inside the boundary
@@ -142,23 +142,39 @@ def _status_py(e, SV, Smu, delta, level, Vprev, started, settle_n):
     for ``settle_n`` more samples inside it (``Vprev[1]`` counts them down): the reduced-order
     error that a loss of sliding leaves decays only with the sliding motion, so ``fhat`` is the
     equivalent injection again before it is the fault again.
+
+    Transients inside the layer. The injection of a step is ``nu = nu_eq + Po (e+ - e) / h``
+    (``nu_eq`` keeps the error where it is): while the error moves inside the layer (the reaching
+    after a fault jump, faster than the layer can follow), ``nu`` and so ``fhat`` are not yet the
+    equivalent injection. A step with ``||Po (e+ - e)|| / h > tlevel * rho`` (``e_old`` is the
+    error before the step) is ``NOT_SLIDING`` too (``tlevel = 0``: off); it starts no hold: once
+    the error rests, ``nu`` is the equivalent injection again (measured on random systems: the
+    reduced-order error such a transient leaves is small, unlike a loss of the layer).
     """
     p = e.shape[0]
     if p == 0:
         return 0
     ne = 0.0
     V = 0.0
+    dv = 0.0
     for i in range(p):
         ne += e[i] * e[i]
         acc = 0.0
+        dacc = 0.0
         for j in range(p):
             acc += SV[j, i] * e[j]
+            dacc += SV[j, i] * (e[j] - e_old[j])
         V += acc * acc / Smu[i]
+        dacc /= Smu[i]
+        dv += dacc * dacc
     ne = np.sqrt(ne)
     code = 0
+    moving = started and tlevel > 0.0 and np.sqrt(dv) > tlevel * rho * h
     if ne > level * (ne + delta):
         code = 1 if (not started or V < Vprev[0]) else 2
         Vprev[1] = settle_n
+    elif moving:
+        code = 1
     elif Vprev[1] > 0.0:
         Vprev[1] -= 1.0
         code = 1
@@ -172,14 +188,14 @@ _status = njit(cache=True, inline="always")(_status_py)
 def _kernel_py(h, cascade, A1, B1, C1, Gl1, Gn1, rho1, del1, S1V, S1mu, Tv, r, Zsel, Af,
                A2, B2, C2, Gl2, Gn2, rho2, del2, S2V, S2mu, Wf,
                U, Y, x1, e1, x2, e2, vf, started, out, implicit, level, a_lp, flp, V1p, V2p,
-               settle_n):
+               settle_n, tlevel):
     """Fixed-step integration of the primary and secondary (or single) observers.
 
     Per sample ``k``: primary step with ``y[k]`` -> ``nu`` (15)-(18), (24); ``v = T^T Po^-1 nu``
     (23); ``ybar = [Z v1; v_f]`` with ``v_f`` advanced by Euler (27)-(28); secondary step with
     ``ybar`` (37)-(39); ``f^ = Wf nubar``, low-passed by ``flp = a_lp flp + (1 - a_lp) f^`` when
     ``a_lp > 0``. ``out[run, k]`` holds ``q`` reconstructions, then the combined, primary and
-    secondary sliding status (:func:`_status`).
+    secondary sliding status (:func:`_status`; ``tlevel`` its transient level).
     """
     runs, T = Y.shape[0], Y.shape[1]
     n1, p1 = A1.shape[0], C1.shape[0]
@@ -193,16 +209,22 @@ def _kernel_py(h, cascade, A1, B1, C1, Gl1, Gn1, rho1, del1, S1V, S1mu, Tv, r, Z
     dx1, xt1, w1, wt1 = np.zeros(n1), np.zeros(n1), np.zeros(p1), np.zeros(p1)
     dx2, xt2, w2, wt2 = np.zeros(n2), np.zeros(n2), np.zeros(p2), np.zeros(p2)
     dvf = np.zeros(r)
+    eo1, eo2 = np.zeros(p1), np.zeros(p2)
     for run in range(runs):
         for k in range(T):
             u = U[run, k]
             st0 = started[run]
             c1 = 0
+            for i in range(p1):
+                eo1[i] = e1[run, i]
+            for i in range(p2):
+                eo2[i] = e2[run, i]
             if cascade:
                 _smo_step(h, A1, B1, C1, Gl1, Gn1, rho1, del1, S1V, S1mu, u, Y[run, k],
                           x1[run], e1[run], st0, nu1, dx1, xt1, w1, wt1,
                           implicit)
-                c1 = _status(e1[run], S1V, S1mu, del1, level, V1p[run], st0, settle_n)
+                c1 = _status(e1[run], S1V, S1mu, del1, level, V1p[run], st0, settle_n, eo1, h, rho1,
+                             tlevel)
                 _mv(Tv, nu1, v, False)  # ng-tan-edwards-kuang, eq. (23)
                 for i in range(Zsel.shape[0]):
                     ybar[i] = v[Zsel[i]]  # ng-tan-edwards-kuang, eq. (27)
@@ -224,7 +246,8 @@ def _kernel_py(h, cascade, A1, B1, C1, Gl1, Gn1, rho1, del1, S1V, S1mu, Tv, r, Z
                 _smo_step(h, A2, B2, C2, Gl2, Gn2, rho2, del2, S2V, S2mu, u, Y[run, k],
                           x2[run], e2[run], st0, nu2, dx2, xt2, w2, wt2,
                           implicit)
-            c2 = _status(e2[run], S2V, S2mu, del2, level, V2p[run], st0, settle_n)
+            c2 = _status(e2[run], S2V, S2mu, del2, level, V2p[run], st0, settle_n, eo2, h, rho2,
+                         tlevel)
             started[run] = True
             for i in range(q):
                 acc = 0.0

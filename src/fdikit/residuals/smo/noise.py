@@ -129,6 +129,9 @@ def _noise_design(build, sig, user, lpf_tau, fault_rate, rho1, rho2, g1, g2, dt)
             d1, d2 = layers(tau, e2)
             rec = build(d1, d2, tau)
             nr = noise_response(rec, sig)
+            if not (np.isfinite(nr["e2_rms"]) and np.isfinite(nr["e1_rms"])):
+                # the step inside these layers is unstable: this time constant is refused
+                return float("inf"), rec, nr, float("inf"), (d1, d2)
             if user["delta2"] is not None or d2 >= 3.0 * nr["e2_rms"] * 0.999:
                 break
             e2 = nr["e2_rms"]
@@ -139,19 +142,26 @@ def _noise_design(build, sig, user, lpf_tau, fault_rate, rho1, rho2, g1, g2, dt)
 
     taus = [lpf_tau] if lpf_tau is not None and lpf_tau > 0 else list(np.logspace(np.log10(20 * dt), 0.0, 25))
     best = None
+    refused = []
     for tau in taus:
         res = evaluate(float(tau))
-        if np.isfinite(res[0]) and (best is None or res[0] < best[0]):
+        if not np.isfinite(res[0]):
+            refused.append({"lpf_tau": float(tau), "spectral_radius": res[2]["spectral_radius"],
+                            "delta": res[4][0], "delta2": res[4][1]})
+        elif best is None or res[0] < best[0]:
             best = (*res, float(tau))
     if best is None:
         raise ConditionError("noise design", "no low-pass time constant gives a stable runtime step "
-                             f"(dt = {dt} s); reduce dt", {"tried": taus})
+                             f"(dt = {dt} s, noise_std = {sig.tolist()}): the linear step inside every "
+                             f"boundary layer tried is unstable (spectral radius >= 1); reduce dt or give "
+                             f"larger delta / delta2", {"tried": taus, "refused": refused})
     pred, rec, nr, lag, (d1, d2), tau = best
     out = {"noise_std": sig.tolist(), "lpf_tau": tau, "lag_s": lag, "delta": d1, "delta2": d2,
            "fhat_noise_std": nr["fhat_std"], "noise_gain": nr["gain"],
            "lag_error_bound": fault_rate * lag, "predicted_error": pred,
-           "e1_rms": nr["e1_rms"], "e2_rms": nr["e2_rms"],
+           "e1_rms": nr["e1_rms"], "e2_rms": nr["e2_rms"], "refused": refused,
            "note": "noise_gain[i][j]: std of fhat_i per unit std of white noise on output j (linear "
                    "boundary-layer model of the step as implemented); lag_s: low-pass + loop time "
-                   "constants; lag_error_bound = fault_rate * lag_s"}
+                   "constants; lag_error_bound = fault_rate * lag_s; refused: low-pass time constants "
+                   "whose step inside the boundary layers is unstable"}
     return rec, out

@@ -18,7 +18,11 @@ from ...signals import Signals, check_finite
 from .kernel import _kernel
 from .validation import _mat, _pos
 
-__all__ = ["SlidingModeReconstructor", "integrate_observers"]
+__all__ = ["TRANSIENT_LEVEL", "SlidingModeReconstructor", "integrate_observers"]
+
+#: Default transient level of the status: a step whose injection moves more than this fraction of
+#: ``rho`` away from the equivalent injection (``||Po (e+ - e)|| / h``) is not sliding.
+TRANSIENT_LEVEL = 1e-3
 
 @dataclass
 class SlidingModeReconstructor(ResidualGenerator):
@@ -65,6 +69,10 @@ class SlidingModeReconstructor(ResidualGenerator):
         Boundary-layer level of the status: sliding while ``||nu|| <= level * rho`` (0 < level < 1).
     lpf_tau : float
         Time constant (s) of the first-order low-pass on ``fhat`` (0: none).
+    transient_level : float
+        Status: a step whose injection differs from the equivalent injection by more than
+        ``transient_level * rho`` (``||Po (e+ - e)|| / h``: the error still moves inside the
+        layer, as in the reaching after a fault jump) is not sliding (0: off).
     settle : float
         After a loss of sliding, the status stays "not sliding" until the error has stayed inside
         the boundary layer this long (s): the time the sliding motion needs to wash out what the
@@ -89,6 +97,7 @@ class SlidingModeReconstructor(ResidualGenerator):
     level: float = 0.9
     lpf_tau: float = 0.0
     settle: float = 0.0
+    transient_level: float = TRANSIENT_LEVEL
 
     STATUS_NAMES = ("sliding_status", "sliding_status:primary", "sliding_status:secondary")
 
@@ -101,6 +110,7 @@ class SlidingModeReconstructor(ResidualGenerator):
             raise DataError(f"level must be in (0, 1), got {self.level}")
         self.lpf_tau = _pos(self.lpf_tau, "lpf_tau", allow_zero=True)
         self.settle = _pos(self.settle, "settle", allow_zero=True)
+        self.transient_level = _pos(self.transient_level, "transient_level", allow_zero=True)
         self.u_names, self.y_names = list(self.u_names), list(self.y_names)
         m, py = len(self.u_names), len(self.y_names)
         for key, d in (("primary", self.primary), ("secondary", self.secondary)):
@@ -206,7 +216,8 @@ class SlidingModeReconstructor(ResidualGenerator):
             "Wf_shape": list(self.Wf.shape),
             "r": self.r, "dt": self.dt, "u_names": self.u_names, "y_names": self.y_names,
             "output_names": self.output_names, "scheme": self.scheme, "level": self.level,
-            "lpf_tau": self.lpf_tau, "settle": self.settle, "info": plain(self.info),
+            "lpf_tau": self.lpf_tau, "settle": self.settle, "transient_level": self.transient_level,
+            "info": plain(self.info),
         }
 
     @classmethod
@@ -242,7 +253,8 @@ class SlidingModeReconstructor(ResidualGenerator):
             dt=float(d["dt"]), u_names=list(d["u_names"]), y_names=list(d["y_names"]),
             output_names=names, info=dict(d.get("info", {})), scheme=d["scheme"],
             level=float(d.get("level", 0.9)), lpf_tau=float(d.get("lpf_tau", 0.0)),
-            settle=float(d.get("settle", 0.0)))
+            settle=float(d.get("settle", 0.0)),
+            transient_level=float(d.get("transient_level", TRANSIENT_LEVEL)))
 
     def error_transfer(self):
         """``G(s)`` of ng-tan-edwards-kuang eq. (40): ``xi`` -> reconstruction error ``f^ - f``.
@@ -317,7 +329,8 @@ class SlidingModeReconstructor(ResidualGenerator):
                 float(S["delta"]), S["SV"], S["Smu"], self.Wf, U, Y,
                 st["x1"], st["e1"], st["x2"], st["e2"], st["vf"], st["started"], out,
                 self.scheme == "implicit", float(self.level), a_lp, st["flp"], st["V1"], st["V2"],
-                float(np.ceil(self.settle / self.dt - 1e-9)) if self.settle > 0 else 0.0)
+                float(np.ceil(self.settle / self.dt - 1e-9)) if self.settle > 0 else 0.0,
+                float(self.transient_level))
         st["k"][0] += Y.shape[1]
         return out
 

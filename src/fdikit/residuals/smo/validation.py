@@ -52,3 +52,18 @@ def _pos(x: Any, what: str, *, allow_zero: bool = False) -> float:
 
 def _norm2(X: np.ndarray) -> float:
     return float(np.linalg.norm(X, 2)) if X.size else 0.0
+
+
+def _spd(X: np.ndarray, what: str) -> np.ndarray:
+    """``X`` if symmetric positive definite, or DataError naming it with its smallest eigenvalue."""
+    if X.size == 0:
+        return X
+    asym = float(np.abs(X - X.T).max())
+    if asym > 1e-10 * max(float(np.abs(X).max()), 1e-300):
+        raise DataError(f"{what} must be symmetric positive definite; it is not symmetric "
+                        f"(largest |X - X^T| = {asym:.3g})")
+    lam = float(np.linalg.eigvalsh(0.5 * (X + X.T)).min())
+    if not lam > 0:
+        raise DataError(f"{what} must be symmetric positive definite; its smallest eigenvalue is "
+                        f"{lam:.4g}")
+    return X

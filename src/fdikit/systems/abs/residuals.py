@@ -613,6 +613,8 @@ class ABSObserver(ResidualGenerator):
         nominal GLRT values of r3, W = 40, all fell 0.1-0.3 s before standstill, 99th percentile
         56.8 against a median of 9.1). ``0`` keeps every sample.
 
+    Notes
+    -----
     The state starts at ``[y1_0, y2_0, 0, 0, 0]`` at the first sample (car rolling, brake off).
     At sample ``k`` the residual is ``y_k - C x_hat(t_k)`` (eq. (33)); then ``x_hat`` is
     integrated to ``t_{k+1}`` with ``y_k`` held (eq. (31)) and ``P_m``, ``u_in``, ``u_out`` of

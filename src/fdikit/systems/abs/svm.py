@@ -86,7 +86,8 @@ def improved_pipeline(
     scale : bool
         Insert a ``StandardScaler`` after the features (off for the ABS: see the module docstring).
     Cs, gammas, cv, random_state
-        See :func:`~fdikit.isolate.svm.cv_pipeline`.
+        See :func:`~fdikit.isolate.svm.cv_pipeline`. The folds are shuffled (``shuffle=True``): every
+        pattern is an independent simulated run, so no pattern's neighbour leaks into validation.
 
     Examples
     --------
@@ -95,7 +96,7 @@ def improved_pipeline(
     ['svc__C', 'svc__gamma']
     """
     return cv_pipeline(WindowFeatures(n_channels, window, combination), scale=scale, Cs=Cs, gammas=gammas,
-                       cv=cv, random_state=random_state)
+                       cv=cv, random_state=random_state, shuffle=True)
 
 
 def abs_pipeline(kind: Any) -> Any:

@@ -53,8 +53,11 @@ __all__ = [
     "true_A",
 ]
 
+#: States of the lateral aircraft model of ng-tan-edwards-kuang, Section IV.
 STATES = ["bank_angle", "yaw_rate", "roll_rate", "sideslip", "washout", "rudder", "aileron"]
+#: Actuator commands.
 INPUTS = ["rudder_cmd", "aileron_cmd"]
+#: Measured outputs (bank angle, yaw rate, roll rate).
 OUTPUTS = ["bank_angle_meas", "yaw_rate_meas", "roll_rate_meas"]
 
 #: Nominal A of ng-tan-edwards-kuang, Section IV (as printed).
@@ -79,6 +82,7 @@ A_TRUE = np.array([
     [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, -25.0],
 ])
 
+#: The uncertainty: ``A_TRUE - A_NOMINAL``.
 DELTA_A = A_TRUE - A_NOMINAL
 
 #: Uncertainty distribution (ng-tan-edwards-kuang: [0_{1x3}; I3; 0_{3x3}]).
@@ -95,7 +99,9 @@ XI_PRINTED = np.array([[0.0, 0.0, 0.0, 0.1, 0.0, 0.0, 0.0],
 
 #: Actuators: first-order lags of 20 and 25 rad/s (the rudder column is ng-tan-edwards-kuang's M).
 B = np.array([[0.0, 0.0]] * 5 + [[20.0, 0.0], [0.0, 25.0]])
+#: Output matrix: the first three states are measured.
 C = np.hstack([np.eye(3), np.zeros((3, 4))])
+#: Fault distribution: the rudder actuator (the first column of ``B``).
 M = B[:, [0]]
 
 

@@ -47,6 +47,7 @@ __all__ = [
 
 #: The paper's faults (Section IV-B, Fig. 2 and the lateral list of Section IV-E).
 SENSOR_FAULTS = [f"sensor:{y}" for y in OUTPUTS]
+#: Actuator faults of the paper: throttle, brake and steering.
 ACTUATOR_FAULTS = ["actuator:throttle", "actuator:brake", "actuator:steer"]
 
 

@@ -68,6 +68,7 @@ __all__ = [
 
 G = 9.80665
 
+#: States of the longitudinal model (engine, driveline, wheels), slow ones first.
 LONGITUDINAL_STATES = [
     "m_air",       # manifold air mass (kg)
     "w_e",         # engine speed (rad/s)
@@ -84,6 +85,7 @@ LONGITUDINAL_STATES = [
     "w_f",         # front axle mean wheel speed (rad/s)     - fast (tyre slip)
     "w_r",         # rear axle mean wheel speed (rad/s)      - fast (tyre slip)
 ]
+#: States of the lateral model (yaw, sideslip, suspension), slow ones first.
 LATERAL_STATES = [
     "v_y",         # lateral velocity, body frame (m/s)
     "phi",         # roll angle (rad)
@@ -94,13 +96,19 @@ LATERAL_STATES = [
     "dd_f",        # rate of d_f (m/s)                       - fast (wheel hop, antisymmetric)
     "dd_r",        # rate of d_r (m/s)                       - fast
 ]
+#: The slow longitudinal states kept by the reduced (residualised) model.
 LONGITUDINAL_REDUCED = LONGITUDINAL_STATES[:10]
+#: The slow lateral states kept by the reduced (residualised) model.
 LATERAL_REDUCED = LATERAL_STATES[:6]
 
+#: Inputs of the nonlinear car: throttle (deg), brake (MPa), steering (rad), road slope (rad).
 INPUTS = ["throttle", "brake", "steer", "slope"]
+#: Inputs of the longitudinal linear model.
 LONGITUDINAL_INPUTS = ["throttle", "brake"]
+#: Inputs of the lateral linear model.
 LATERAL_INPUTS = ["steer"]
 
+#: Sensors of the car, in the order of the output vector (units in the comments).
 OUTPUTS = [
     "p_man",       # manifold pressure sensor (kPa)
     "w_engine",    # engine speed sensor (rad/s)
@@ -114,7 +122,9 @@ OUTPUTS = [
     "w_front_diff",  # difference FL - FR of the front wheel speed sensors (rad/s): yaw + load transfer
     "w_rear_diff",   # difference RL - RR of the rear wheel speed sensors (rad/s)
 ]
+#: Sensors of the longitudinal linear model.
 LONGITUDINAL_OUTPUTS = ["p_man", "w_engine", "a_x", "w_front_sum", "w_rear_sum"]
+#: Sensors of the lateral linear model.
 LATERAL_OUTPUTS = ["a_y", "yaw_rate", "w_front_diff", "w_rear_diff"]
 
 UNITS = {
@@ -198,6 +208,7 @@ PARAM_DOC: dict[str, tuple[float, str, str]] = {
     "k_br": (180.0, "N m/MPa", "rear axle brake torque per MPa (~70/30 split)"),
     "w_b_eps": (1.0, "rad/s", "wheel speed below which brake torque fades to zero (tanh), no stiction"),
 }
+#: Parameter values by name (the first entries of :data:`PARAM_DOC`).
 DEFAULT_PARAMS: dict[str, float] = {k: v[0] for k, v in PARAM_DOC.items()}
 
 

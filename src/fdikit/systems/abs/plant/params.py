@@ -10,6 +10,8 @@ from __future__ import annotations
 G = 9.81  # m/s^2
 _M_CAR = 1200.0  # kg, vehicle mass m of eq. (30) (not given in the paper; a compact car)
 
+#: The plant and controller parameters by name (luo-et-al Table I; the values the paper prints
+#: garbled or omits are replaced, each with its reason beside it).
 PARAMS: dict[str, float] = {
     # sliding-mode PWM controller, eqs. (1)-(3)
     "alpha": 0.01,  # s, Table I

@@ -1,0 +1,164 @@
+"""Issue 31: the SMO reconstructor keeps its word -- validated inputs, finite self-checks,
+refusals with numbers, noise designs that never crash, a status that is not "sliding" while the
+estimate is wrong after a fault jump."""
+
+import warnings
+
+import numpy as np
+import pytest
+
+from fdikit.errors import ConditionError, DataError, ModelError
+from fdikit.model.linear import LinearFaultModel
+from fdikit.model.random_systems import as_fault_model, random_fault_system
+from fdikit.residuals.smo import SLIDING, design_reconstructor, integrate_observers, simulate_plant
+
+try:  # the design's module (self_check is looked up there)
+    from fdikit.residuals.smo import design as smo_design
+except ImportError:  # a single-module smo (before the package)
+    import fdikit.residuals.smo as smo_design
+
+
+def _model(seed):
+    A, M, C, Q = random_fault_system(seed)
+    return (A, M, C, Q), as_fault_model(A, M, C, Q)
+
+
+# ----------------------------------------------------------------------------- validation
+def test_a_1d_control_matrix_of_the_wrong_length_is_named():
+    (A, _M, C, _Q), _m = _model(1)
+    with pytest.raises(ModelError, match="B given as a 1-D array"):
+        LinearFaultModel(A, np.ones(A.shape[0] - 1), C)
+
+
+def test_a_non_finite_fault_direction_is_refused():
+    (A, M, C, _Q), _m = _model(1)
+    b = M[:, 0].copy()
+    b[2] = np.nan
+    with pytest.raises(ModelError, match="non-finite"):
+        LinearFaultModel(A, np.zeros((A.shape[0], 0)), C, faults=[("f0", b, None)])
+
+
+def test_D1_must_be_positive_definite():
+    (_A, _M, C, _Q), m = _model(1)
+    with pytest.raises(DataError, match="D1 must be symmetric positive definite"):
+        design_reconstructor(m, D1=-np.eye(C.shape[0]), check=False, hinf_check=False)
+
+
+def test_a_step_too_large_for_the_observers_is_refused_with_numbers():
+    _sys, m = _model(1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        with pytest.raises(ConditionError, match="too large for the observer dynamics") as ei:
+            design_reconstructor(m, dt=0.5, hinf_check=False)
+    assert ei.value.condition == "step"
+    assert max(ei.value.details["step_spectral_radius"]) > 1.0
+
+
+def test_the_lmi_refusal_says_why_and_what_to_try():
+    (_A, _M, C, _Q), m = _model(4)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        with pytest.raises(ConditionError, match="What to try") as ei:
+            design_reconstructor(m, D1=1e-3 * np.eye(C.shape[0]), check=False, hinf_check=False)
+    assert "badly scaled" in ei.value.details["why"]
+
+
+# ----------------------------------------------------------------------------- finite ladder
+def _fake_checks(monkeypatch, nan_layers):
+    real = smo_design.self_check
+
+    def fake(rec, **kw):
+        sc = real(rec, **kw)
+        if rec.secondary["delta"] in nan_layers:
+            sc = {**sc, "step_error": float("nan")}
+        return sc
+
+    monkeypatch.setattr(smo_design, "self_check", fake)
+
+
+def test_a_nan_self_check_is_never_chosen(monkeypatch):
+    _sys, m = _model(1)
+    _fake_checks(monkeypatch, {1e-5})
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        rec = design_reconstructor(m, accuracy=1e-14, check_horizon=0.1, hinf_check=False)
+    assert rec.secondary["delta"] != 1e-5
+    assert np.isfinite(rec.info["self_check"]["step_error"])
+    tried = rec.info["boundary_layers"]["tried"]
+    assert tried[0]["skipped"] == "non-finite self-check"
+
+
+def test_no_finite_self_check_refuses_the_design(monkeypatch):
+    _sys, m = _model(1)
+    _fake_checks(monkeypatch, set(smo_design.DELTA_LADDER))
+    with pytest.raises(ConditionError, match="non-finite self-check"):
+        design_reconstructor(m, check_horizon=0.05, hinf_check=False)
+
+
+# ----------------------------------------------------------------------------- noise
+def test_noise_design_with_an_unstable_step_refuses_clearly_instead_of_crashing():
+    _sys, m = _model(1)
+    with pytest.raises(ConditionError, match="no low-pass time constant gives a stable runtime step"):
+        design_reconstructor(m, noise_std=1e-5, dt=1e-3, check=False, hinf_check=False)
+
+
+def test_a_large_predicted_noise_error_warns_with_the_number():
+    _sys, m = _model(1)
+    with pytest.warns(UserWarning, match="predicted reconstruction error is"):
+        rec = design_reconstructor(m, noise_std=1e-5, check=False, hinf_check=False)
+    assert rec.info["noise"]["predicted_error"] > 0.1
+
+
+# ----------------------------------------------------------------------------- status
+@pytest.fixture(scope="module")
+def designs():
+    out = {}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for seed in (1, 2):
+            (A, M, C, _Q), m = _model(seed)
+            rec = design_reconstructor(m, hinf_check=False, check_horizon=0.3)
+            g = rec.info["gains"]
+            small = design_reconstructor(m, hinf_check=False, check_horizon=0.3,
+                                         rho=g["rho"] / 5, rho2=g["rho2"] / 5)
+            out[seed] = ((A, M, C), rec, small)
+    return out
+
+
+def _silent_errors(rec, A, M, C, shape):
+    dt = rec.dt
+    t = np.arange(round(0.8 / dt) + 1) * dt
+    q = M.shape[1]
+    d = np.where(np.arange(q) % 2 == 0, 1.0, -1.0) / np.sqrt(q)
+    s = {"square": np.where(np.sin(2 * np.pi * (t - 0.2)) >= 0, 1.0, -1.0) * (t >= 0.2),
+         "step": 0.5 * (t >= 0.2) + 0.5 * (t >= 0.5),
+         "ramp": np.clip((t - 0.2) / 0.3, 0.0, 1.0)}[shape]
+    f = s[:, None] * d
+    Y = simulate_plant(A, M, C, f, dt)
+    fh, st = integrate_observers(rec, np.zeros((1, t.size, 0)), Y, return_status=True)
+    # y[k] cannot see f[k] yet (one sample of causal delay): score against f[k] or f[k-1]
+    fprev = np.vstack([f[:1], f[:-1]])
+    err = np.minimum(np.linalg.norm(fh[0] - f, axis=1), np.linalg.norm(fh[0] - fprev, axis=1))
+    return int(np.sum((err > 0.05) & (st[0, :, 0] == SLIDING))), fh
+
+
+@pytest.mark.parametrize("shape", ["square", "step"])
+@pytest.mark.parametrize("gains", ["default", "undersized"])
+def test_no_wrong_estimate_is_called_sliding(designs, shape, gains):
+    for (A, M, C), rec, small in designs.values():
+        n_bad, _fh = _silent_errors(rec if gains == "default" else small, A, M, C, shape)
+        assert n_bad == 0
+
+
+def test_the_status_does_not_change_fhat(designs):
+    (A, M, C), rec, _small = designs[1]
+    n_on, fh = _silent_errors(rec, A, M, C, "square")
+    assert n_on == 0
+    old = rec.transient_level
+    try:
+        rec.transient_level = 0.0
+        n_off, fh_off = _silent_errors(rec, A, M, C, "square")
+    finally:
+        rec.transient_level = old
+    assert np.array_equal(fh, fh_off)
+    assert n_off > 0  # without the transient test the jumps are called sliding
