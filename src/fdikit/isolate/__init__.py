@@ -35,8 +35,8 @@ def __getattr__(name: str):
     raise AttributeError(f"module 'fdikit.isolate' has no attribute {name!r}")
 
 __all__ = [
-    "BlockedStratifiedKFold",
     "FAULT_TYPES",
+    "BlockedStratifiedKFold",
     "DMatrix",
     "DMatrixDecision",
     "Diagnosis",

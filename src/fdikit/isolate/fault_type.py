@@ -124,7 +124,8 @@ class FaultTypeClassifier(ResidualProcessor):
     def __init__(self, members: Sequence[str], sigma: Mapping[str, float], window: int, *,
                  channels: Mapping[str, str] | None = None, raw: Mapping[str, str] | None = None,
                  stuck_after: Mapping[str, int] | None = None, lookback: int = 50, min_len: int = 10,
-                 spike_max: int = 10, burst_gap: int = 25, release: float = 0.5, clear_after: int = 250, prefer: float = 6.0):
+                 spike_max: int = 10, burst_gap: int = 25, release: float = 0.5, clear_after: int = 250,
+                 prefer: float = 6.0):
         self.members = [str(m) for m in members]
         if not self.members:
             raise DataError("FaultTypeClassifier needs at least one member")
@@ -132,7 +133,8 @@ class FaultTypeClassifier(ResidualProcessor):
         if any(not (np.isfinite(s) and s > 0) for s in self.sigma.values()):
             raise DataError(f"sigma must be finite and > 0 per member, got {self.sigma}")
         for what, v, lo in (("window", window, 2), ("lookback", lookback, 0), ("min_len", min_len, 1),
-                            ("spike_max", spike_max, 1), ("burst_gap", burst_gap, 1), ("clear_after", clear_after, 1)):
+                            ("spike_max", spike_max, 1), ("burst_gap", burst_gap, 1),
+                            ("clear_after", clear_after, 1)):
             if isinstance(v, bool) or int(v) != v or v < lo:
                 raise DataError(f"{what} must be an integer >= {lo} (samples), got {v!r}")
         self.window, self.lookback, self.min_len = int(window), int(lookback), int(min_len)
@@ -257,10 +259,11 @@ class FaultTypeClassifier(ResidualProcessor):
                 f"stuck_after={self.stuck_after})")
 
     def to_dict(self) -> dict[str, Any]:
-        return {"members": self.members, "sigma": self.sigma, "window": self.window, "channels": self.channels,
-                "raw": self.raw, "stuck_after": self.stuck_after, "lookback": self.lookback,
-                "min_len": self.min_len, "spike_max": self.spike_max, "burst_gap": self.burst_gap, "release": self.release,
-                "clear_after": self.clear_after, "prefer": self.prefer}
+        return {"members": self.members, "sigma": self.sigma, "window": self.window,
+                "channels": self.channels, "raw": self.raw, "stuck_after": self.stuck_after,
+                "lookback": self.lookback, "min_len": self.min_len, "spike_max": self.spike_max,
+                "burst_gap": self.burst_gap, "release": self.release, "clear_after": self.clear_after,
+                "prefer": self.prefer}
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> FaultTypeClassifier:

@@ -39,7 +39,10 @@ class Rav4Monitor:
         Generator :class:`Rav4LateralFilter` (raw channels), processors :class:`Rav4FeatureNorms`,
         :class:`Rav4MHSSPT`, :class:`~fdikit.detect.Hold`, and the announcement decision.
     artifacts : dict
-        The saveable parts ``{"filter", "features", "mhsspt", "hold"}`` (what :func:`design` returns).
+        The saveable parts ``{"filter", "features", "mhsspt", "hold"}``, with the sensor checks also
+        ``"sensor_channels"``, ``"sensor_<i>"``, ``"sensor_hold"`` and, with the peer checks,
+        ``"peer_signals"``, ``"peer_check"``, ``"fault_type"``, ``"type_hold"`` (what :func:`design`
+        returns), generators first, each in the monitor's order.
     decision : Decision
     faults : list of str
     model : LinearFaultModel
@@ -49,7 +52,8 @@ class Rav4Monitor:
     raw : Signals
         The real minute (raw channels).
     record : dict
-        Preprocessing, fit and calibration record.
+        Preprocessing, fit and calibration record; ``record["stages"]`` the artifact names of the
+        generators and of the processors in the monitor's order (what the config lists).
     """
 
     def __init__(self, monitor, artifacts, decision, faults, model, designs, raw, record):
@@ -92,7 +96,8 @@ def rav4_monitor(path: str | None = None, *, rate: float = 50.0, q_weight: float
                  inflate: float = 2.5, hold: int = 10, tau: float = 0.0, n_speeds: int = 4,
                  band_hz: float = 3.0, h0_window: float = 0.2, warmup: float = 2.0,
                  level: float = 0.95, nuisance: tuple[str, ...] = (), settle: float = 0.04,
-                 sensor_checks: bool = True, sensor_warmup: float = 5.0, peer_checks: bool = True) -> Rav4Monitor:
+                 sensor_checks: bool = True, sensor_warmup: float = 5.0,
+                 peer_checks: bool = True) -> Rav4Monitor:
     """Design and calibrate the RAV4 lateral monitor on the first half of the real minute.
 
     Parameters
@@ -193,8 +198,8 @@ def rav4_monitor(path: str | None = None, *, rate: float = 50.0, q_weight: float
     test = Rav4MHSSPT(feats.output_names, cal.densities, p=p, groups=cal.groups, warmup=round(warmup / dt),
                       tabulate=MHSSPT_TABLE, interpolation="cubic")
     announce = Hold([f"P:{f}" for f in faults], level, Z=max(1, int(hold)), absolute=False)
-    gens, procs = [gen], [feats, test, announce]
-    arts_extra: dict[str, Any] = {}
+    gens: dict[str, Any] = {"filter": gen}
+    procs: dict[str, Any] = {"features": feats, "mhsspt": test, "hold": announce}
     sensor_names: dict[str, str] = {}
     if sensor_checks:
         chk = fit_sensor_channels(raw, half_s, pre, rec)
@@ -205,13 +210,13 @@ def rav4_monitor(path: str | None = None, *, rate: float = 50.0, q_weight: float
             from ....detect import StuckDetector
 
             dets = [d for d in dets if isinstance(d, StuckDetector)]
-            sensor_names = {k: v for k, v in sensor_names.items() if k in {n for d in dets for n in d.output_names}}
+            kept = {n for d in dets for n in d.output_names}
+            sensor_names = {k: v for k, v in sensor_names.items() if k in kept}
         sensor_hold = Hold([n for d in dets for n in d.output_names if n in sensor_names], 1.0,
                            Z=max(1, int(hold)), absolute=False)
-        gens.append(chk)
-        procs.extend([*dets, sensor_hold])
-        arts_extra = {"sensor_channels": chk, **{f"sensor_{i}": d for i, d in enumerate(dets)},
-                      "sensor_hold": sensor_hold}
+        gens["sensor_channels"] = chk
+        procs.update({f"sensor_{i}": d for i, d in enumerate(dets)})
+        procs["sensor_hold"] = sensor_hold
         rec["sensor_checks"] = {"coef": chk.coef, "detectors": [repr(d) for d in dets]}
         if peer_checks:
             psig = Rav4PeerSignals(pre, chk.coef["steer"], rec["k_f"], rec["k_r"])
@@ -220,20 +225,19 @@ def rav4_monitor(path: str | None = None, *, rate: float = 50.0, q_weight: float
                 psig.run(Signals(raw.t[cal_t], raw.values[:, cal_t], raw.names, check=False)), dt, skip=sk,
                 warmup=sk)
             type_hold = Hold(list(type_names), 0.5, Z=max(1, int(hold)), absolute=False)
-            gens.append(psig)
-            procs.extend([pc, ftc, type_hold])
+            gens["peer_signals"] = psig
+            procs.update(peer_check=pc, fault_type=ftc, type_hold=type_hold)
             sensor_names.update(type_names)
-            arts_extra.update(peer_signals=psig, peer_check=pc, fault_type=ftc, type_hold=type_hold)
             rec["peer_checks"] = {"thresholds": pc.thresholds, "coef": pc.coef, "sigma": ftc.sigma,
                                   "stuck_after": ftc.stuck_after}
     dec = decision_for(faults, sensor_names)
-    mon = Monitor(gens, procs, dec)
+    mon = Monitor(list(gens.values()), list(procs.values()), dec)
     rec["filter_methods"] = {f"set{s}/{t_}": d.info.get("method") for s, ds in designs.items()
                              for t_, d in ds.items()}
     rec["calibration"] = {h: {"low": d.low.round(4).tolist(), "high": d.high.round(4).tolist(),
                               "std": d.std.round(4).tolist()} for h, d in cal.densities.items()}
-    arts = {"filter": gen, "features": feats, "mhsspt": test, "hold": announce, **arts_extra}
-    return Rav4Monitor(mon, arts, dec, faults, md, designs, raw, rec)
+    rec["stages"] = {"generators": list(gens), "processors": list(procs)}
+    return Rav4Monitor(mon, {**gens, **procs}, dec, faults, md, designs, raw, rec)
 
 
 def design(params: dict | None = None) -> dict[str, Any]:
@@ -246,13 +250,13 @@ def design(params: dict | None = None) -> dict[str, Any]:
     -------
     dict
         ``{"filter": Rav4LateralFilter, "features": Rav4FeatureNorms, "mhsspt": Rav4MHSSPT,
-        "hold": Hold}``.
+        "hold": Hold, ...}`` and the sensor and peer checks' stages (:attr:`Rav4Monitor.artifacts`).
 
     Examples
     --------
     >>> arts = design({})                                  # doctest: +SKIP
-    >>> sorted(arts)                                       # doctest: +SKIP
-    ['features', 'filter', 'hold', 'mhsspt']
+    >>> list(arts)[:4]                                     # doctest: +SKIP
+    ['filter', 'sensor_channels', 'peer_signals', 'features']
     """
     kw = dict(params or {})
     data = kw.pop("data", None)

@@ -41,8 +41,9 @@ class Rav4PeerSignals(ResidualGenerator):
 
     ``sig:wheel_*`` (m/s); in rad/s: ``sig:yaw_rate`` (the gyro, offset removed),
     ``sig:lateral_accelerometer`` (``a_y / U``), ``sig:steering`` (kinematic steering,
-    ``(steer - c_0) U / L``; the peer check fits its gain and sign), ``sig:yaw_front`` / ``sig:yaw_rear`` (each
-    axle's wheel-speed difference over ``k_f`` / ``k_r``); ``raw:*`` the raw sensor values.
+    ``(steer - c_0) U / L``; the peer check fits its gain and sign), ``sig:yaw_front`` /
+    ``sig:yaw_rear`` (each axle's wheel-speed difference over ``k_f`` / ``k_r``); ``raw:*`` the raw
+    sensor values.
     Stateless.
 
     Parameters
@@ -61,7 +62,8 @@ class Rav4PeerSignals(ResidualGenerator):
         self.steer = [float(c) for c in steer]
         self.k_f, self.k_r = float(k_f), float(k_r)
         if len(self.steer) != 3 or not (self.k_f and self.k_r):
-            raise DataError(f"steer needs 3 coefficients and k_f, k_r must be non-zero; got {steer}, {k_f}, {k_r}")
+            raise DataError(f"steer needs 3 coefficients and k_f, k_r must be non-zero; "
+                            f"got {steer}, {k_f}, {k_r}")
         self.u_names, self.y_names = list(_RAW_U), list(_RAW_Y)
         self.output_names = [m for ms in PEER_GROUPS.values() for m in ms] + sorted(set(_RAW_OF.values()))
         self.output_units = ["m/s"] * 4 + ["rad/s"] * 5 + ["-"] * len(set(_RAW_OF.values()))
@@ -104,9 +106,9 @@ class Rav4PeerSignals(ResidualGenerator):
         return Signals(signals.t, self._compute(u, y), self.output_names, check=False)
 
 
-def design_peer_stages(sig: Signals, dt: float, *, skip: int, warmup: int, band_hz=None, stuck_margin: float = 1.0,
-                       window_s: float = 30.0, lookback_s: float = 5.0, clear_after_s: float = 5.0,
-                       pfa: float = 1.0, per="hour", margin: float = 0.0):
+def design_peer_stages(sig: Signals, dt: float, *, skip: int, warmup: int, band_hz=None,
+                       stuck_margin: float = 1.0, window_s: float = 30.0, lookback_s: float = 5.0,
+                       clear_after_s: float = 5.0, pfa: float = 1.0, per="hour", margin: float = 0.0):
     """The peer check and the fault-type classifier designed on nominal :class:`Rav4PeerSignals`
     outputs ``sig`` (the calibration half).
 
