@@ -18,7 +18,7 @@ from fdikit.residuals import ObserverResidual, design_observer_residual
 DT = 0.01
 
 
-def build_monitor() -> Monitor:
+def build_monitor(**options) -> Monitor:
     A = [[0, 1, 0, 0], [-2, -0.4, 1, 0], [0, 0, 0, 1], [1, 0, -1, -0.3]]
     plant = LinearFaultModel(A, [[0], [1], [0], [0]], [[1, 0, 0, 0], [0, 0, 1, 0]],
                              inputs=["force"], outputs=["pos1", "pos2"])
@@ -29,7 +29,7 @@ def build_monitor() -> Monitor:
     mh = MHSSPT(["r:pos2"], {"ok": UniformMeanGaussian([0], [0], [0.002]),
                              "bias": UniformMeanGaussian([0.005], [0.05], [0.002])}, p=1e-3, q=1e-4)
     return Monitor([gen], [glrt, hold, gate, mh],
-                   Decision(["r:pos2:glrt:alarm", "P:bias"], level=0.9))
+                   Decision(["r:pos2:glrt:alarm", "P:bias"], level=0.9), **options)
 
 
 def record(runs=2, T=800, seed=3) -> Signals:
@@ -132,3 +132,19 @@ def test_batch_equals_streaming_with_time_gated_and_mhsspt():
     b = build_monitor().stream(sig)
     np.testing.assert_array_equal(a.statistics.values, b.statistics.values)
     assert a.events == b.events
+
+
+def test_an_infinite_sample_is_held_in_streaming_as_in_batch_without_max_abs():
+    """max_abs=None switches off the magnitude limit, not the finiteness check: +inf and -inf are
+    held in streaming as in batch (the streaming screen compared the largest |x| with an infinite
+    limit, and inf <= inf let +inf reach the filters)."""
+    sig = record(runs=1, T=300)
+    v = sig.values.copy()
+    v[0, 150, 1] = np.inf
+    v[0, 160, 2] = -np.inf
+    bad = Signals(sig.t, v, sig.names, check=False)
+    stream = build_monitor(max_abs=None, on_invalid="hold").stream(bad)
+    assert not np.isinf(stream.residuals.values).any()
+    assert stream.status[0, 150] != 0 and stream.status[0, 160] != 0
+    with pytest.raises(DataError, match="non-finite value at sample 150"):
+        build_monitor(max_abs=None).stream(bad)

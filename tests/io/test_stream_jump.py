@@ -8,6 +8,7 @@ mode). Such a frame is now refused as a corrupt clock, and the stream goes on.
 from __future__ import annotations
 
 import cantools
+import numpy as np
 import pytest
 
 from fdikit.errors import DataError
@@ -39,16 +40,32 @@ def test_far_future_frame_is_refused_and_the_stream_goes_on():
     assert all(why is None for _, _, why in out)
 
 
-def test_a_long_real_gap_below_max_jump_is_gridded_as_invalid_samples():
+def test_a_long_real_gap_below_max_jump_is_cut_from_the_grid():
     g = FrameGridder(cantools.database.load_string(DBC, database_format="dbc"), ["SPEED.SPEED"], rate=10.0,
                      max_jump=120.0)
     out = []
     for k in range(5):
         out += g.push(0.1 * k, 180, _frame(10.0))
-    out += g.push(60.4, 180, _frame(10.0))  # a minute without frames: bridged, flagged
+    # a minute without a frame of any requested message: a gap the grid time jumps over (issue 27
+    # item 4, the batch loader's rule), not 600 NaN samples
+    out += g.push(60.4, 180, _frame(10.0))
     out += g.flush()
-    assert len(out) == 605
-    assert sum(why is not None for _, _, why in out) > 590
+    assert [round(t, 6) for t, _, _ in out] == [0.0, 0.1, 0.2, 0.3, 0.4, 60.4]
+    assert all(why is None for _, _, why in out)
+    # with a second signal still sending, the gap of the first is gridded as invalid samples
+    db = cantools.database.load_string(DBC + '''
+BO_ 181 OTHER: 8 XXX
+ SG_ X : 7|8@0+ (1,0) [0|255] "" XXX
+''', database_format="dbc")
+    g = FrameGridder(db, ["SPEED.SPEED", "OTHER.X"], rate=10.0, max_jump=120.0)
+    out = []
+    for k in range(60):
+        if k < 5 or k > 50:
+            out += g.push(0.1 * k, 180, _frame(10.0))
+        out += g.push(0.1 * k + 0.05, 181, bytes(8))
+    out += g.flush()
+    assert 40 < sum(why is not None for _, _, why in out) < 50
+    assert np.allclose(np.diff([o[0] for o in out]), 0.1)
 
 
 @pytest.mark.parametrize("bad", [0.0, -1.0, float("nan"), float("inf"), "x"])

@@ -1,5 +1,6 @@
 """Output of every command: exactly one JSON object on stdout (NaN and inf as null), and the output
-paths a command will write checked before any computation (:func:`check_output_paths`)."""
+paths a command will write checked before any computation (:func:`check_output_paths`: writable,
+never an input, never another output's file)."""
 
 from __future__ import annotations
 
@@ -12,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from ..base.outputs import check_outputs
 from ..errors import DataError
 
 __all__ = ["IMAGE_SUFFIXES", "OUTPUT_SUFFIXES", "check_output_paths", "print_json"]
@@ -59,7 +61,7 @@ def _writable_folder(folder: Path, what: str) -> None:
 
 def check_output_paths(args: Any, *options: str, folders: tuple[str, ...] = (),
                        suffixes: dict[str, tuple[str, ...]] | None = None,
-                       labels: dict[str, str] | None = None) -> None:
+                       labels: dict[str, str] | None = None, inputs: tuple[str, ...] = ()) -> None:
     """Check the output paths a command was given, before any computation.
 
     Parameters
@@ -79,6 +81,10 @@ def check_output_paths(args: Any, *options: str, folders: tuple[str, ...] = (),
         Overrides of :data:`OUTPUT_SUFFIXES` per option.
     labels : dict, optional
         How messages name an option (default ``--name``; e.g. ``{"out": "OUT"}`` for a positional).
+    inputs : tuple of str
+        Attribute names of the files the command reads (``"log"``, ``"config"``): no output may
+        be one of them, and no two outputs may be the same file
+        (:func:`fdikit.base.outputs.check_outputs`).
 
     Raises
     ------
@@ -98,6 +104,12 @@ def check_output_paths(args: Any, *options: str, folders: tuple[str, ...] = (),
 
     def label(name: str) -> str:
         return (labels or {}).get(name, f"--{name.replace('_', '-')}")
+
+    def given(names) -> dict:
+        return {label(n): v for n in names
+                if isinstance(v := getattr(args, n, None), str | os.PathLike) and v}
+
+    check_outputs(given(options), given(inputs))
 
     for name in options:
         value = getattr(args, name, None)

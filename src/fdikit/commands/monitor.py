@@ -21,6 +21,7 @@ import sys
 import time
 from pathlib import Path
 
+from ..base.outputs import io_error
 from ..errors import DataError
 from ._output import print_json
 
@@ -29,14 +30,16 @@ __all__ = ["register"]
 
 def _design(args) -> int:
     from ..monitor.config import load_config, run_design
-
-    t0 = time.perf_counter()
     from ..report.progress import progress_steps, progress_wanted
 
+    t0 = time.perf_counter()
     cfg = load_config(args.config)
     with progress_steps(progress_wanted(args.json), 1, "fdikit design") as steps:
         steps.step(f"recipe {cfg.design.get('recipe') or 'declarative [design]'}")
-        paths = run_design(cfg)
+        try:
+            paths = run_design(cfg)
+        except OSError as exc:  # a full disk: one message naming the artifacts' folder
+            raise io_error(exc.filename or cfg.artifacts, exc) from None
     out = {"config": str(cfg.path), "artifacts": {k: str(v) for k, v in paths.items()},
            "wall_seconds": round(time.perf_counter() - t0, 3)}
     if args.json:
@@ -49,7 +52,7 @@ def _design(args) -> int:
 
 def _batch(args, cfg) -> int:
     from ..monitor.config import build_monitor, map_channels, read_log
-    from ..monitor.records import batch_records, batch_summary, stats_frame, summary_lines
+    from ..monitor.records import batch_records, batch_summary, summary_lines, write_records, write_stats
 
     t0 = time.perf_counter()
     log = read_log(cfg, args.log)
@@ -58,11 +61,9 @@ def _batch(args, cfg) -> int:
     res = mon.run(sig)
     records = batch_records(sig, res)
     if args.events:
-        with open(args.events, "w") as fh:
-            for rec in records:
-                fh.write(json.dumps(rec) + "\n")
+        write_records(args.events, records)
     if args.stats:
-        stats_frame(sig, res).to_parquet(args.stats, index=False)
+        write_stats(args.stats, sig, res)
     summary = batch_summary(cfg, args.log, sig, res, t_start=t0)
     if args.report or args.plot:
         from ..report import monitor_report, monitor_thresholds
@@ -74,8 +75,11 @@ def _batch(args, cfg) -> int:
         if args.plot:
             from ..report.figures import monitor_figure
 
-            summary["plot"] = monitor_figure(sig, res, args.plot, thresholds=monitor_thresholds(mon),
-                                             level=mon.decision.level if mon.decision else None)
+            try:
+                summary["plot"] = monitor_figure(sig, res, args.plot, thresholds=monitor_thresholds(mon),
+                                                 level=mon.decision.level if mon.decision else None)
+            except OSError as exc:
+                raise io_error(args.plot, exc) from None
     if args.json:
         print_json(summary)
     else:
@@ -97,9 +101,13 @@ def _follow(args, cfg) -> int:
     try:
         live.follow(stream, on_record=lambda rec: print(json.dumps(rec), flush=True), events=args.events,
                     checkpoint=args.checkpoint, resume=args.resume, checkpoint_every=args.checkpoint_every)
+    except KeyboardInterrupt:  # Ctrl-C is follow mode's normal end: its summary, then the stop
+        print(live.summary_line(), file=sys.stderr, flush=True)
+        raise
     finally:
         if stream is not sys.stdin:
             stream.close()
+    print(live.summary_line(), file=sys.stderr, flush=True)
     return 0
 
 
@@ -109,7 +117,8 @@ def _monitor(args) -> int:
     cfg = load_config(args.config)
     from ._output import check_output_paths
 
-    check_output_paths(args, "events", "stats", "plot", "report", "checkpoint")
+    check_output_paths(args, "events", "stats", "plot", "report", "checkpoint", inputs=("log", "config"),
+                       labels={"log": "LOG"})
     if args.follow:
         if args.json:
             raise DataError("--follow prints one JSON line per announcement; it does not take --json")

@@ -23,7 +23,8 @@ def _report(args) -> int:
     from ..report import report_from_files
     from ._output import check_output_paths, print_json
 
-    check_output_paths(args, "out", suffixes={"out": (".html", ".htm")}, labels={"out": "OUT"})
+    check_output_paths(args, "out", suffixes={"out": (".html", ".htm")}, labels={"out": "OUT"},
+                       inputs=("events", "stats", "log", "config", "campaign"))
     t0 = time.perf_counter()
     out = report_from_files(
         args.out,

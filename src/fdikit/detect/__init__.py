@@ -17,11 +17,15 @@ from .mhsspt import (
     WhitenedMHSSPT,
     calibrate_densities,
     calibrate_segments,
+    design_calibrated_mhsspt,
     design_mhsspt,
     detection_time,
     extend_ranges,
     final_diagnosis,
+    fit_temperature,
     floor_std,
+    reliability,
+    shrunk_covariance,
 )
 from .redundancy import PeerCheck, design_peer_check
 from .sensor import (
@@ -62,6 +66,7 @@ __all__ = [
     "calibrate_densities",
     "calibrate_segments",
     "consecutive_count",
+    "design_calibrated_mhsspt",
     "design_drift",
     "design_gain",
     "design_intermittent",
@@ -73,6 +78,9 @@ __all__ = [
     "directional_statistic",
     "extend_ranges",
     "final_diagnosis",
+    "fit_temperature",
     "floor_std",
     "glrt_statistic",
+    "reliability",
+    "shrunk_covariance",
 ]

@@ -15,6 +15,13 @@ Pre-whitening is chosen over an effective-sample correction (raising each likeli
 ``1 / tau``) because it is exact for an autoregressive process: it leaves the evidence of each
 sample its true weight and keeps the shape of the posterior, while tempering only rescales it.
 
+Many channels and few nominal samples (a VAR(p) of C channels needs about ``10 (p C + 1)``):
+the fit refuses, naming what it needs and the alternatives, or with ``reduce=True`` lowers the
+order to what the samples carry (by BIC or AIC) and, when not even a full VAR(1) fits, fits one
+autoregression per channel (``structure="diagonal"``; the cross-channel correlation is then left to
+the innovation covariance, estimated with shrinkage by
+:func:`~fdikit.detect.mhsspt.calibrate_segments`).
+
 Samples before the history is full use ``mu`` for the missing past (zero centred history); the
 first ``p`` outputs of a record are therefore transients.
 """
@@ -45,6 +52,19 @@ def _records(data, C: int | None = None) -> list[np.ndarray]:
             return list(a)
         raise DataError(f"records must be (T, C) or (runs, T, C), got shape {a.shape}")
     return [np.asarray(r, float).reshape(len(r), -1) for r in data]
+
+
+def _n_fit(recs, p: int) -> int:
+    return sum(max(0, r.shape[0] - p) for r in recs)
+
+
+def _need(p: int, C: int, structure: str) -> int:
+    """Samples a VAR(p) needs: ten per coefficient of one equation (and the mean)."""
+    return 10 * (p * (C if structure == "full" else 1) + 1)
+
+
+def _enough(recs, p: int, C: int, structure: str) -> bool:
+    return _n_fit(recs, p) >= _need(p, C, structure)
 
 
 class VARWhitener(ResidualProcessor):
@@ -97,12 +117,21 @@ class VARWhitener(ResidualProcessor):
 
     @classmethod
     def fit(cls, nominal, inputs: Sequence[str], *, order: int | None = None,
-            max_order: int = 10) -> VARWhitener:
-        """Least-squares VAR fit to nominal records; ``order`` None: by BIC in ``0..max_order``.
+            max_order: int = 10, criterion: str = "bic", structure: str = "full",
+            reduce: bool = False) -> VARWhitener:
+        """Least-squares VAR fit to nominal records; ``order`` None: by ``criterion`` in ``0..max_order``.
 
         ``nominal``: a Signals (its ``inputs`` channels), an array (T, C) or (runs, T, C), or a list
-        of (T_i, C) segments (independent records). ``info`` records the order, the BIC of each
-        order, the innovation covariance and the samples used.
+        of (T_i, C) segments (independent records). ``criterion``: ``"bic"`` (default) or ``"aic"``.
+        ``structure``: ``"full"`` (every channel's past predicts every channel: ``p C^2``
+        coefficients, ``10 (p C + 1)`` samples needed) or ``"diagonal"`` (one autoregression per
+        channel: ``p`` coefficients each, ``10 (p + 1)`` samples; the cross-channel correlation is
+        left to the innovation covariance). A full VAR of ``max_order`` the samples cannot carry is
+        refused with the samples it needs and the alternatives, unless ``reduce``: then the
+        orders the samples carry compete (``max_order`` lowered), and a diagonal VAR is fitted
+        when not even a full VAR(1) fits. ``info`` records the order, the structure, the
+        criterion of each order, the innovation covariance and the samples used (and ``reduced``
+        with the reason, when ``reduce`` lowered the order or the structure).
         """
         if isinstance(nominal, Signals):
             recs = [v for v in nominal.values[:, :, nominal.index(list(inputs))]]
@@ -116,22 +145,61 @@ class VARWhitener(ResidualProcessor):
             if not np.all(np.isfinite(r)):
                 k, c = np.argwhere(~np.isfinite(r))[0]
                 raise DataError(f"nominal record {i}: channel {inputs[c]!r} is not finite at sample {k}")
+        if criterion not in ("bic", "aic"):
+            raise DataError(f"criterion must be 'bic' or 'aic', got {criterion!r}")
+        if structure not in ("full", "diagonal"):
+            raise DataError(f"structure must be 'full' or 'diagonal', got {structure!r}")
         mu = np.concatenate(recs).mean(axis=0)
         orders = [int(order)] if order is not None else list(range(int(max_order) + 1))
         pmax = max(orders)
-        n_fit = sum(max(0, r.shape[0] - pmax) for r in recs)
-        if n_fit < 10 * (pmax * C + 1):
-            raise DataError(f"{n_fit} nominal samples after the first {pmax} of each record are too few "
-                            f"for a "
-                            f"VAR({pmax}) of {C} channels (need >= {10 * (pmax * C + 1)})")
-        # the same samples (k >= pmax in every record) for every order, so the BICs compare
+        reduced = None
+        if not _enough(recs, pmax, C, structure):
+            feasible = [p for p in range(pmax, -1, -1) if _enough(recs, p, C, structure)]
+            p_full = next((p for p in range(pmax, -1, -1) if _enough(recs, p, C, "full")), -1)
+            p_diag = next((p for p in range(pmax, -1, -1) if _enough(recs, p, C, "diagonal")), -1)
+            if not reduce or (not feasible and p_diag < 0):
+                n_fit = _n_fit(recs, pmax)
+                need = _need(pmax, C, structure)
+                alts = []
+                if structure == "full" and p_full >= 0:
+                    alts.append(f"order <= {p_full} (max_order={p_full})")
+                if structure == "full" and p_diag >= 1:
+                    alts.append(f"a diagonal VAR (structure='diagonal', order <= {p_diag})")
+                if p_diag >= 0 or p_full >= 0:
+                    alts.append("reduce=True (the orders the samples carry, by the information criterion; "
+                                "design_mhsspt does this by default)")
+                alts.append("shrinkage covariances of the whitened features (calibrate_segments(cov="
+                            "'ledoit_wolf' or 'oas'))")
+                raise DataError(f"{n_fit} nominal samples after the first {pmax} of each record are too few "
+                                f"for a {'diagonal ' if structure == 'diagonal' else ''}"
+                                f"VAR({pmax}) of {C} channels (need >= {need}); alternatives: "
+                                + "; ".join(alts))
+            top = feasible[0] if feasible else -1
+            if structure == "full" and top < 1 and p_diag >= 1:  # a diagonal VAR beats mean removal
+                reduced = (f"full VAR({pmax}) needs {_need(pmax, C, 'full')} samples: diagonal VAR, "
+                           f"orders <= {p_diag}")
+                structure, top = "diagonal", p_diag
+            else:
+                reduced = (f"{structure} VAR({pmax}) needs {_need(pmax, C, structure)} samples: "
+                           f"orders <= {top}")
+            orders = [p for p in orders if p <= top] or [top]
+            pmax = max(orders)
+        # the same samples (k >= pmax in every record) for every order, so the criteria compare
         Y = np.concatenate([r[pmax:] - mu for r in recs])
         lags = [np.concatenate([r[pmax - i : r.shape[0] - i] - mu for r in recs]) for i in range(1, pmax + 1)]
-        best, bic = None, {}
+        best, ic = None, {}
         for p in orders:
             if p == 0:
                 A = np.zeros((0, C, C))
                 E = Y
+            elif structure == "diagonal":
+                A = np.zeros((p, C, C))
+                E = np.empty_like(Y)
+                for c in range(C):
+                    X = np.stack([lag[:, c] for lag in lags[:p]], axis=1)  # (n, p)
+                    b, *_ = np.linalg.lstsq(X, Y[:, c], rcond=None)
+                    A[:, c, c] = b
+                    E[:, c] = Y[:, c] - X @ b
             else:
                 X = np.concatenate(lags[:p], axis=1)  # (n, p C)
                 B, *_ = np.linalg.lstsq(X, Y, rcond=None)  # (p C, C)
@@ -142,12 +210,18 @@ class VARWhitener(ResidualProcessor):
             if sign <= 0:
                 raise DataError(f"innovation covariance of the VAR({p}) is singular (channels {list(inputs)} "
                                 f"linearly dependent?)")
-            b = float(E.shape[0] * logdet + np.log(E.shape[0]) * p * C * C)
-            bic[p] = b
+            pen = np.log(E.shape[0]) if criterion == "bic" else 2.0
+            # the penalty per coefficient times p C C (full) or p C (diagonal), in the order of operations
+            # of the former BIC (bitwise the same values)
+            b = float(E.shape[0] * logdet + (pen * p * C * C if structure == "full" else pen * p * C))
+            ic[p] = b
             if best is None or b < best[0]:
                 best = (b, p, A, S)
         w = cls(inputs, mu, best[2])
-        w.info = {"order": best[1], "bic": bic, "innovation_cov": best[3], "samples": int(Y.shape[0])}
+        w.info = {"order": best[1], criterion: ic, "criterion": criterion, "structure": structure,
+                  "innovation_cov": best[3], "samples": int(Y.shape[0])}
+        if reduced is not None:
+            w.info["reduced"] = reduced
         return w
 
     _state_attrs = ("_hist",)

@@ -13,6 +13,7 @@ import socket
 import time
 from pathlib import Path
 
+from ..base.outputs import io_error
 from ..errors import FdikitError
 from .commit import _commit, _empty_events, _schemas
 from .tasks import LogTask, _part_dir, is_done
@@ -39,7 +40,9 @@ def process_log(task: LogTask) -> dict:
     """Run the monitor over one log and commit its results; returns the summary row (a dict).
 
     Any failure to read or monitor the log is caught and becomes an error record (status
-    ``"error"``, the reason in ``error``); only a failure to write the results raises.
+    ``"error"``, the reason in ``error``), and so does a failure to write its results (a full
+    disk: the reason names the file); when not even the summary can be written, the error row is
+    returned uncommitted, so the next run redoes the log.
 
     Parameters
     ----------
@@ -123,17 +126,28 @@ def process_log(task: LogTask) -> dict:
         events, stats_table = [], None
     t3 = time.perf_counter()
     out = Path(task.out)
-    _commit(pa.Table.from_pylist(events, schema=events_schema) if events else _empty_events(),
-            _part_dir(out, "events", task.vehicle) / f"{task.part}.parquet")
-    if task.stats:
-        if stats_table is None:
-            stats_table = pa.table({"t": pa.array([], pa.float64())})
-        _commit(stats_table, _part_dir(out, "stats", task.vehicle) / f"{task.part}.parquet", small=False)
+    target = out
+    try:
+        target = _part_dir(out, "events", task.vehicle) / f"{task.part}.parquet"
+        _commit(pa.Table.from_pylist(events, schema=events_schema) if events else _empty_events(), target)
+        if task.stats:
+            if stats_table is None:
+                stats_table = pa.table({"t": pa.array([], pa.float64())})
+            target = _part_dir(out, "stats", task.vehicle) / f"{task.part}.parquet"
+            _commit(stats_table, target, small=False)
+    except OSError as exc:  # a full disk: this log's error record, and the fleet goes on
+        row.update(status="error", error=str(io_error(target, exc)), samples=0, invalid_samples=0,
+                   episodes=0)
     row["write_s"] = time.perf_counter() - t3
     row["wall_s"] = time.perf_counter() - t_start
     # the summary last: once it is in place, the log is committed
-    _commit(pa.Table.from_pylist([row], schema=summary_schema),
-            _part_dir(out, "summaries", task.vehicle) / f"{task.part}.parquet")
+    target = _part_dir(out, "summaries", task.vehicle) / f"{task.part}.parquet"
+    try:
+        _commit(pa.Table.from_pylist([row], schema=summary_schema), target)
+    except OSError as exc:  # not even the error record fits: reported, not committed (redone next run)
+        why = str(io_error(target, exc))
+        row.update(status="error", error=why if row["error"] is None else f"{row['error']}; {why}",
+                   samples=0, invalid_samples=0, episodes=0)
     return dict(row, vehicle=task.vehicle)
 
 

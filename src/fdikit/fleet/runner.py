@@ -191,6 +191,17 @@ def run_fleet(tasks: list[LogTask], engine, *, retry_errors: bool = False, progr
     return summarise(rows, logs=len(tasks), skipped=skipped, wall_seconds=time.perf_counter() - t0)
 
 
+def _terminate_workers(engine) -> None:
+    """Stop a local process pool's workers at once (their logs stay uncommitted: a rerun redoes
+    them); the engine's close then returns without waiting for their batches."""
+    pool = getattr(engine, "_pool", None)
+    for proc in list((getattr(pool, "_processes", None) or {}).values()):
+        try:
+            proc.terminate()
+        except (OSError, AttributeError):
+            pass
+
+
 def summarise(rows: list[dict], *, logs: int, skipped: int, wall_seconds: float) -> dict:
     """The report of a fleet run from the summary rows of the logs it processed.
 
@@ -287,15 +298,19 @@ def run(logs: list[str], config: str | os.PathLike, out: str | os.PathLike, *, m
     """
     check_options(config, processes=processes, workers=workers, scheduler=scheduler)
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
     tasks = plan(logs, config, out, manifest=manifest, template=path_fields, stats=stats)
     if not tasks:
         raise DataError(f"no log files found in {logs}")
+    out.mkdir(parents=True, exist_ok=True)
     cleaned = _clean_tmp(out)
     engine = make_engine(len(tasks), processes=processes, workers=workers, scheduler=scheduler,
                          in_process=in_process)
     with engine:
-        report = run_fleet(tasks, engine, retry_errors=retry_errors, progress=progress)
+        try:
+            report = run_fleet(tasks, engine, retry_errors=retry_errors, progress=progress)
+        except KeyboardInterrupt:  # Ctrl-C, SIGTERM: stop the workers now, not after their batches
+            _terminate_workers(engine)
+            raise
         report["engine"] = engine.describe()
     report.update(out=str(out.resolve()), config=str(Path(config).resolve()),
                   temporary_files_removed=cleaned,

@@ -10,6 +10,7 @@ from __future__ import annotations
 import csv
 import glob
 import hashlib
+import json
 import os
 from dataclasses import dataclass, field
 from pathlib import Path, PurePosixPath
@@ -280,13 +281,26 @@ def plan(specs: list[str], config: str | os.PathLike, out: str | os.PathLike, *,
     """
     out = Path(out).resolve()
     meta = read_manifest(manifest) if manifest else {}
-    tasks = []
+    depth = len([t for t in template.strip("/").split("/") if t])
+    tasks, names = [], {}
     for path, rel in discover(specs, exclude=out):
         f = dict(path_fields(rel, template))
-        f.update({k: v for k, v in meta.get(path, {}).items() if v != ""})
+        given = {k: v for k, v in meta.get(path, {}).items() if v != ""}
+        f.update(given)
         vehicle = f.pop("vehicle", "") or "unknown"
         route = f.pop("route", "") or (rel.name[: -len(rel.suffix)] if rel.suffix else rel.name)
         log_id = str(rel)
+        if "vehicle" not in given:  # folders above the template's must not tell two vehicles apart
+            key = (vehicle, route, json.dumps(f, sort_keys=True))
+            above = rel.parts[:max(0, len(rel.parts) - depth)]
+            other = names.setdefault(key, (log_id, above))
+            if other[1] != above:
+                raise DataError(
+                    f"the logs {other[0]!r} and {log_id!r} both get vehicle {vehicle!r} and route "
+                    f"{route!r} from --path-fields {template!r}: their paths differ in folders the "
+                    f"template does not read ({'/'.join(other[1]) or '.'} vs {'/'.join(above) or '.'}), "
+                    f"so two vehicles would be merged; name every folder, e.g. --path-fields "
+                    f"'{{vehicle}}/{{run}}/{{route}}', or give a --manifest")
         tasks.append(LogTask(str(path), log_id, _part_name(log_id, path), vehicle, route, f,
                              str(Path(config).resolve()), str(out), stats))
     return tasks

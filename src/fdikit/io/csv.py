@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..base import interrupt
 from ..errors import DataError
 from .can import LogSignals, SignalInfo, convert_units
 from .timebase import time_unit_hint, times_to_seconds
@@ -25,9 +26,13 @@ def _cells_to_float(cells: list[str], where: str, column: str) -> np.ndarray:
     na = np.fromiter((c.lower() in NA_TEXTS for c in cells), bool, len(cells))
     work = np.where(na, "nan", arr)
     try:
-        return work.astype(float)
+        out = work.astype(float)
     except ValueError:
-        pass
+        out = None
+    # NumPy's text cast clears a KeyboardInterrupt raised in it and goes on: stop here instead
+    interrupt.check()
+    if out is not None:
+        return out
     out = np.empty(len(cells))
     for k, x in enumerate(work.tolist()):
         try:
@@ -38,11 +43,31 @@ def _cells_to_float(cells: list[str], where: str, column: str) -> np.ndarray:
     return out
 
 
+#: The first bytes of binary files that are often given a .csv name, and what to do with them.
+_MAGIC = ((b"\x1f\x8b", "gzip-compressed (decompress it first: gunzip)"),
+          (b"PK\x03\x04", "a ZIP archive, e.g. an Excel .xlsx workbook (save it as CSV, or unzip it)"),
+          (b"PAR1", "a Parquet file (name it .parquet)"),
+          (b"MDF     ", "an MDF4 measurement file (name it .mf4)"))
+
+
+def _binary_kind(p: Path) -> str | None:
+    """What a binary file named like a CSV really is, from its first bytes (None: unknown)."""
+    try:
+        with open(p, "rb") as fh:
+            head = fh.read(8)
+    except OSError:
+        return None
+    return next((what for magic, what in _MAGIC if head.startswith(magic)), None)
+
+
 def _read_rows(p: Path, where: str, encoding: str) -> tuple[list[str], list[list[str]]]:
     try:
         with open(p, encoding=encoding, newline="") as fh:
             rows = list(_csv.reader(fh))
     except UnicodeDecodeError as exc:
+        kind = _binary_kind(p)
+        if kind:
+            raise DataError(f"{where} is not a CSV text file: it is {kind}") from None
         raise DataError(f"{where} is not {encoding} text (byte {exc.start}: {exc.reason})") from None
     except _csv.Error as exc:
         raise DataError(f"{where} cannot be parsed as CSV: {exc}") from None

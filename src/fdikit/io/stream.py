@@ -14,6 +14,13 @@ arithmetic as the batch loader, so on the same frames the two give the same valu
   ``max_gap`` source periods apart, or when it touches a frame that could not be decoded or
   carried a NaN/inf value.
 
+A run of grid samples with a gap in some signal is held back until it ends: when at one of its
+samples *every* signal is in a gap (no frame of any requested message: a clock jump forward, a
+pause of the logger), the whole run is dropped and the grid time jumps over it -- the batch
+loader's rule (:mod:`fdikit.io.formats.frames`), so the monitor sees a gap, not NaN samples.
+(A clock step *back* is still refused frame by frame here: a stream cannot tell it from one
+corrupt time stamp without looking ahead.)
+
 The one difference a stream cannot avoid: the batch loader measures a signal's period as the
 median interval over the *whole* log, the stream as the median interval of the frames seen so
 far (the last 256); the two agree on any log without gaps, and a gap is flagged by both.
@@ -162,6 +169,7 @@ class FrameGridder:
         self._t_last: float | None = None
         self._start: float | None = None
         self._k = 0
+        self._pending: list[tuple[float, dict[str, float], str | None, bool]] = []
         self.frames = 0
         self.undecodable = 0
 
@@ -209,12 +217,18 @@ class FrameGridder:
                 if s.t[-1] < g or (s.t[-1] == g and not final):
                     return out
             vals, why = {}, []
+            n_gap = 0
             for n in self.signals:
                 x, reason = self._value(n, g, final)
                 vals[n] = x
                 if reason:
                     why.append(reason)
-            out.append((g, vals, "; ".join(why) or None))
+                    n_gap += "gap" in reason
+            if n_gap:  # held back until the run of gap samples ends
+                self._pending.append((g, vals, "; ".join(why), n_gap == len(self.signals)))
+            else:
+                out.extend(self._release())
+                out.append((g, vals, "; ".join(why) or None))
             self._k += 1
             g_next = self._start + self._k / self.rate
             for s in self._series.values():  # drop frames no later grid time can use (keep one
@@ -223,6 +237,13 @@ class FrameGridder:
                     j += 1
                 if j:
                     del s.t[:j], s.v[:j]
+
+    def _release(self) -> list[tuple[float, dict[str, float], str | None]]:
+        """The held-back run of gap samples: dropped when every signal is in a gap at one of them."""
+        run, self._pending = self._pending, []
+        if any(dead for *_x, dead in run):
+            return []
+        return [(g, vals, why) for g, vals, why, _dead in run]
 
     # --------------------------------------------------------------------- public
     @property
@@ -297,7 +318,8 @@ class FrameGridder:
 
     def flush(self) -> list[tuple[float, dict[str, float], str | None]]:
         """At the end of the stream: release the samples that sit exactly on the last frames."""
-        return self._emit(final=True)
+        out = self._emit(final=True)
+        return out + self._release()
 
     # --------------------------------------------------------------------- checkpoint / restore
     def state(self) -> dict[str, Any]:
@@ -328,7 +350,8 @@ class FrameGridder:
                   for name, s in self._series.items()}
         return {"series": series, "bus": {str(k): v for k, v in self._bus.items()}, "t0": self._t0,
                 "t_last": self._t_last, "start": self._start, "k": self._k, "frames": self.frames,
-                "undecodable": self.undecodable}
+                "undecodable": self.undecodable,
+                "pending": [[g, dict(vals), why, dead] for g, vals, why, dead in self._pending]}
 
     def restore(self, state: dict[str, Any]) -> None:
         """Continue from a :meth:`state` of a gridder of the same signals.
@@ -359,8 +382,13 @@ class FrameGridder:
         keys = {"series", "bus", "t0", "t_last", "start", "k", "frames", "undecodable"}
         if keys - set(state):
             raise DataError(f"{where}: missing keys {sorted(keys - set(state))}")
-        if set(state) - keys:
-            raise DataError(f"{where}: unknown keys {sorted(set(state) - keys)}")
+        if set(state) - keys - {"pending"}:  # pending: optional (checkpoints before issue 27)
+            raise DataError(f"{where}: unknown keys {sorted(set(state) - keys - {'pending'})}")
+        pending = state.get("pending", [])
+        if not isinstance(pending, list | tuple) or not all(
+                isinstance(p, list | tuple) and len(p) == 4 and isinstance(p[1], dict) for p in pending):
+            raise DataError(f"{where}: pending must be a list of [t, values, reason, dead] samples")
+
         series = state["series"]
         if not isinstance(series, dict) or sorted(series) != sorted(self._series):
             got = sorted(series) if isinstance(series, dict) else type(series).__name__
@@ -408,6 +436,9 @@ class FrameGridder:
         t_last = number(state["t_last"], "t_last", optional=True)
         start = number(state["start"], "start", optional=True)
         k, frames, undecodable = count("k"), count("frames"), count("undecodable")
+        pending = [(number(p[0], "pending time"), {str(k): number(v, "pending value", finite=False)
+                                                   for k, v in p[1].items()}, str(p[2]), bool(p[3]))
+                   for p in pending]
         for name, (t, v, iv, first) in new.items():
             s = self._series[name]
             s.t, s.v, s.first = t, v, first
@@ -416,3 +447,4 @@ class FrameGridder:
         self._bus = bus
         self._t0, self._t_last, self._start = t0, t_last, start
         self._k, self.frames, self.undecodable = k, frames, undecodable
+        self._pending = pending

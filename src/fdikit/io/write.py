@@ -6,8 +6,9 @@
 * :func:`write_parquet` -- one float64 column per channel, each channel's unit in its field
   metadata (key ``unit``, which :func:`fdikit.io.read_parquet` reads back).
 
-One run is written (``run=0`` by default). The file is written to a temporary name and renamed,
-so a reader never sees half a file.
+One run is written (``run=0`` by default). The file is written to a temporary name and renamed
+(:func:`fdikit.base.outputs.open_output`), so a reader never sees half a file; a full disk is a
+DataError naming the file.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..base.outputs import open_output
 from ..errors import DataError
 from ..signals import Signals
 
@@ -76,9 +78,8 @@ def write_csv(signals: Signals, path: str | os.PathLike, *, time: str = "t", run
     lines = [header]
     lines += [",".join(map(repr, row)) for row in cols.tolist()]
     text = "\n".join(lines) + "\n"
-    tmp = p.with_name(p.name + ".tmp")
-    tmp.write_text(text)
-    os.replace(tmp, p)
+    with open_output(p, "w") as fh:
+        fh.write(text)
     return p
 
 
@@ -121,7 +122,6 @@ def write_parquet(signals: Signals, path: str | os.PathLike, *, time: str = "t",
         fields.append(pa.field(n, pa.float64(), metadata={"unit": u} if u else None))
         arrays.append(pa.array(np.ascontiguousarray(v[:, j]), pa.float64()))
     table = pa.Table.from_arrays(arrays, schema=pa.schema(fields))
-    tmp = p.with_name(p.name + ".tmp")
-    pq.write_table(table, tmp)
-    os.replace(tmp, p)
+    with open_output(p, "wb") as fh:
+        pq.write_table(table, fh)
     return p

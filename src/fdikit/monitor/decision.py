@@ -30,6 +30,10 @@ class Decision:
     ``clear_level`` neither grows nor restarts. ``clear_after = 0`` gives the rising-edge rule
     (a new onset at every crossing).
 
+    A cleared event says the fault is *not seen any more* (the records label it so), not that it
+    is gone: the rule sees only the alarm, and a fault that persists while its residual decays
+    (a constant sensor bias that an observer's state absorbs) ends its episode the same way.
+
     Parameters
     ----------
     alarm_channels : sequence of str

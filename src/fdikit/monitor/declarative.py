@@ -18,6 +18,14 @@ The ``[design]`` table of a monitor config (:mod:`fdikit.monitor.config`) may de
     #                                  # LinearFaultModel, a fdikit NonlinearModel, or a function
     #                                  # returning one; "module:attr", the module may sit beside
     #                                  # the config
+    # identify = { logs = ["nominal1.csv", "nominal2.csv"], inputs = ["V"],
+    #              outputs = ["i_meas", "w_meas"], order = "auto", method = "n4sid" }
+    #                                  # no model: identified from nominal logs (many records
+    #                                  # pooled; fdikit.estimate.identify), discrete at the logs'
+    #                                  # sample time, in deviations from the logs' mean operating
+    #                                  # point (set [channels.*].offset to it: the design report's
+    #                                  # identification.u_offset / y_offset); the noise defaults to
+    #                                  # the identified R and Q
     states = ["i", "w"]
     inputs = ["V"]
     outputs = ["i_meas", "w_meas"]
@@ -66,13 +74,14 @@ from ..model import LinearFaultModel, linearize
 from ..signals import Signals
 
 __all__ = ["DESIGN_KEYS", "GENERATORS", "PROCESSORS", "AlarmTarget", "alarm_from_config", "decision_for",
-           "design_monitor", "estimate_noise", "import_object", "noise_from_config", "plant_from_config",
-           "sample_time"]
+           "design_monitor", "estimate_noise", "identification_from_config", "import_object",
+           "noise_from_config", "plant_from_config", "sample_time"]
 
 #: Keys of the declarative ``[design]`` sub-tables and their types.
 DESIGN_KEYS: dict[str, dict[str, type | tuple[type, ...]]] = {
     "plant": {"A": list, "B": list, "C": list, "D": list, "dt": (int, float), "file": str, "object": str,
-              "states": list, "inputs": list, "outputs": list, "operating_point": dict, "params": dict},
+              "states": list, "inputs": list, "outputs": list, "operating_point": dict, "params": dict,
+              "identify": dict},
     "faults": {"names": list},
     "disturbances": {},
     "noise": {"measurement": (dict, int, float), "process": (list, int, float), "nominal_log": str,
@@ -180,6 +189,60 @@ def _from_object(obj: Any, spec: Mapping[str, Any], where: str) -> LinearFaultMo
                     "returning one")
 
 
+#: Keys of ``[design.plant].identify`` (:func:`identification_from_config`).
+IDENTIFY_KEYS: dict[str, type | tuple[type, ...]] = {
+    "logs": (list, str), "inputs": list, "outputs": list, "order": (str, int), "method": str, "time": str,
+    "criterion": str, "block_rows": int, "validation": (int, float)}
+
+
+def identification_from_config(spec: Mapping[str, Any], base_dir: str | Path = ".", *,
+                               where: str = "design.plant.identify"):
+    """The :class:`~fdikit.estimate.Identification` of an ``identify = {...}`` table: the logs read
+    (paths relative to the config, ``~`` and ``$VARS`` expanded) and pooled as records.
+
+    Examples
+    --------
+    >>> identification_from_config({"logs": [], "inputs": [], "outputs": ["y"]})
+    Traceback (most recent call last):
+    ...
+    fdikit.errors.DataError: config: [design.plant.identify].logs must name at least one nominal log
+    """
+    from ..estimate import identify
+    from ..io import read_log
+
+    spec = _check(spec, IDENTIFY_KEYS, where)
+    logs = [spec["logs"]] if isinstance(spec.get("logs"), str) else list(spec.get("logs") or [])
+    if not logs:
+        raise DataError(f"config: [{where}].logs must name at least one nominal log")
+    for key in ("inputs", "outputs"):
+        if key not in spec:
+            raise DataError(f"config: [{where}].{key} = [...] is missing (channel names of the logs)")
+        _names(spec, key, None, where)
+    order = spec.get("order", "auto")
+    if order != "auto" and not (isinstance(order, int) and not isinstance(order, bool) and order >= 1):
+        raise DataError(f"config: [{where}].order must be \"auto\" or an integer >= 1, got {order!r}")
+    method = spec.get("method", "n4sid")
+    if method not in ("n4sid", "arx"):
+        raise DataError(f"config: [{where}].method must be \"n4sid\" or \"arx\", got {method!r}")
+    records = []
+    for k, f in enumerate(logs):
+        path = config_path(base_dir, f, where=f"[{where}].logs[{k}]")
+        if not Path(path).exists():
+            raise DataError(f"config: [{where}].logs[{k}] {str(path)!r} does not exist")
+        log = read_log(path, **({"time": spec["time"]} if "time" in spec else {}))
+        missing = [c for c in [*spec["inputs"], *spec["outputs"]] if c not in log.names]
+        if missing:
+            raise DataError(f"config: [{where}].logs[{k}] {str(path)!r} has no channels {missing}; its "
+                            f"channels: {log.names}")
+        records.append(log)
+    kw = {k: spec[k] for k in ("criterion", "block_rows", "validation") if k in spec}
+    try:
+        return identify(records, spec["inputs"], spec["outputs"], method=method,
+                        order=None if order == "auto" else int(order), name="identified", **kw)
+    except (DataError, ModelError) as exc:
+        raise DataError(f"config: [{where}]: identification failed: {exc}") from None
+
+
 def plant_from_config(design: Mapping[str, Any], base_dir: str | Path = ".", *,
                       where: str = "design") -> LinearFaultModel:
     """The plant of a declarative ``[design]`` table, with its faults and disturbances declared.
@@ -205,15 +268,29 @@ def plant_from_config(design: Mapping[str, Any], base_dir: str | Path = ".", *,
     >>> m.fault_names, m.dt is None
     (['actuator:u', 'sensor:y'], True)
     """
+    return _plant(design, base_dir, where)[0]
+
+
+def _plant(design: Mapping[str, Any], base_dir: str | Path, where: str):
+    """The plant of :func:`plant_from_config` and its Identification (None unless identified)."""
     if "plant" not in design:
-        raise DataError(f"config: [{where}.plant] is missing (state-space matrices, a file or an object)")
+        raise DataError(f"config: [{where}.plant] is missing (state-space matrices, a file, an object or "
+                        "identify = {logs = [...], ...})")
     spec = _check(design["plant"], DESIGN_KEYS["plant"], f"{where}.plant")
     base = Path(base_dir)
-    given = [k for k in ("A", "file", "object") if k in spec]
+    given = [k for k in ("A", "file", "object", "identify") if k in spec]
     if len(given) != 1:
-        raise DataError(f"config: [{where}.plant] needs exactly one of A/B/C matrices, file or object; "
-                        f"got {given or 'none'}")
-    if "object" in spec:
+        raise DataError(f"config: [{where}.plant] needs exactly one of A/B/C matrices, file, object or "
+                        f"identify; got {given or 'none'}")
+    ident = None
+    if "identify" in spec:
+        extra = [k for k in spec if k != "identify"]
+        if extra:
+            raise DataError(f"config: [{where}.plant] names and sample time come from the identification; "
+                            f"remove {extra}")
+        ident = identification_from_config(spec["identify"], base, where=f"{where}.plant.identify")
+        model = ident.model
+    elif "object" in spec:
         model = _from_object(import_object(spec["object"], base, where=f"[{where}.plant].object"), spec,
                              f"{where}.plant")
         if any(k in spec for k in ("states", "inputs", "outputs")):
@@ -294,7 +371,7 @@ def plant_from_config(design: Mapping[str, Any], base_dir: str | Path = ".", *,
         model = model.without_faults().with_faults(*faults)
     except ModelError as exc:
         raise DataError(f"config: [{where}.faults]: {exc}") from None
-    return model
+    return model, ident
 
 
 def estimate_noise(signals: Signals, channels: Sequence[str] | None = None) -> dict[str, float]:
@@ -332,14 +409,22 @@ def estimate_noise(signals: Signals, channels: Sequence[str] | None = None) -> d
 
 
 def noise_from_config(design: Mapping[str, Any], model: LinearFaultModel, base_dir: str | Path = ".", *,
-                      where: str = "design") -> dict[str, Any]:
+                      where: str = "design", identification: Any = None) -> dict[str, Any]:
     """``{"measurement": {output: variance}, "process": (n,) variances}`` of a declarative config.
 
     Measurement variances are given per output (a number applies to every output) or estimated from
     ``nominal_log`` (:func:`estimate_noise`); the process variance defaults to 1e-8 of the unit
-    squared per state (a nearly exact model).
+    squared per state (a nearly exact model). For an identified plant (``identification``, an
+    :class:`~fdikit.estimate.Identification`) without a ``[design.noise]`` table, the diagonals of
+    the identified ``R`` and ``Q``.
     """
     spec = _check(design.get("noise", {}), DESIGN_KEYS["noise"], f"{where}.noise")
+    if not spec and identification is not None:
+        r = np.diag(np.asarray(identification.R, float))
+        q = np.diag(np.asarray(identification.Q, float)).copy()
+        floor = 1e-12 * max(float(np.max(r)), 1e-300)
+        return {"measurement": {y: max(float(v), floor) for y, v in zip(model.outputs, r)},
+                "process": np.maximum(q, 0.0)}
     meas = spec.get("measurement")
     if meas is None and "nominal_log" not in spec:
         raise DataError(f"config: [{where}.noise] needs measurement = {{output = variance}} or nominal_log")
@@ -488,8 +573,8 @@ def design_monitor(design: Mapping[str, Any], base_dir: str | Path = ".", *, whe
     from ..residuals import FaultDetectionFilter, FilterDesign, design_residual_bank
     from ..sim import simulate
 
-    model = plant_from_config(design, base_dir, where=where)
-    noise = noise_from_config(design, model, base_dir, where=where)
+    model, ident = _plant(design, base_dir, where)
+    noise = noise_from_config(design, model, base_dir, where=where, identification=ident)
     alarm = alarm_from_config(design, where=where)
     dt = sample_time(design, model, where=where)
     structure = design.get("structure") or None
@@ -502,7 +587,11 @@ def design_monitor(design: Mapping[str, Any], base_dir: str | Path = ".", *, whe
     for w in caught:
         warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
     raw = bank.design
-    groups = {name: bank.channels(name) for name in bank.residual_names}
+    # one feature (norm) per residual; a residual of one channel would give the feature its
+    # channel's name, and the monitor refuses two channels of one name: ":norm" then
+    chans_of = {name: bank.channels(name) for name in bank.residual_names}
+    taken = set(bank.design.residual_names)
+    groups = {(f"{name}:norm" if name in taken else name): ch for name, ch in chans_of.items()}
     # nominal operation: noise only (the residuals are decoupled from the known inputs)
     md = model.discretize(dt) if model.dt is None else model
     hours = 0.05 if nominal_hours is None else float(nominal_hours)
@@ -563,6 +652,11 @@ def design_monitor(design: Mapping[str, Any], base_dir: str | Path = ".", *, whe
                                      [float(thr[0])] * len(feats.output_names))),
               "threshold_design": {k: v for k, v in td.items() if k != "threshold"
                                    and not isinstance(v, np.ndarray)}}
+    if ident is not None:
+        i = ident.info
+        report["identification"] = {k: i[k] for k in ("method", "order", "criterion", "order_scores", "fit",
+                                                      "fit_per_record", "u_offset", "y_offset", "records",
+                                                      "integrators", "kalman") if k in i}
     return {"bank": white, "features": feats, "hold": hold, "isolate": iso, "_report": report}
 
 

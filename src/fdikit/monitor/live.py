@@ -22,9 +22,11 @@ the records of a crashed run plus those of its resumed run equal an uninterrupte
 from __future__ import annotations
 
 import csv
+import fcntl
 import itertools
 import json
 import os
+import zipfile
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from typing import Any
@@ -32,11 +34,27 @@ from typing import Any
 import numpy as np
 
 from ..errors import DataError
-from .records import step_records
+from .records import NOT_SEEN, step_records
 
 __all__ = ["EventLog", "LiveClock", "LiveMonitor"]
 
 _FOLLOW_KEYS = ("n", "lines", "t_last", "header", "time_first")
+
+
+def _cells(text: str, lineno: int, strip: bool = True) -> list[str]:
+    """The (stripped) cells of one CSV line; a line the csv module refuses is a DataError."""
+    try:
+        row = next(csv.reader([text]), [])
+        return [c.strip() for c in row] if strip else row
+    except csv.Error as exc:
+        raise DataError(f"follow mode: line {lineno} cannot be read as CSV ({exc})") from None
+
+
+def _digest(text: str) -> str:
+    """A short digest of an input line (its text without surrounding space)."""
+    import hashlib
+
+    return hashlib.sha1(text.strip().encode()).hexdigest()[:16]
 
 
 class LiveClock:
@@ -118,8 +136,22 @@ class EventLog:
     """
 
     def __init__(self, path: str | os.PathLike):
+        from ..base.outputs import io_error, open_device
+
         self.path = path
-        self.fh = open(path, "a+b")  # closed in close()
+        self.fh = open_device(path, "wb")  # a device or a FIFO someone reads: written as it is
+        self.device = self.fh is not None
+        if self.fh is None:
+            try:
+                self.fh = open(path, "a+b", buffering=0)  # closed in close(); unbuffered
+            except OSError as exc:
+                raise io_error(path, exc) from None
+            try:  # one writer per log: a second follower would write every record twice
+                fcntl.flock(self.fh.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError:
+                self.fh.close()
+                raise DataError(f"{path}: another process (a second follower) writes this event log; "
+                                "give each follower its own --events file") from None
 
     def __enter__(self) -> EventLog:
         return self
@@ -129,6 +161,8 @@ class EventLog:
 
     def start(self, size: int | None = None) -> None:
         """Empty the log (``size`` None) or cut it back to ``size`` bytes (a checkpoint's length)."""
+        if self.device:
+            return
         if size is None:
             self.fh.truncate(0)
             return
@@ -139,18 +173,43 @@ class EventLog:
         self.fh.truncate(size)
 
     def write(self, line: str) -> None:
-        """Append one line (a JSON record, without its newline) and flush it."""
-        self.fh.write(line.encode() + b"\n")
-        self.fh.flush()
+        """Append one line (a JSON record, without its newline) and flush it; a full disk is a
+        DataError naming the file, and the log is cut back to its last whole line."""
+        from ..base.outputs import io_error
+
+        data = memoryview(line.encode() + b"\n")
+        pos = None if self.device else self.fh.seek(0, 2)
+        try:
+            while data:  # unbuffered: a short write goes on where it stopped
+                data = data[self.fh.write(data):]
+            if self.device:
+                self.fh.flush()
+        except OSError as exc:
+            if pos is not None:
+                try:
+                    self.fh.truncate(pos)
+                except OSError:
+                    pass
+            raise io_error(self.path, exc) from None
 
     def sync(self) -> int:
         """Flush the log to disk; returns its length in bytes."""
-        self.fh.flush()
-        os.fsync(self.fh.fileno())
+        from ..base.outputs import io_error
+
+        try:
+            self.fh.flush()
+            if self.device:
+                return 0
+            os.fsync(self.fh.fileno())
+        except OSError as exc:
+            raise io_error(self.path, exc) from None
         return self.fh.seek(0, 2)
 
     def close(self) -> None:
-        self.fh.close()
+        try:
+            self.fh.close()
+        except OSError:
+            pass
 
 
 class LiveMonitor:
@@ -222,7 +281,9 @@ class LiveMonitor:
         self.t_last: float | None = None   # latest time of a consumed input line
         self.header: list[str] | None = None
         self.time_first: str | None = None   # CSV: the first timestamp's text (the origin)
+        self.first: str | None = None        # digest of the first input line (a resume checks it)
         self._resumed: dict | None = None
+        self.counts = {"announcements": 0, "cleared": 0, "invalid": 0, "gaps": 0}  # follow()'s records
         self._since = 0
         self._every: int = 500
         self._hook: Callable[[LiveMonitor], None] | None = None
@@ -238,7 +299,7 @@ class LiveMonitor:
         ['follow', 'gridder', 'monitor']
         """
         follow = {"n": self.samples, "lines": self.lines, "t_last": self.t_last, "header": self.header,
-                  "time_first": self.time_first}
+                  "time_first": self.time_first, "first": self.first}
         return {"monitor": self.monitor.state(), "follow": follow,
                 "gridder": None if self.gridder is None else self.gridder.state()}
 
@@ -277,9 +338,10 @@ class LiveMonitor:
         self.samples, self.lines, self.t_last = n, lines, f["t_last"]
         self.header = f.get("header")
         self.time_first = f.get("time_first")
+        self.first = f.get("first")
         if self.gridder is not None:
             self.gridder.restore(state["gridder"])
-        self._resumed = {"lines": self.lines, "t_last": self.t_last}
+        self._resumed = {"lines": self.lines, "t_last": self.t_last, "first": self.first}
 
     def save_checkpoint(self, path: str | os.PathLike, *, events_bytes: int = 0) -> None:
         """Write :meth:`state` to ``path`` atomically (:func:`fdikit.base.state.save_state`).
@@ -299,7 +361,7 @@ class LiveMonitor:
         st = self.state()
         f = st["follow"]
         st["follow"] = {"n": f["n"], "lines": f["lines"], "t_last": f["t_last"], "events_bytes": events_bytes,
-                        "header": f["header"], "time_first": f["time_first"]}
+                        "header": f["header"], "time_first": f["time_first"], "first": f["first"]}
         save_state(path, st, meta={"kind": "follow", "input": self.kind,
                                    "config": str(self.cfg.path.resolve())})
 
@@ -318,7 +380,11 @@ class LiveMonitor:
         """
         from ..base.state import load_state
 
-        state, meta = load_state(path)
+        try:
+            state, meta = load_state(path)
+        except (zipfile.BadZipFile, EOFError, ValueError, KeyError) as exc:  # e.g. half written by hand
+            raise DataError(f"{path}: not a readable fdikit checkpoint (truncated or corrupt: {exc})"
+                            ) from None
         if meta.get("kind") != "follow" or meta.get("input") != self.kind:
             raise DataError(f"{path}: not a follow-mode checkpoint of {self.kind} input "
                             f"(kind {meta.get('kind')!r}, input {meta.get('input')!r})")
@@ -329,7 +395,7 @@ class LiveMonitor:
         return dict(state["follow"])
 
     # ------------------------------------------------------------------ the stream
-    def _skip(self, index: int, t: float | None) -> bool:
+    def _skip(self, index: int, t: float | None, text: str = "") -> bool:
         """Was input line ``index`` (0-based) consumed before the restored state?
 
         Yes while the line is among the first ``lines`` and not later than the last consumed
@@ -340,11 +406,17 @@ class LiveMonitor:
         if r is None:
             return False
         done = index < r["lines"] and (t is None or r["t_last"] is None or t <= r["t_last"])
+        if done and index == 0 and r.get("first") and _digest(text) != r["first"]:
+            raise DataError(f"--resume: the input's first line {text.strip()[:60]!r} is not the first line "
+                            "of the checkpointed run: a different log (replay the same input, or start "
+                            "without --resume)")
         if not done:
             self._resumed = None  # past the checkpoint: nothing more is skipped
         return done
 
-    def _consumed(self, index: int, t: float | None) -> None:
+    def _consumed(self, index: int, t: float | None, text: str = "") -> None:
+        if index == 0 and self._resumed is None:
+            self.first = _digest(text)
         self.lines = index + 1
         if t is not None and (self.t_last is None or t > self.t_last):
             self.t_last = t
@@ -458,6 +530,7 @@ class LiveMonitor:
             n = 0
             for rec in self.records(lines, checkpoint_every=checkpoint_every,
                                     on_checkpoint=save if ckpt is not None else None):
+                self._count(rec)
                 if on_record is not None:
                     on_record(rec)
                 if log is not None:
@@ -467,6 +540,24 @@ class LiveMonitor:
         finally:
             if log is not None:
                 log.close()
+
+    def _count(self, rec: dict) -> None:
+        c = self.counts
+        key = ("gaps" if rec.get("gap") else "invalid" if "invalid" in rec
+               else "announcements" if rec.get("kind") == "onset" else "cleared")
+        c[key] += 1
+
+    def summary_line(self) -> str:
+        """One line on what a follow run did so far (printed at its end, and when it is stopped).
+
+        Examples
+        --------
+        >>> LiveMonitor("monitor.toml").summary_line()  # doctest: +SKIP
+        'follow: 0 samples, 0 announcements (0 not seen any more), 0 invalid lines or samples, 0 gaps'
+        """
+        c = self.counts
+        return (f"follow: {self.samples} samples, {c['announcements']} announcements ({c['cleared']} "
+                f"{NOT_SEEN}), {c['invalid']} invalid lines or samples, {c['gaps']} gaps")
 
     def _stepped(self) -> None:
         self.samples += 1
@@ -497,14 +588,14 @@ class LiveMonitor:
             try:
                 frame = parse_candump_line(line, lineno)
             except DataError as exc:
-                if not self._skip(index, None):
+                if not self._skip(index, None, line):
                     yield {"line": lineno, "invalid": str(exc)}
-                    self._consumed(index, None)
+                    self._consumed(index, None, line)
                 continue
             t = None if frame is None else frame[0]
-            if self._skip(index, t):
+            if self._skip(index, t, line):
                 continue
-            self._consumed(index, t)
+            self._consumed(index, t, line)
             if frame is None:
                 continue
             t, bus, fid, data = frame
@@ -525,10 +616,10 @@ class LiveMonitor:
         lines = iter(stream)
         header = self.header
         first = next(lines, None)
-        if header is None or (first is not None and [h.strip() for h in next(csv.reader([first]))] == header):
+        if header is None or (first is not None and _cells(first, 1) == header):
             if first is None:
                 raise DataError("follow mode: no header line on the input")
-            header = [h.strip() for h in next(csv.reader([first]))]
+            header = _cells(first, 1)
             lines_iter = lines
         else:  # resumed on a stream that goes on without repeating its header
             lines_iter = itertools.chain([first], lines) if first is not None else lines
@@ -538,7 +629,13 @@ class LiveMonitor:
         it = header.index(tcol)
         for index, text in enumerate(lines_iter):
             lineno = index + 2
-            row = next(csv.reader([text]), [])
+            try:
+                row = _cells(text, lineno, strip=False)
+            except DataError as exc:  # e.g. a field longer than the CSV module's limit
+                if not self._skip(index, None, text):
+                    self._consumed(index, None, text)
+                    yield {"line": lineno, "invalid": str(exc)}
+                continue
             if not row:
                 continue
             t_row = None
@@ -549,9 +646,9 @@ class LiveMonitor:
                     t_row = None
                 if t_row is not None and not np.isfinite(t_row):
                     t_row = None
-            if self._skip(index, t_row):
+            if self._skip(index, t_row, text):
                 continue
-            self._consumed(index, t_row)
+            self._consumed(index, t_row, text)
             if len(row) != len(header):
                 yield {"line": lineno, "invalid": f"{len(row)} fields, expected {len(header)}"}
                 continue

@@ -21,9 +21,13 @@ The rules, for a channel with value ``x`` at time ``t`` of sample ``k``:
   sample is a spike when both its increment from the preceding sample departs from ``m`` by more
   than ``spike * s`` and its change from the last valid sample, ``n`` periods back, departs from
   ``n * m`` by more than ``spike * s * sqrt(n)``. The test needs ``window`` increments collected
-  and a preceding sample that arrived (not the first sample after a gap or a NaN); it is skipped
-  when ``s == 0`` (a constant or coarsely quantised signal has no spread to judge against). A
-  spike is an isolated sample: a level that persists for two samples is accepted as a step;
+  and a preceding sample that arrived (not the first sample after a gap or a NaN). When the MAD
+  is 0 -- a quantised signal whose increments are mostly zero (41 of 50 equal samples) -- ``s``
+  is 1.4826 times the median of the non-zero deviations from ``m`` (the scale of the increments
+  that move: about the quantisation step), so the test does not collapse; only a window of
+  identical increments (a constant or constant-slope signal) gives ``s == 0``, and then the test
+  is skipped. A spike is an isolated sample: a level that persists for two samples is accepted
+  as a step;
 * and, for every input channel whatever the rules, a value with ``|x| > max_abs`` (the
   Monitor's absurd-magnitude limit, 1e12 by default) is invalid.
 """
@@ -54,6 +58,22 @@ def _num(x: Any, what: str) -> float | None:
     if not math.isfinite(x):
         raise DataError(f"plausibility {what} must be finite, got {x}")
     return x
+
+
+def _robust_scale(win: np.ndarray, meds: np.ndarray) -> np.ndarray:
+    """1.4826 MAD of the increments ``win`` (..., W) about ``meds`` (...); where it is 0, 1.4826
+    times the median of the non-zero deviations (0 only when every deviation is 0)."""
+    dev = np.abs(win - meds[..., None])
+    scales = _MAD_SCALE * np.median(dev, axis=-1)
+    flat = scales == 0
+    if flat.any():
+        d = dev[flat]
+        nz = np.zeros(d.shape[0])
+        has = (d > 0).any(axis=-1)
+        if has.any():
+            nz[has] = _MAD_SCALE * np.nanmedian(np.where(d[has] > 0, d[has], np.nan), axis=-1)
+        scales[flat] = nz
+    return scales
 
 
 @dataclass(frozen=True)
@@ -262,7 +282,7 @@ class PlausibilityChecker:
                 meds, scales = self._stats_ragged()
             else:
                 meds = np.median(win, axis=-1)
-                scales = _MAD_SCALE * np.median(np.abs(win - meds[..., None]), axis=-1)
+                scales = _robust_scale(win, meds)
             lim = self.spike_k * scales
             n = max(1, round((t - self._t_ref) / self.dt)) if self.dt else 1
             with np.errstate(invalid="ignore"):
@@ -289,7 +309,7 @@ class PlausibilityChecker:
             seg = ordered[:, j, self.W - int(w):]
             m = np.median(seg, axis=-1)
             meds[:, j] = m
-            scales[:, j] = _MAD_SCALE * np.median(np.abs(seg - m[:, None]), axis=-1)
+            scales[:, j] = _robust_scale(seg, m)
         return meds, scales
 
     # ------------------------------------------------------------------ recording

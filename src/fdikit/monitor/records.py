@@ -5,7 +5,11 @@
 A record has ``t``, ``run`` and ``sample``, and one of:
 
 * an event: ``kind`` (``"onset"`` or ``"cleared"``), ``hypothesis``, ``value``, ``size`` (``None``
-  where not estimated), ``episode`` and ``announcement`` (``True`` for an onset);
+  where not estimated), ``episode`` and ``announcement`` (``True`` for an onset); a cleared event
+  also has ``label: "not seen any more"`` -- the alarm stayed below its clear level for the
+  decision's ``clear_after``, which is all the monitor knows: a persistent fault whose residual
+  decays (a sensor bias an observer absorbs) ends its episode the same way, so a cleared episode
+  says the fault is no longer seen, not that it is gone;
 * a gap: ``gap: True``, ``t_start`` and ``n_missing`` (at the first sample after the gap);
 * a held sample: ``invalid`` (the reason).
 
@@ -20,7 +24,11 @@ from typing import Any
 import numpy as np
 
 __all__ = ["batch_records", "batch_summary", "event_record", "gap_record", "invalid_record", "record_order",
-           "stats_frame", "status_counts", "step_records", "summary_lines"]
+           "stats_frame", "status_counts", "step_records", "summary_lines", "write_records", "write_stats"]
+
+
+#: What a cleared episode means: the alarm stopped, which a fault that persists can do too.
+NOT_SEEN = "not seen any more"
 
 
 def event_record(e) -> dict:
@@ -40,12 +48,17 @@ def event_record(e) -> dict:
     >>> from fdikit.monitor import Event
     >>> event_record(Event(0, 12, 0.24, "sensor:speed", 31.5))["announcement"]
     True
+    >>> event_record(Event(0, 90, 1.8, "sensor:speed", 0.0, "cleared"))["label"]
+    'not seen any more'
     """
     kind = getattr(e, "kind", "onset")
     size = getattr(e, "size", None)
-    return {"t": e.t, "run": e.run, "sample": e.k, "kind": kind, "hypothesis": e.hypothesis,
-            "value": e.value, "size": None if size is None or not np.isfinite(size) else float(size),
-            "episode": int(getattr(e, "episode", 0)), "announcement": kind == "onset"}
+    rec = {"t": e.t, "run": e.run, "sample": e.k, "kind": kind, "hypothesis": e.hypothesis,
+           "value": e.value, "size": None if size is None or not np.isfinite(size) else float(size),
+           "episode": int(getattr(e, "episode", 0)), "announcement": kind == "onset"}
+    if kind == "cleared":
+        rec["label"] = NOT_SEEN
+    return rec
 
 
 def gap_record(g) -> dict:
@@ -213,6 +226,42 @@ def stats_frame(sig, res):
     return df
 
 
+def write_records(path, records: list[dict]) -> None:
+    """Write records as JSON Lines (``fdikit monitor --events``), atomically
+    (:func:`fdikit.base.outputs.open_output`: never half a file; a full disk is a DataError naming it).
+
+    Examples
+    --------
+    >>> import os, tempfile
+    >>> p = os.path.join(tempfile.mkdtemp(), "ev.jsonl")
+    >>> write_records(p, [{"t": 0.5, "invalid": "x: NaN"}])
+    >>> open(p).read()
+    '{"t": 0.5, "invalid": "x: NaN"}\\n'
+    """
+    import json
+
+    from ..base.outputs import open_output
+
+    with open_output(path, "w") as fh:
+        for rec in records:
+            fh.write(json.dumps(rec) + "\n")
+
+
+def write_stats(path, sig, res) -> None:
+    """Write :func:`stats_frame` as Parquet (``fdikit monitor --stats``), atomically: a stop or a
+    full disk while it is written leaves no file that looks valid.
+
+    Examples
+    --------
+    >>> write_stats("stats.parquet", sig, res)  # doctest: +SKIP
+    """
+    from ..base.outputs import open_output
+
+    frame = stats_frame(sig, res)
+    with open_output(path, "wb") as fh:
+        frame.to_parquet(fh, index=False)
+
+
 def batch_summary(cfg, log: Any, sig, res, *, t_start: float) -> dict:
     """The summary of a batch run (``fdikit monitor LOG --json``).
 
@@ -281,13 +330,13 @@ def summary_lines(summary: dict, records: list[dict]) -> list[str]:
     ...        "episode": 0}
     >>> first, event = summary_lines(summary, [rec])
     >>> first
-    '100 samples, 1 announcements (0 cleared), ... status: 90 ok, 0 cannot judge, 10 warmup'
+    '100 samples, 1 announcements (0 not seen any more), ... status: 90 ok, 0 cannot judge, 10 warmup'
     >>> event
     '  t = 0.500 s  sensor:speed  (31.5)  [episode 0]'
     """
     st = summary["status"]
     out = [f"{summary['samples']} samples, {summary['n_events']} announcements "
-           f"({summary['n_cleared']} cleared), {summary['invalid_samples']} invalid samples held, "
+           f"({summary['n_cleared']} {NOT_SEEN}), {summary['invalid_samples']} invalid samples held, "
            f"{summary['n_gaps']} gaps; status: " + ", ".join(f"{v} {k.replace('_', ' ')}"
                                                           for k, v in st.items())]
     for rec in records:
@@ -296,6 +345,6 @@ def summary_lines(summary: dict, records: list[dict]) -> list[str]:
                        f"t = {rec['t_start']:.3f} s: cannot judge, warm-up after it")
         elif "kind" in rec:
             size = "" if rec["size"] is None else f", size {rec['size']:.4g}"
-            what = "cleared" if rec["kind"] == "cleared" else f"({rec['value']:.4g}{size})"
+            what = NOT_SEEN if rec["kind"] == "cleared" else f"({rec['value']:.4g}{size})"
             out.append(f"  t = {rec['t']:.3f} s  {rec['hypothesis']}  {what}  [episode {rec['episode']}]")
     return out

@@ -113,7 +113,7 @@ class _StreamingPath:
             # (the largest magnitude of the whole sample proves every input finite and sane;
             # otherwise look closely: a channel the monitor does not read may be NaN)
             m = float(np.abs(vals).max()) if vals.size else 0.0
-            if not m <= self._abs_limit:
+            if not m <= self._abs_limit or m == math.inf:   # inf too when max_abs is None
                 x = vals[:, sel]
                 bad = ~np.isfinite(x)
                 if bad.any():

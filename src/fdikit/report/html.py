@@ -526,12 +526,14 @@ class Report:
         )
 
     def write(self, path: str | os.PathLike) -> Path:
-        """Write the page to ``path`` (atomically: a temporary file renamed); returns the path."""
+        """Write the page to ``path`` atomically (:func:`fdikit.base.outputs.open_output`: a full disk
+        is a DataError naming the file, never half a page); returns the path."""
+        from ..base.outputs import open_output
+
         p = check_output_path(path)
         text = self.to_html()
-        tmp = p.with_name(p.name + ".tmp")
-        tmp.write_text(text, encoding="utf-8")
-        os.replace(tmp, p)
+        with open_output(p, "w", encoding="utf-8") as fh:
+            fh.write(text)
         return p
 
 

@@ -21,7 +21,8 @@ The code lives in one module per concept: :mod:`.densities` (the hypotheses' den
 :mod:`.kernels` (compiled exact log densities), :mod:`.recursion` (the compiled recursion and its
 outputs), :mod:`.tables` (tabulated densities and their fused kernels), :mod:`.core` (the test),
 :mod:`.warmup`, :mod:`.calibrate` (densities from simulated features), :mod:`.design` (the test
-from real, labelled data) and :mod:`.diagnosis` (decisions from the posteriors); every name of the
+from real, labelled data), :mod:`.tempering` (a temperature fitted on held-out data, the
+reliability of posteriors) and :mod:`.diagnosis` (decisions from the posteriors); every name of the
 former single module is importable from here.
 """
 
@@ -38,7 +39,7 @@ from .core import (  # noqa: F401
     table_direct,
 )
 from .densities import _LOG_SQRT_2PI, LineMeanGaussian, UniformMeanGaussian, _log_diff_ndtr  # noqa: F401
-from .design import WhitenedMHSSPT, _segment_list, calibrate_segments, design_mhsspt  # noqa: F401
+from .design import WhitenedMHSSPT, _segment_list, calibrate_segments, design_mhsspt, shrunk_covariance  # noqa: F401
 from .diagnosis import _fault_outputs, detection_time, final_diagnosis  # noqa: F401
 from .kernels import (  # noqa: F401
     _INV_SQRT2,
@@ -80,6 +81,12 @@ from .tables import (  # noqa: F401
     tabulate_umg_cubic,
     umg_table_add,
 )
+from .tempering import (
+    decision_outputs,
+    design_calibrated_mhsspt,
+    fit_temperature,
+    reliability,
+)
 from .warmup import WarmupMHSSPT  # noqa: F401
 
 __all__ = [
@@ -91,10 +98,15 @@ __all__ = [
     "WhitenedMHSSPT",
     "calibrate_densities",
     "calibrate_segments",
+    "decision_outputs",
+    "design_calibrated_mhsspt",
     "design_mhsspt",
     "detection_time",
     "final_diagnosis",
+    "fit_temperature",
     "mhsspt_update",
+    "reliability",
+    "shrunk_covariance",
     "tabulate_umg",
     "tabulate_umg_cubic",
     "umg_component_logpdf",

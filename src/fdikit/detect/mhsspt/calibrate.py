@@ -54,7 +54,8 @@ def calibrate_densities(
         mean and their standard deviation.
     faults : mapping fault -> mapping magnitude -> array (N_m, C)
         Feature samples of each fault at each simulated magnitude (after the fault has
-        settled). At least two magnitudes per fault.
+        settled). At least two magnitudes per fault (one segment of unknown magnitude per fault:
+        :func:`~fdikit.detect.mhsspt.calibrate_segments`).
     no_fault : str
         Name of the no-fault hypothesis.
     split : mapping fault -> magnitude, optional
@@ -94,7 +95,10 @@ def calibrate_densities(
     for fault, by_mag in faults.items():
         mags = sorted(by_mag, key=abs)
         if len(mags) < 2:
-            raise DataError(f"fault {fault!r}: need features at >= 2 magnitudes, got {len(mags)}")
+            raise DataError(f"fault {fault!r}: need features at >= 2 magnitudes, got {len(mags)}; with "
+                            f"one segment per fault at an unknown magnitude use calibrate_segments "
+                            f"(fdikit.detect.calibrate_segments: a mean along the segment's direction "
+                            f"and a full covariance)")
         stats = {}
         for m in mags:
             x = np.asarray(by_mag[m], float)

@@ -15,7 +15,7 @@ from .calibrate import MHSSPTCalibration
 from .core import MHSSPT
 from .densities import LineMeanGaussian
 
-__all__ = ["WhitenedMHSSPT", "calibrate_segments", "design_mhsspt"]
+__all__ = ["WhitenedMHSSPT", "calibrate_segments", "design_mhsspt", "shrunk_covariance"]
 
 
 def _segment_list(x, what: str, C: int | None) -> list[np.ndarray]:
@@ -32,6 +32,33 @@ def _segment_list(x, what: str, C: int | None) -> list[np.ndarray]:
     return out
 
 
+def shrunk_covariance(x: np.ndarray, method: str = "ledoit_wolf") -> np.ndarray:
+    """Shrinkage covariance of samples ``x`` (N, C): the correlation matrix shrunk towards the
+    identity by scikit-learn's ``LedoitWolf`` or ``OAS`` (``method`` ``"ledoit_wolf"`` or
+    ``"oas"``), scaled back by the sample standard deviations (unbiased, as :func:`numpy.cov`).
+
+    Examples
+    --------
+    >>> x = np.random.default_rng(0).normal(size=(60, 40)) * np.arange(1, 41)
+    >>> S = shrunk_covariance(x)
+    >>> bool(np.allclose(np.diag(S), x.var(0, ddof=1))), bool(np.linalg.eigvalsh(S).min() > 0)
+    (True, True)
+    """
+    from sklearn.covariance import OAS, LedoitWolf
+
+    x = np.asarray(x, float)
+    sd = x.std(0, ddof=1)
+    if np.any(sd <= 0):
+        raise DataError(f"feature {int(np.argmin(sd))} is constant: no covariance")
+    est = {"ledoit_wolf": LedoitWolf, "oas": OAS}.get(method)
+    if est is None:
+        raise DataError(f"shrinkage method must be 'ledoit_wolf' or 'oas', got {method!r}")
+    z = (x - x.mean(0)) / sd
+    R = est(assume_centered=True).fit(z).covariance_
+    R = R / np.sqrt(np.outer(np.diag(R), np.diag(R)))  # a correlation: unit diagonal
+    return R * np.outer(sd, sd)
+
+
 def calibrate_segments(
     nominal,
     segments: Mapping[str, Any],
@@ -39,6 +66,7 @@ def calibrate_segments(
     no_fault: str = "none",
     scale: tuple[float, float] = (0.5, 2.0),
     ridge: float = 1e-9,
+    cov: str = "sample",
 ) -> MHSSPTCalibration:
     """Full-covariance densities from labelled segments of real data, one unknown magnitude each.
 
@@ -65,6 +93,12 @@ def calibrate_segments(
         observed size, a plain Gaussian).
     ridge : float
         Added to each covariance's diagonal, relative to its mean diagonal (numerical safety).
+    cov : {"sample", "ledoit_wolf", "oas", "auto"}
+        Covariance estimate: the sample covariance, or a shrinkage estimate (scikit-learn's
+        Ledoit-Wolf or OAS, of the correlation, towards the identity: the variances are kept) for
+        many channels and few samples, where the sample covariance's small eigenvalues are too
+        small and the densities overconfident; ``"auto"``: Ledoit-Wolf for a segment of fewer than
+        ``10 C`` samples, else the sample covariance.
 
     Returns
     -------
@@ -87,8 +121,12 @@ def calibrate_segments(
     if not (0 <= lo <= hi) or not np.isfinite(hi):
         raise DataError(f"scale must be 0 <= low <= high, got {scale}")
 
+    if cov not in ("sample", "ledoit_wolf", "oas", "auto"):
+        raise DataError(f"cov must be 'sample', 'ledoit_wolf', 'oas' or 'auto', got {cov!r}")
+
     def cov_of(x):
-        S = np.atleast_2d(np.cov(x, rowvar=False))
+        method = ("ledoit_wolf" if x.shape[0] < 10 * C else "sample") if cov == "auto" else cov
+        S = np.atleast_2d(np.cov(x, rowvar=False)) if method == "sample" else shrunk_covariance(x, method)
         return S + ridge * max(float(np.mean(np.diag(S))), 1e-300) * np.eye(C)
 
     mu0 = nom.mean(0)
@@ -129,6 +167,11 @@ class WhitenedMHSSPT(MHSSPT):
         As :class:`MHSSPT`.
     whitener : VARWhitener
         Fitted on nominal data of ``inputs``.
+    temperature : float
+        Every log-likelihood is divided by it (> 0; 1: the plain test). A temperature above one
+        discounts the evidence of each sample for what the densities do not model (densities
+        estimated from few samples, runs that differ from the training run, residual serial
+        correlation); fit it on held-out data with :func:`~fdikit.detect.mhsspt.fit_temperature`.
 
     Examples
     --------
@@ -145,8 +188,11 @@ class WhitenedMHSSPT(MHSSPT):
 
     _state_attrs = (*MHSSPT._state_attrs, "whitener")
 
-    def __init__(self, inputs, densities, p, pi=None, q=0.0, groups=None, *, whitener):
+    def __init__(self, inputs, densities, p, pi=None, q=0.0, groups=None, *, whitener, temperature=1.0):
         super().__init__(inputs, densities, p, pi, q, groups)
+        self.temperature = float(temperature)
+        if not (np.isfinite(self.temperature) and self.temperature > 0):
+            raise DataError(f"temperature must be positive and finite, got {temperature}")
         if list(whitener.input_names) != list(self.input_names):
             raise DataError(f"whitener inputs {whitener.input_names} differ from the test's "
                             f"{self.input_names}")
@@ -157,6 +203,22 @@ class WhitenedMHSSPT(MHSSPT):
         super().reset(runs)
         if hasattr(self, "whitener"):
             self.whitener.reset(runs)
+
+    def loglik(self, x: np.ndarray) -> np.ndarray:
+        """Log densities of every hypothesis divided by :attr:`temperature`: x (..., C) -> (..., H)."""
+        ll = super().loglik(x)
+        return ll if getattr(self, "temperature", 1.0) == 1.0 else ll / self.temperature
+
+    def whitened(self, x: np.ndarray) -> np.ndarray:
+        """The features the densities see for a whole record ``x`` (runs, T, C) from a reset: the
+        innovations, the whitening transient replaced by the no-fault mean (the whitener is reset
+        and left at the end of ``x``)."""
+        self.whitener.reset(x.shape[0])
+        e = self.whitener.whiten(x)
+        if self.whitener.order:
+            e = e.copy()
+            e[:, : self.whitener.order] = self._x0
+        return e
 
     def _advance(self, x):
         e = self.whitener.whiten(x)
@@ -178,7 +240,7 @@ class WhitenedMHSSPT(MHSSPT):
         return {"inputs": list(self.input_names),
                 "densities": {h: d.to_dict() for h, d in zip(self.hypotheses, self.densities)},
                 "p": self.p, "pi": self.pi.tolist(), "q": self.q, "groups": self.groups,
-                "whitener": self.whitener.to_dict()}
+                "whitener": self.whitener.to_dict(), "temperature": self.temperature}
 
     @classmethod
     def from_dict(cls, d: dict) -> WhitenedMHSSPT:
@@ -186,7 +248,7 @@ class WhitenedMHSSPT(MHSSPT):
 
         dens = {h: LineMeanGaussian(v["a"], v["b"], v["cov"]) for h, v in d["densities"].items()}
         return cls(d["inputs"], dens, d["p"], d["pi"], d["q"], d["groups"],
-                   whitener=VARWhitener.from_dict(d["whitener"]))
+                   whitener=VARWhitener.from_dict(d["whitener"]), temperature=d.get("temperature", 1.0))
 
 
 def design_mhsspt(
@@ -201,6 +263,8 @@ def design_mhsspt(
     scale: tuple[float, float] = (0.5, 2.0),
     q: float = 0.0,
     no_fault: str = "none",
+    criterion: str = "bic",
+    cov: str = "auto",
 ) -> WhitenedMHSSPT:
     """An MHSSPT from labelled real data: pre-whitening fitted on the nominal records, then
     full-covariance densities from one segment per fault and magnitude (:func:`calibrate_segments`).
@@ -219,9 +283,16 @@ def design_mhsspt(
         Fit a :class:`~fdikit.detect.whiten.VARWhitener` (False: mean removal only; right for
         serially independent features).
     order, max_order : int
-        VAR order (None: BIC up to ``max_order``).
-    scale, no_fault
-        As :func:`calibrate_segments`.
+        VAR order (None: by ``criterion`` up to ``max_order``). Where the nominal samples are too
+        few for a full VAR of that order (many channels), the orders they carry compete, and a
+        diagonal VAR (one autoregression per channel) is fitted when not even a full VAR(1) fits
+        (:meth:`~fdikit.detect.whiten.VARWhitener.fit` with ``reduce=True``; ``whitener.info``
+        says what was reduced).
+    criterion : {"bic", "aic"}
+        Information criterion of the order.
+    scale, no_fault, cov
+        As :func:`calibrate_segments` (``cov="auto"``: shrinkage covariances for segments shorter
+        than ten samples per channel).
     q : float
         Return probability (:class:`MHSSPT`).
 
@@ -244,7 +315,7 @@ def design_mhsspt(
     C = len(inputs)
     nom = _segment_list(nominal, "nominal", C)
     if whiten:
-        w = VARWhitener.fit(nom, inputs, order=order, max_order=max_order)
+        w = VARWhitener.fit(nom, inputs, order=order, max_order=max_order, criterion=criterion, reduce=True)
     else:
         w = VARWhitener(inputs, np.concatenate(nom).mean(0), np.zeros((0, C, C)))
     k0 = w.order  # the first samples of each record are whitening transients
@@ -256,7 +327,7 @@ def design_mhsspt(
 
     wn = [white(s) for s in nom]
     ws = {f: [white(s) for s in _segment_list(v, f"fault {f!r}", C)] for f, v in segments.items()}
-    cal = calibrate_segments(wn, ws, no_fault=no_fault, scale=scale)
+    cal = calibrate_segments(wn, ws, no_fault=no_fault, scale=scale, cov=cov)
     groups = {g: m for g, m in cal.groups.items() if m != [g]}
     test = WhitenedMHSSPT(inputs, cal.densities, p, q=q, groups=groups, whitener=w)
     test.calibration = cal

@@ -26,7 +26,7 @@ def read_blf(path, dbc, signals, rate=None, **kw) -> LoadedSignals:
     p = _check_file(path, "BLF file")
     frames = None
     try:
-        if set(kw) <= set(_COMMON_OPTIONS):  # the usual layout is read on demand
+        if set(kw) <= {*_COMMON_OPTIONS, "plausibility"}:  # the usual layout is read on demand
             frames = _read_blf_frames(p)
         if frames is None:
             ts, ids, data = _read_frame_table(p)

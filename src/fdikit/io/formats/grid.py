@@ -25,6 +25,7 @@ from ..can import (
     convert_units,
 )
 from ..timebase import TimeOrigin
+from .raw_checks import implausible_samples
 
 #: Largest grid a loader builds (samples); a larger one is a time column in the wrong unit.
 MAX_GRID = 50_000_000
@@ -54,6 +55,10 @@ class SignalQuality(SignalInfo):
         Longest stretch (s) over which the source value did not change.
     stuck : bool
         ``longest_constant >= stuck_after`` (a report, not an error).
+    n_implausible : int
+        Source samples refused by the signal's plausibility rule before resampling
+        (:mod:`fdikit.io.formats.raw_checks`); every grid sample interpolated from one is
+        flagged invalid with the rule's reason (not counted in ``n_nonfinite``).
     """
 
     n_nonfinite: int = 0
@@ -62,6 +67,7 @@ class SignalQuality(SignalInfo):
     n_conflicts: int = 0
     longest_constant: float = 0.0
     stuck: bool = False
+    n_implausible: int = 0
 
 
 @dataclass(frozen=True)
@@ -90,16 +96,25 @@ class LoadedSignals(LogSignals):
 
     ``info`` maps each channel to a :class:`SignalQuality`; ``reasons`` lists, for every run of
     invalid grid samples, ``(channel, start, stop, reason)`` (samples ``start <= k < stop``; see
-    :meth:`invalid_reason`).
+    :meth:`invalid_reason`). ``breaks`` lists ``(t_before, t_after, reason)`` for every stretch
+    cut from the grid (its time jumps from ``t_before`` to ``t_after``: a clock jump, a pause of
+    the whole log, a clock step back that starts a new segment); ``n_segments`` counts the
+    segments of clock steps back.
     """
 
-    __slots__ = ("reasons", "source")
+    __slots__ = ("breaks", "reasons", "source")
 
     def __init__(self, t, values, names, units=None, *, valid=None, info=None, source=None, t0=0.0,
                  time_origin=None, reasons=None):
         super().__init__(t, values, names, units, valid=valid, info=info, t0=t0, time_origin=time_origin)
         self.source = source
         self.reasons: list[tuple[str, int, int, str]] = list(reasons or [])
+        self.breaks: list[tuple[float, float, str]] = []
+
+    @property
+    def n_segments(self) -> int:
+        """Segments of the log between clock steps back (1 when its clock never steps back)."""
+        return 1 + sum("clock steps back" in why for _a, _b, why in self.breaks)
 
     def invalid_reason(self, k: int) -> str | None:
         """Why grid sample ``k`` is invalid (every channel's reason, joined), ``None`` when valid.
@@ -125,8 +140,10 @@ class LoadedSignals(LogSignals):
         return "; ".join(why)
 
     def _keep_source(self, s: LogSignals) -> LoadedSignals:
-        return LoadedSignals(s.t, s.values, s.names, s.units, valid=s.valid, info=s.info, source=self.source,
-                             t0=s.t0, time_origin=s.time_origin)
+        out = LoadedSignals(s.t, s.values, s.names, s.units, valid=s.valid, info=s.info, source=self.source,
+                            t0=s.t0, time_origin=s.time_origin)
+        out.breaks = list(self.breaks)
+        return out
 
     def select(self, names) -> LoadedSignals:
         out = self._keep_source(super().select(names))
@@ -242,6 +259,8 @@ def series_to_grid(
     where: str = "log",
     t0: float = 0.0,
     time_origin: TimeOrigin | None = None,
+    plausibility: Mapping[str, Any] | None = None,
+    resolution: Mapping[str, float] | None = None,
 ) -> LoadedSignals:
     """Put irregularly sampled signals on one uniform grid (the second step of every loader).
 
@@ -275,6 +294,14 @@ def series_to_grid(
     t0, time_origin
         Absolute origin of the (relative) sample times, stored on the result
         (:mod:`fdikit.io.timebase`).
+    plausibility : mapping of str -> Plausibility or mapping, optional
+        Range and spike rules per channel, in the channel's returned unit, applied to its source
+        samples before resampling (:func:`fdikit.io.formats.raw_checks.implausible_samples`): a
+        refused sample is a bad sample, and every grid sample it would touch is invalid with the
+        rule's reason.
+    resolution : mapping of str -> float, optional
+        Quantisation step of each channel in its source unit (a DBC signal's scale), the floor of
+        the spike test's scale.
 
     Returns
     -------
@@ -310,6 +337,12 @@ def series_to_grid(
             if k not in names:
                 raise DataError(f"unit conversion given for {k!r}, which is not a requested signal")
     counts = counts or {}
+    plausibility = dict(plausibility or {})
+    for k in plausibility:
+        if k not in names:
+            raise DataError(f"plausibility rule given for {k!r}, which is not a requested signal")
+    resolution = resolution or {}
+    implausible: dict[str, tuple[np.ndarray, list[str]]] = {}
     clean: dict[str, tuple[np.ndarray, np.ndarray, int, int]] = {}
     period: dict[str, float] = {}
     # the signals of one message share their time stamps (one array): what depends on the times
@@ -377,8 +410,17 @@ def series_to_grid(
             target = _SI.get(_norm_unit(src_unit), src_unit)
         elif units is not None:
             target = units.get(n, src_unit)
+        res = abs(float(resolution.get(n, 0.0) or 0.0))
         if target != src_unit:
             v = convert_units(v, src_unit, target, channel=n)
+            if res:
+                r01 = convert_units(np.array([0.0, res]), src_unit, target, channel=n)
+                res = abs(float(r01[1] - r01[0]))
+        if n in plausibility:
+            bad, why = implausible_samples(t, v, plausibility[n], res, where=n)
+            if bad.any():
+                v = np.where(bad, np.nan, v)
+                implausible[n] = (bad, why)
         out_units.append(target)
         conv.append(v)
     # the channels of one time axis (one message) are resampled together, as the rows of one
@@ -438,8 +480,9 @@ def series_to_grid(
         src_unit = str(source_units.get(n, "") or "")
         ok = valid[:, c]
         n_ok = int(np.count_nonzero(ok))
+        imp = implausible.get(n)
         if n_ok < n_grid:
-            reasons.extend(_invalid_spans(n, t, fin_of[c], grid, ok, method, max_gap, period[n]))
+            reasons.extend(_invalid_spans(n, t, fin_of[c], grid, ok, method, max_gap, period[n], imp))
         longest = longest_of[c]
         span_s = float(t[-1] - t[0])
         info[n] = SignalQuality(
@@ -447,10 +490,11 @@ def series_to_grid(
             float((t.size - 1) / span_s) if t.size > 1 and span_s > 0 else float("nan"),
             period[n], float(t[0]), float(t[-1]),
             _n_gaps(by_time[id(t)], max_gap), n_grid - n_ok,
-            n_nonfinite=int(t.size - np.count_nonzero(fin_of[c])),
+            n_nonfinite=int(t.size - np.count_nonzero(fin_of[c])) - (0 if imp is None else int(imp[0].sum())),
             n_undecodable=int(counts.get(n, {}).get("n_undecodable", 0)),
             n_duplicates=n_dup, n_conflicts=n_conf, longest_constant=longest,
-            stuck=bool(longest >= stuck_after))
+            stuck=bool(longest >= stuck_after),
+            n_implausible=0 if imp is None else int(imp[0].sum()))
     out = LoadedSignals(grid, values, names, out_units, valid=valid, info=info, source=source, t0=t0,
                         time_origin=time_origin)
     out.reasons = reasons
@@ -470,14 +514,27 @@ def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(np.flatnonzero(d == 1).tolist(), np.flatnonzero(d == -1).tolist()))
 
 
-def _invalid_spans(name, t, fin, grid, ok, method, max_gap, period) -> list[tuple[str, int, int, str]]:
+def _invalid_spans(name, t, fin, grid, ok, method, max_gap, period,
+                   implausible=None) -> list[tuple[str, int, int, str]]:
     """Why each run of invalid grid samples of one channel is invalid: outside the channel's span,
-    a gap longer than ``max_gap`` periods, or an interpolation touching a bad source sample."""
+    a gap longer than ``max_gap`` periods, an interpolation touching a source sample refused by
+    the plausibility rule (``implausible``: its mask and reasons) or another bad source sample."""
     out = []
     bad = ~ok
     outside = bad & ((grid < t[0]) | (grid > t[-1]))
     touches = bad & ~outside & _touches_bad(t, fin, grid, method)
-    gap = bad & ~outside & ~touches
+    if implausible is not None:
+        imp, why = implausible
+        by_imp = touches & _touches_bad(t, ~imp, grid, method)
+        touches &= _touches_bad(t, fin | imp, grid, method)
+        ti = t[imp]
+        for a, b in _runs(by_imp):
+            lo, hi = grid[max(a - 1, 0)], grid[min(b, grid.size - 1)]
+            sel = [w for w, x in zip(why, ti) if lo <= x <= hi] or why[:1]
+            out.append((name, a, b,
+                        f"{name}: interpolated from an implausible source sample ({'; '.join(sel)})"))
+    gap = bad & ~outside & ~touches & ~(_touches_bad(t, ~implausible[0], grid, method)
+                                        if implausible is not None else False)
     for a, b in _runs(outside):
         out.append((name, a, b, f"{name}: no sample (outside its recorded span {t[0]:.6f} .. {t[-1]:.6f} s)"))
     for a, b in _runs(touches):

@@ -97,7 +97,8 @@ def detect_format(path) -> str:
                     f"{head[:16]!r} are not BLF, Parquet, MDF, ULog, ROS bag, MCAP, ASC or candump")
 
 
-_FORMAT_OPTIONS = {"blf": (), "asc": ("strict", "encoding", "channel"), "candump": ("channel",),
+_FORMAT_OPTIONS = {"blf": ("plausibility",), "asc": ("strict", "encoding", "channel", "plausibility"),
+                   "candump": ("channel", "plausibility"),
                    "parquet": ("time", "source_units", "time_unit", "rebase"),
                    "csv": ("time", "source_units", "time_unit", "rebase"), "mdf": ("channel",),
                    "ulog": ("strict", "source_units", "max_age", "age"),
@@ -129,7 +130,9 @@ def read_log(path, dbc=None, signals=None, rate=None, *, format: str | None = No
         ``"ns"``) and ``rebase`` for tables (:mod:`fdikit.io.timebase`: an absolute time axis is
         rebased exactly to start at 0, its origin kept in ``t0`` and ``time_origin``; frame
         logs always start at their first frame, ``t0`` its time); ``strict`` and ``encoding`` for ASC;
-        ``channel`` for ASC, candump and MDF4 bus logging; ``max_age``, ``age``,
+        ``channel`` for ASC, candump and MDF4 bus logging; ``plausibility`` (range and spike
+        rules per signal, applied to each frame before resampling) for the CAN frame logs (BLF,
+        ASC, candump); ``max_age``, ``age``,
         ``source_units`` for the topic logs (ULog, ROS bags, topic folders), with ``strict`` for
         ULog, ``time`` for ROS bags and topic folders, ``time_unit`` and ``pattern`` for topic
         folders. An option that does not apply to the detected format is a
@@ -210,6 +213,7 @@ def read_can_log(
     max_gap: float = 3.0,
     method: str = "linear",
     span: str = "common",
+    plausibility: Mapping[str, Any] | None = None,
 ) -> LogSignals:
     """Read a CAN log, decode the chosen signals with a DBC and put them on one time grid.
 
@@ -236,6 +240,10 @@ def read_can_log(
         Grid from the latest first frame to the earliest last frame of the chosen signals
         (default; no leading/trailing NaN), or over the whole log (channels are invalid outside
         their recorded span). Time 0 is the first frame of the log either way.
+    plausibility : mapping of str -> Plausibility or mapping, optional
+        Range and spike rules per signal (in its returned unit) applied to each frame before
+        resampling (:mod:`fdikit.io.formats.raw_checks`): an implausible frame flags the grid
+        samples it would touch.
 
     Returns
     -------
@@ -262,4 +270,5 @@ def read_can_log(
     # one frame-to-grid path for every log format: fdikit.io.formats (stricter bad-input policy:
     # short payloads are flagged, never zero-padded; conflicting duplicates are flagged; a
     # corrupt container is a DataError)
-    return read_log(path, dbc, signals, rate, units=units, max_gap=max_gap, method=method, span=span)
+    kw = {} if plausibility is None else {"plausibility": plausibility}
+    return read_log(path, dbc, signals, rate, units=units, max_gap=max_gap, method=method, span=span, **kw)

@@ -132,7 +132,7 @@ def rav4_log_figure(mon, faults, sig, res, path: str | Path) -> str:
     fig = panel_figure(
         t,
         [col1, col2],
-        title=f"RAV4 lateral monitor, injected: {describe_injected(faults)} "
+        title=f"RAV4 lateral monitor, injected: {describe_injected(faults, mon.artifacts['filter'].pre)} "
         "(grey: calibration half; red: injected fault)",
         events=events,
         shade=shade,
@@ -141,8 +141,11 @@ def rav4_log_figure(mon, faults, sig, res, path: str | Path) -> str:
     return save(fig, path)
 
 
-def describe_injected(faults) -> str:
+def describe_injected(faults, pre=None) -> str:
     """A one-line description of injected faults (Fault objects or (channel, magnitude, start) biases).
+
+    With the RAV4 preprocessing ``pre`` a fault on a CAN name says what each signal receives, in
+    its DBC unit (:func:`fdikit.systems.car.monitor_rav4.injection.injection_summary`).
 
     Examples
     --------
@@ -150,7 +153,25 @@ def describe_injected(faults) -> str:
     'yaw_rate +0.03 from 40 s'
     >>> describe_injected([])
     'none'
+    >>> from fdikit.systems.car.monitor_rav4 import Rav4Preprocessing, parse_inject
+    >>> describe_injected(parse_inject("bias:STEER_ANGLE:3@20"), Rav4Preprocessing(16, 0, 0, 0, 1, 0, 0))
+    'bias on STEER_ANGLE_SENSOR.STEER_ANGLE (magnitude 3 deg) from 20 s'
     """
+    if pre is not None and faults and not isinstance(faults[0], tuple):
+        from .monitor_rav4.injection import injection_summary
+
+        out = []
+        for f in injection_summary(faults, pre):
+            parts = []
+            for a in f["applied"]:
+                unit = {"gain": "", "slope": f" {a['unit']}/s"}
+                v = ", ".join(f"{k} {x:g}{unit.get(k, ' ' + a['unit'])}" if isinstance(x, float)
+                              else f"{k} {x}"
+                              for k, x in a.items() if k not in ("signal", "unit") and x is not None)
+                parts.append(a["signal"] + (f" ({v})" if v else ""))
+            what = " and ".join(parts) or f["target"]
+            out.append(f"{f['fault']} on {what} from {f['start_s']:g} s")
+        return ", ".join(out)
     out = []
     for f in faults:
         if isinstance(f, tuple):
@@ -174,7 +195,7 @@ def rav4_log_report(mon, faults, sig, res, path: str | Path, data: str | Path) -
     t0 = sig.t[0]
     meta = {
         "data": str(data),
-        "injected": describe_injected(faults),
+        "injected": describe_injected(faults, mon.artifacts["filter"].pre),
         "calibrated on (s)": mon.record.get("half_s"),
         "design": "fitted and calibrated in this run (fdikit.systems.car.monitor_rav4.rav4_monitor)",
     }

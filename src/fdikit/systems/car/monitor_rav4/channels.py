@@ -132,6 +132,13 @@ def load_rav4_raw(path: str | Path | None = None, rate: float = 50.0) -> Signals
         raise DataError(f"RAV4 data not found: need {blf} and {dbc}")
     srcs = [RAW_SOURCES[n][0] for n in RAW_CHANNELS]
     s = read_can_log(blf, dbc, srcs, rate=rate)
+    breaks = getattr(s, "breaks", [])
+    if breaks:  # the design fits and calibrates on this log: it needs one contiguous grid
+        raise DataError(f"the RAV4 log {blf} is not contiguous: {breaks[0][2]} (grid time "
+                        f"{breaks[0][0]:.3f} s -> {breaks[0][1]:.3f} s); the RAV4 design fits its model on "
+                        "the log itself. Run a designed monitor on it instead (fdikit monitor LOG --config "
+                        "examples/rav4-lateral/monitor.toml), which holds over the break and judges both "
+                        "sides")
     if not s.valid.all():
         bad = [n for i, n in enumerate(s.names) if not s.valid[0, :, i].all()]
         raise DataError(f"the RAV4 log has gaps in {bad}")

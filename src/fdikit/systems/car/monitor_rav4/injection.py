@@ -13,7 +13,8 @@ from ....errors import DataError
 from ....signals import Signals
 from .channels import _WHEEL, CHANNELS, RAW_CHANNELS, RAW_SOURCES, Rav4Preprocessing
 
-__all__ = ["INJECT_TYPES", "inject", "inject_channels", "injected_sensor", "parse_inject"]
+__all__ = ["INJECT_TYPES", "check_inject_targets", "inject", "inject_channels", "injected_sensor",
+           "injected_sensors", "injection_summary", "parse_inject"]
 
 
 def _inject_raw(raw: np.ndarray, t: np.ndarray, faults, pre: Rav4Preprocessing) -> np.ndarray:
@@ -52,8 +53,10 @@ def inject_channels(pre: Rav4Preprocessing) -> dict[str, list[tuple[str, float]]
 
     * a CAN signal, alone or with its message (``YAW_RATE`` or ``KINEMATICS.YAW_RATE``), in its
       DBC unit (deg/s, deg, km/h, m/s^2 in the sensor's own sign);
-    * a CAN message (``STEER_ANGLE_SENSOR``, ``KINEMATICS``, ``WHEEL_SPEEDS``): every signal of it
-      (a frozen sensor freezes its whole message), each in its DBC unit;
+    * a CAN message (``STEER_ANGLE_SENSOR``, ``KINEMATICS``, ``WHEEL_SPEEDS``): every signal of it,
+      for a ``stuck`` fault without a value only (a frozen sensor freezes its whole message, each
+      signal at its own value); any other fault on a message is refused by
+      :func:`check_inject_targets` (it would add its magnitude to every signal of the message);
     * a raw channel (:data:`RAW_CHANNELS`, SI units);
     * an internal monitor channel: ``steer`` (road-wheel rad: the hand-wheel angle moves ``i_s``
       times as much), ``a_y`` (left positive: the opposite sign of the sensor when it is mounted
@@ -72,6 +75,117 @@ def inject_channels(pre: Rav4Preprocessing) -> dict[str, list[tuple[str, float]]
     out.update({"steer": [("steer_angle", pre.i_s)], "a_y": [("accel_y_raw", pre.ay_sign)],
                 "yaw_rate": [("yaw_rate_raw", 1.0)], "w_front_diff": [("wheel_fl", 1.0)],
                 "w_rear_diff": [("wheel_rl", 1.0)]})
+    return out
+
+
+def _message_signals() -> dict[str, list[str]]:
+    """CAN message -> its signals read by the monitor (``STEER_ANGLE_SENSOR`` -> two signals)."""
+    out: dict[str, list[str]] = {}
+    for src, _scale, _u in RAW_SOURCES.values():
+        msg, sig = src.split(".", 1)
+        out.setdefault(msg, []).append(sig)
+    return out
+
+
+def check_inject_targets(faults) -> None:
+    """Refuse a fault that names a whole CAN message of several signals.
+
+    A bias, drift, gain or intermittent fault on ``STEER_ANGLE_SENSOR`` would be added to every
+    signal of the message (+3 deg on STEER_ANGLE *and* on STEER_FRACTION: 6 deg on the steering
+    angle); the error lists the signals to name instead. A ``stuck`` fault without a value may
+    name a message: the frozen message holds each signal at its own value.
+
+    Raises
+    ------
+    DataError
+        Naming the fault, the message and its signals.
+
+    Examples
+    --------
+    >>> check_inject_targets(parse_inject("stuck:STEER_ANGLE_SENSOR@15,bias:STEER_ANGLE:3@20"))
+    >>> check_inject_targets(parse_inject("bias:WHEEL_SPEEDS:1@20"))   # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    fdikit.errors.DataError: bias on 'WHEEL_SPEEDS': a CAN message of 4 signals ...
+    """
+    from ....faults import Stuck
+
+    msgs = _message_signals()
+    for f in faults:
+        if isinstance(f, tuple | list):
+            continue
+        name = f.target.split(":", 1)[1] if f.target.startswith("sensor:") else f.target
+        sigs = msgs.get(name, [])
+        if len(sigs) < 2 or (isinstance(f, Stuck) and f.value is None):
+            continue
+        kind = type(f).__name__.lower()
+        raise DataError(f"{kind} on {name!r}: a CAN message of {len(sigs)} signals {sigs}; the fault "
+                        f"would be added to each of them. Name one signal, e.g. {kind}:{sigs[0]}:... "
+                        f"(only stuck without a value may freeze a whole message)")
+
+
+def _scaled(x, k: float):
+    """``x * k`` as plain data (a float, or a list for per-run values)."""
+    return (np.asarray(x, float) * k).tolist()
+
+
+def injection_summary(faults, pre: Rav4Preprocessing) -> list[dict]:
+    """What each fault applies, per CAN signal, in that signal's DBC unit.
+
+    ``[{"fault": "bias", "target": ..., "start_s": ..., "end_s": ..., "applied": [{"signal":
+    "STEER_ANGLE_SENSOR.STEER_ANGLE", "unit": "deg", "magnitude": 3.0}, ...]}]``: ``magnitude``
+    (bias, intermittent), ``slope`` (drift, per s), ``gain`` or ``value`` (stuck) as the signal
+    receives it; an internal channel's magnitude is converted (``steer:0.01`` is 0.01 rad of
+    road-wheel angle, ``0.01 * i_s`` rad = that many deg of hand-wheel angle).
+
+    Examples
+    --------
+    >>> pre = Rav4Preprocessing(16.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0)
+    >>> injection_summary(parse_inject("bias:STEER_ANGLE_SENSOR.STEER_ANGLE:3@2"), pre)[0]["applied"]
+    [{'signal': 'STEER_ANGLE_SENSOR.STEER_ANGLE', 'unit': 'deg', 'magnitude': 3.0}]
+    """
+    from ....faults import Bias, Gain, Intermittent, Ramp, Stuck
+
+    chans = inject_channels(pre)
+    dbc_unit = {"rad": "deg", "m/s": "km/h", "rad/s": "deg/s", "m/s^2": "m/s^2"}
+    out = []
+    for f in _as_faults(faults):
+        name = f.target.split(":", 1)[1] if f.target.startswith("sensor:") else f.target
+        applied = []
+        for raw, scale in chans.get(name, [(name, 1.0)]):
+            if raw not in RAW_SOURCES:
+                continue
+            src, to_si, si_unit = RAW_SOURCES[raw]
+            row: dict = {"signal": src, "unit": dbc_unit.get(si_unit, si_unit)}
+            if isinstance(f, Bias | Intermittent):
+                row["magnitude"] = _scaled(f.magnitude, scale / to_si)
+            elif isinstance(f, Ramp):
+                row["slope"] = _scaled(f.slope, scale / to_si)
+            elif isinstance(f, Gain):
+                row["gain"] = _scaled(f.gain, 1.0)
+            elif isinstance(f, Stuck):
+                row["value"] = None if f.value is None else _scaled(f.value, scale / to_si)
+            applied.append(row)
+        out.append({"fault": type(f).__name__.lower(), "target": f.target, "start_s": float(f.start),
+                    "end_s": None if f.end is None else float(f.end), "applied": applied})
+    return out
+
+
+def injected_sensors(faults, pre: Rav4Preprocessing | None = None) -> list[str]:
+    """The sensor of every fault (:func:`injected_sensor`), in order and without repeats: a run
+    with several faults is judged against all of them (``false_announcements`` names only an
+    announcement of none of them).
+
+    Examples
+    --------
+    >>> injected_sensors(parse_inject("bias:ACCEL_Y:1@20,drift:YAW_RATE:0.02/s@30,yaw_rate:0.01@40"))
+    ['lateral_accelerometer', 'yaw_rate']
+    """
+    out: list[str] = []
+    for f in _as_faults(faults):
+        s = injected_sensor(f.target, pre)
+        if s not in out:
+            out.append(s)
     return out
 
 
@@ -125,6 +239,7 @@ def inject(sig: Signals, faults, pre: Rav4Preprocessing) -> Signals:
     faults = _as_faults(faults)
     if not faults:
         return sig
+    check_inject_targets(faults)
     t0 = float(sig.t[0])
     rel = Signals(sig.t - t0, sig.values, sig.names, sig.units, check=False)
     out = apply_faults(rel, faults, channels=inject_channels(pre))
@@ -208,4 +323,5 @@ def parse_inject(spec: str) -> list:
             out.append(Stuck(ch, v, **kw))
         else:
             out.append(Intermittent(ch, v, period=opts.get("period", 2.0), duty=opts.get("duty", 0.25), **kw))
+    check_inject_targets(out)
     return out

@@ -1,0 +1,510 @@
+"""The Tennessee Eastman benchmark (Braatz sets): fdikit's detectors and isolator beside independent peers.
+
+Issue 26, item 9. On the sets in ``../shared/data/tep`` (``d00`` nominal training, stored 52 x 500;
+``dNN`` 480 x 52 fault training sets; ``dNN_te`` 960 x 52 test sets, the fault after sample 160),
+in one run:
+
+* **fdikit's detectors** -- :class:`~fdikit.residuals.PCAResidual` (T², Q),
+  :class:`~fdikit.residuals.DPCAResidual` (2 lags) and :class:`~fdikit.residuals.CVAResidual`
+  (T²s, T²r, Q), each (a) fitted on all of ``d00`` with its 99 % limits (the published protocol)
+  and (b) fitted on the first ``N_FIT`` samples of ``d00`` with ONE combined index (the largest
+  statistic over its 99 % limit) thresholded by :func:`~fdikit.detect.design_threshold` at 1 % per
+  sample on the rest of ``d00`` (time-blocked). When the 160 held-out samples cannot support 1 %
+  per sample the refusal is printed and the design is repeated on the held-out part of ``d00``
+  plus the 160 pre-onset (nominal) samples of each test set (``+pre``: then the pre-onset
+  false-alarm rates are in-sample, ``d00_te`` stays held out). A model-based detector: an N4SID
+  model from ``d00`` (:func:`~fdikit.estimate.identify`, XMV 1-11 -> XMEAS 1-22), its Kalman
+  residuals, their T² in the same held-out design (a refusal is printed). ``--mhsspt``: the
+  tempered MHSSPT (:func:`~fdikit.detect.design_calibrated_mhsspt`) as in the calibration test.
+* **peers written here** with numpy / scikit-learn only (they check fdikit's classes): PCA T²/Q
+  (``sklearn.decomposition.PCA``) with 99 % limits, DPCA (2 lags; ``numpy.linalg.eigh``, as
+  scikit-learn would re-centre the lagged windows), CVA (symmetric square roots
+  instead of fdikit's Cholesky factors), and for isolation ``RandomForestClassifier()`` and
+  ``LinearDiscriminantAnalysis()`` on the same causal 20-sample window means as
+  :class:`~fdikit.isolate.WindowedIsolator`.
+* per fault: missed-detection rate after the onset, false-alarm rate before it and on ``d00_te``,
+  isolation accuracy (trained on ``d00`` + ``d01..d21``, tested on the ``_te`` sets after the
+  onset), published values where known (recalled from memory, UNVERIFIED: see ``PUBLISHED``).
+* the claims-vs-measured table and the targets (met / not met).
+
+Faults 3, 9 and 15 are nearly undetectable from these data and are left out of every mean. The
+number of components is chosen by parallel analysis (fdikit's :func:`n_components_parallel`) and
+the SAME number is given to the peers (the count is a choice, not the computation checked).
+
+The last printed line is one JSON object. ``--quick``: faults 1, 2, 4, 5 only, no model-based
+detector, no isolation forest search.
+"""
+
+from __future__ import annotations
+
+import argparse
+import gzip
+import json
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+from scipy import stats
+
+DATA = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "tep"
+ONSET = 160          # the faults start after sample 160 of the test sets
+HARD = (3, 9, 15)    # nearly undetectable: out of every mean
+N_FIT = 340          # d00: fit on samples 0..339, threshold on 340..499 (160 samples)
+WINDOW = 20          # isolation window (samples)
+LAGS_DPCA = 2
+LAGS_CVA = 2
+QUICK_FAULTS = (1, 2, 4, 5)
+
+# Missed-detection rates (PCA T², PCA Q at 99 % limits) on these test sets as printed in Chiang,
+# Russell & Braatz (2001) / Russell, Chiang & Braatz (2000). RECALLED FROM MEMORY, NOT CHECKED
+# against the printed table (the same numbers as the tutorial's, which were also typed by hand):
+# the benchmark prints them labelled "recalled". DPCA and CVA values and the published
+# false-alarm rates are not given: "n/a".
+PUBLISHED_PCA_RECALLED = {
+    1: (0.008, 0.003), 2: (0.020, 0.014), 3: (0.998, 0.991), 4: (0.956, 0.038),
+    5: (0.775, 0.746), 6: (0.011, 0.000), 7: (0.085, 0.000), 8: (0.034, 0.024),
+    9: (0.994, 0.981), 10: (0.666, 0.659), 11: (0.794, 0.356), 12: (0.029, 0.025),
+    13: (0.060, 0.045), 14: (0.158, 0.000), 15: (0.988, 0.973), 16: (0.834, 0.755),
+    17: (0.259, 0.108), 18: (0.113, 0.101), 19: (0.996, 0.873), 20: (0.701, 0.550),
+    21: (0.736, 0.570),
+}
+
+
+# ---------------------------------------------------------------------------------------- data
+def load(faults, data_dir: Path = DATA) -> tuple[dict, dict]:
+    """``train[k]`` (d00: 500 x 52, dk: 480 x 52) and ``test[k]`` (960 x 52) for 0 and ``faults``."""
+    def rd(name):
+        return np.loadtxt(gzip.open(data_dir / f"{name}.dat.gz"))
+    train = {0: rd("d00").T}                        # stored transposed
+    test = {0: rd("d00_te")}
+    for k in faults:
+        train[k], test[k] = rd(f"d{k:02d}"), rd(f"d{k:02d}_te")
+    return train, test
+
+
+def available(data_dir: Path = DATA) -> bool:
+    return (data_dir / "d21_te.dat.gz").exists() and (data_dir / "d00.dat.gz").exists()
+
+
+# ---------------------------------------------------------------------------------------- peers
+def peer_windows(Z: np.ndarray, lags: int, pad: bool) -> np.ndarray:
+    """Rows ``[z_k, z_{k-1}, ..., z_{k-lags}]``; ``pad``: the start padded with the first sample
+    (one row per sample), else only the full windows."""
+    if pad and lags:
+        Z = np.vstack([np.repeat(Z[:1], lags, axis=0), Z])
+    n = Z.shape[0] - lags
+    return np.hstack([Z[lags - j:lags - j + n] for j in range(lags + 1)])
+
+
+def peer_t2_limit(a: int, n: int, level: float = 0.99) -> float:
+    """Hotelling T² limit, Chiang et al. 2001 eq. (4.13) (F distribution)."""
+    return a * (n - 1) * (n + 1) / (n * (n - a)) * stats.f.ppf(level, a, n - a)
+
+
+def peer_q_limit(lam: np.ndarray, level: float = 0.99) -> float:
+    """Jackson-Mudholkar Q limit from the residual eigenvalues."""
+    t1, t2, t3 = (np.sum(lam ** i) for i in (1, 2, 3))
+    h0 = 1 - 2 * t1 * t3 / (3 * t2 ** 2)
+    ca = stats.norm.ppf(level)
+    return t1 * (ca * np.sqrt(2 * t2 * h0 ** 2) / t1 + 1 + t2 * h0 * (h0 - 1) / t1 ** 2) ** (1 / h0)
+
+
+class PeerPCA:
+    """PCA T² and Q with scikit-learn's PCA (DPCA: numpy's eigh), autoscaled by the training mean and std."""
+
+    def __init__(self, train: np.ndarray, a: int, lags: int = 0, level: float = 0.99):
+        from sklearn.decomposition import PCA
+        self.mu, self.sd, self.lags, self.a = train.mean(0), train.std(0, ddof=1), lags, a
+        V = peer_windows((train - self.mu) / self.sd, lags, pad=False)
+        if lags == 0:          # scikit-learn (centres V again: a no-op on autoscaled samples)
+            self.pca = PCA(svd_solver="full").fit(V)
+            lam, comp, self.centre = self.pca.explained_variance_, self.pca.components_, self.pca.mean_
+        else:                  # lagged windows are not re-centred (Ku et al. 1995): eigh of V'V/(n-1)
+            lam, U = np.linalg.eigh(V.T @ V / (V.shape[0] - 1))
+            lam, comp, self.centre = lam[::-1], U[:, ::-1].T, 0.0
+        self.lam, self.P = lam[:a], comp[:a].T
+        self.limits = np.array([peer_t2_limit(a, V.shape[0], level), peer_q_limit(lam[a:], level)])
+
+    def statistics(self, X: np.ndarray) -> np.ndarray:
+        V = peer_windows((X - self.mu) / self.sd, self.lags, pad=True) - self.centre
+        t = V @ self.P
+        e = V - t @ self.P.T
+        return np.c_[np.sum(t ** 2 / self.lam, 1), np.sum(e ** 2, 1)]
+
+
+def _inv_sqrt(S: np.ndarray) -> np.ndarray:
+    w, U = np.linalg.eigh(S)
+    return (U / np.sqrt(w)) @ U.T
+
+
+class PeerCVA:
+    """CVA T²s, T²r, Q (Russell, Chiang & Braatz 2000) with symmetric inverse square roots."""
+
+    def __init__(self, train: np.ndarray, p: int, f: int, n: int, level: float = 0.99):
+        self.mu, self.sd, self.p, self.n = train.mean(0), train.std(0, ddof=1), p, n
+        Z = (train - self.mu) / self.sd
+        W = peer_windows(Z, p + f - 1, pad=False)            # newest first: future | past
+        m = Z.shape[1]
+        Fu, Pa = W[:, :f * m], W[:, f * m:]
+        N = W.shape[0]
+        Spp, Sff, Sfp = Pa.T @ Pa / (N - 1), Fu.T @ Fu / (N - 1), Fu.T @ Pa / (N - 1)
+        Wp = _inv_sqrt(Spp)
+        _, self.sigma, Vt = np.linalg.svd(_inv_sqrt(Sff) @ Sfp @ Wp)
+        J = Vt @ Wp
+        q = p * m
+        self.Jn, self.Jr = J[:n], J[n:]
+        self.R = np.eye(q) - Spp @ self.Jn.T @ self.Jn
+        E = Pa @ self.R.T
+        lam = np.clip(np.linalg.eigvalsh(E.T @ E / (N - 1))[::-1], 0, None)
+        self.limits = np.array([peer_t2_limit(n, N, level), peer_t2_limit(q - n, N, level),
+                                peer_q_limit(lam, level)])
+
+    def statistics(self, X: np.ndarray) -> np.ndarray:
+        P = peer_windows((X - self.mu) / self.sd, self.p - 1, pad=True)
+        return np.c_[np.sum((P @ self.Jn.T) ** 2, 1), np.sum((P @ self.Jr.T) ** 2, 1),
+                     np.sum((P @ self.R.T) ** 2, 1)]
+
+
+def peer_window_means(X: np.ndarray, w: int) -> np.ndarray:
+    """Causal mean of the last ``w`` samples (fewer at the start)."""
+    out = np.empty_like(X, dtype=float)
+    for k in range(X.shape[0]):
+        out[k] = X[max(0, k - w + 1):k + 1].mean(0)
+    return out
+
+
+# ---------------------------------------------------------------------------------------- fdikit
+def fdikit_monitors(train0: np.ndarray) -> dict:
+    """fdikit's PCA, DPCA and CVA fitted on ``train0`` (components by parallel analysis)."""
+    from fdikit.residuals import CVAResidual, DPCAResidual, PCAResidual
+    return {"PCA": PCAResidual.fit(train0, n_components="parallel"),
+            "DPCA": DPCAResidual.fit(train0, n_components="parallel", lags=LAGS_DPCA),
+            "CVA": CVAResidual.fit(train0, lags=LAGS_CVA)}
+
+
+def held_out_design(name, index_d00, index_pre, target=0.01):
+    """design_threshold at ``target`` per sample on the held-out d00 index; on refusal, again with
+    the pre-onset segments. Returns (label, design or None, note)."""
+    from fdikit import DataError
+    from fdikit.detect import design_threshold
+    try:
+        return name, design_threshold(index_d00, target, per="sample", absolute=False), "d00 held out"
+    except DataError as exc:
+        print(f"  design_threshold refused on d00[{N_FIT}:] for {name}: {exc}")
+    try:
+        runs = np.vstack([index_d00[None], index_pre])
+        return name + "+pre", design_threshold(runs, target, per="sample", absolute=False), \
+            "d00 held out + pre-onset of the test sets"
+    except DataError as exc:
+        print(f"  design_threshold refused with the pre-onset segments too for {name}: {exc}")
+        return name, None, str(exc)
+
+
+def model_based(train0: np.ndarray, test: dict):
+    """Kalman residuals of an N4SID model identified from d00[:N_FIT] (XMV -> XMEAS 1-22): T² of
+    the residuals (covariance of the fit part). Returns (index of each set, index on d00, info)."""
+    from fdikit import Signals
+    from fdikit.estimate import identify
+    from fdikit.residuals import ObserverResidual, design_observer_residual
+    names = [f"xmeas{i}" for i in range(1, 42)] + [f"xmv{i}" for i in range(1, 12)]
+    ins, outs = names[41:], names[:22]
+    t = np.arange(N_FIT) * 180.0
+    model, info = identify(Signals(t, train0[:N_FIT], names), ins, outs, method="n4sid")
+    obs = ObserverResidual(design_observer_residual(model, method="kalman",
+                                                    R=np.asarray(info["noise_covariance"])))
+    uo = np.array([info["u_offset"][c] for c in ins])
+    yo = np.array([info["y_offset"][c] for c in outs])
+
+    def resid(X):
+        s = Signals(np.arange(len(X)) * 180.0, np.c_[X[:, 41:] - uo, X[:, :22] - yo], ins + outs)
+        return obs.run(s).values[0]
+    r0 = resid(train0)
+    C = np.cov(r0[20:N_FIT].T)
+    Ci = np.linalg.pinv(C)
+
+    def t2(X):
+        r = resid(X)
+        return np.einsum("ti,ij,tj->t", r, Ci, r)
+    fit_mean = float(np.mean(list(info["fit"].values())))
+    return {k: t2(X) for k, X in test.items()}, t2(train0), {"order": info["order"], "fit_mean": fit_mean}
+
+
+# ---------------------------------------------------------------------------------------- rates
+def rates(alarm: dict, faults) -> dict:
+    """``alarm[k]`` (960,) bool -> far_d00te, far_pre[k], mdr[k]."""
+    return {"far_d00te": float(alarm[0].mean()),
+            "far_pre": {k: float(alarm[k][:ONSET].mean()) for k in faults},
+            "mdr": {k: float(1 - alarm[k][ONSET:].mean()) for k in faults}}
+
+
+def mean_easy(d: dict) -> float:
+    v = [x for k, x in d.items() if k not in HARD and x is not None]
+    return float(np.mean(v)) if v else float("nan")
+
+
+def fmt(x, w=6):
+    return f"{'n/a':>{w}}" if x is None or (isinstance(x, float) and np.isnan(x)) else f"{x:{w}.3f}"
+
+
+# ---------------------------------------------------------------------------------------- isolation
+def isolation(train: dict, test: dict, faults, *, forest_peer=True, seed=0) -> dict:
+    """WindowedIsolator vs RandomForest / LDA on the same causal window means (per record)."""
+    from sklearn.discriminant_analysis import LinearDiscriminantAnalysis
+    from sklearn.ensemble import RandomForestClassifier
+
+    from fdikit import DataError
+    from fdikit.isolate import WindowedIsolator
+    mu, sd = train[0].mean(0), train[0].std(0, ddof=1)
+    z = {k: (X - mu) / sd for k, X in train.items()}
+    r = np.vstack([z[k] for k in [0, *faults]])
+    lab = np.concatenate([np.full(len(z[k]), "nominal" if k == 0 else f"f{k}") for k in [0, *faults]])
+    out = {"pfa": None, "refusals": []}
+    iso = None
+    for pfa in (0.01, 0.05):
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                iso = WindowedIsolator(window=WINDOW, pfa=pfa, random_state=seed).fit(r, lab)
+            out["pfa"] = pfa
+            break
+        except DataError as exc:
+            print(f"  WindowedIsolator(pfa={pfa}) refused: {exc}")
+            out["refusals"].append(f"pfa {pfa}: {exc}")
+    # peers: the same windows (each record on its own), every clean sample (window not across records)
+    X, y = [], []
+    for k in [0, *faults]:
+        F = peer_window_means(z[k], WINDOW)[WINDOW:]
+        X.append(F)
+        y += ["nominal" if k == 0 else f"f{k}"] * len(F)
+    X, y = np.vstack(X), np.array(y)
+    peers = {"forest": RandomForestClassifier(random_state=seed) if forest_peer else None,
+             "lda": LinearDiscriminantAnalysis()}
+    peers = {n: c.fit(X, y) for n, c in peers.items() if c is not None}
+    acc = {n: {} for n in ["fdikit", *peers]}
+    nominal_ok = {}
+    for k in [0, *faults]:
+        Z = (test[k] - mu) / sd
+        truth = "nominal" if k == 0 else f"f{k}"
+        sl = slice(None) if k == 0 else slice(ONSET, None)
+        if iso is not None:
+            acc["fdikit"][k] = float(np.mean(iso.predict(Z)[sl] == truth))
+        F = peer_window_means(Z, WINDOW)
+        for n, c in peers.items():
+            acc[n][k] = float(np.mean(c.predict(F)[sl] == truth))
+    if iso is not None:
+        out["design_report"] = {kk: (v.tolist() if isinstance(v, np.ndarray) else v)
+                                for kk, v in iso.design_report_.items()
+                                if isinstance(v, (int, float, str, list, tuple, np.ndarray))}
+        out["classifier"] = iso.classifier_
+        out["cv_scores"] = getattr(iso, "cv_scores_", {})
+        nominal_ok = {"gate_far_d00te": float(np.mean(iso.predict((test[0] - mu) / sd) != "nominal"))}
+    out["accuracy"] = {n: {k: v for k, v in a.items() if k} for n, a in acc.items()}
+    out["nominal_accuracy"] = {n: a.get(0) for n, a in acc.items()}
+    out.update(nominal_ok)
+    return out
+
+
+# ---------------------------------------------------------------------------------------- MHSSPT
+def mhsspt(train: dict, test: dict, faults) -> dict:
+    """Tempered MHSSPT (as tests/detect/test_mhsspt_calibration.py): false decisions on d00_te."""
+    from fdikit import Signals
+    from fdikit.detect import design_calibrated_mhsspt, reliability
+    from fdikit.detect.mhsspt import decision_outputs
+    names = [f"x{i}" for i in range(52)]
+    t = design_calibrated_mhsspt(names, [train[0]], {f"f{k}": train[k][20:] for k in faults}, p=1e-3)
+    Ps, ys, pre = [], [], {}
+    for k, X in test.items():
+        cols, P = decision_outputs(t.run(Signals(np.arange(960.0), X, names)))
+        yk = np.zeros(960, int)
+        if k:
+            yk[ONSET:] = cols.index(f"P:f{k}")
+        pre[k] = float((P[0, :ONSET if k else None, 1:] >= 0.9).any(axis=1).mean())
+        Ps.append(P[0])
+        ys.append(yk)
+    rel = reliability(np.concatenate(Ps), np.concatenate(ys))
+    return {"temperature": float(t.temperature), "far_d00te": pre[0],
+            "far_pre": {k: v for k, v in pre.items() if k}, "top_bin_frequency": float(rel["frequency"][-1]),
+            "top_bin_count": int(rel["count"][-1]), "ece": float(rel["ece"])}
+
+
+# ---------------------------------------------------------------------------------------- main
+def main(argv=None) -> dict:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--quick", action="store_true", help=f"faults {QUICK_FAULTS} only, no model-based")
+    ap.add_argument("--faults", type=int, nargs="*", default=None)
+    ap.add_argument("--mhsspt", action="store_true", help="also the tempered MHSSPT (slow)")
+    ap.add_argument("--no-isolation", action="store_true")
+    ap.add_argument("--data", type=Path, default=DATA)
+    a = ap.parse_args(argv)
+    t_start = time.perf_counter()
+    faults = a.faults or (list(QUICK_FAULTS) if a.quick else list(range(1, 22)))
+    if not available(a.data):
+        print(json.dumps({"skipped": f"Tennessee Eastman data absent ({a.data})"}))
+        return {}
+    train, test = load(faults, a.data)
+    d00 = train[0]
+    result: dict = {"faults": faults}
+
+    # --- 99 % limits, fitted on all of d00: fdikit vs peers -------------------------------------
+    fk = fdikit_monitors(d00)
+    cva = fk["CVA"]
+    peers = {"PCA": PeerPCA(d00, fk["PCA"].n_components),
+             "DPCA": PeerPCA(d00, fk["DPCA"].n_components, lags=LAGS_DPCA),
+             "CVA": PeerCVA(d00, cva.past, cva.future, cva.order)}
+    print(f"components by parallel analysis: PCA {fk['PCA'].n_components}, DPCA {fk['DPCA'].n_components}; "
+          f"CVA past {cva.past} future {cva.future} states {cva.order}")
+    stat_names = {"PCA": ["T2", "Q"], "DPCA": ["T2", "Q"], "CVA": ["T2s", "T2r", "Q"]}
+    tables, checks = {}, {}
+    for det in ("PCA", "DPCA", "CVA"):
+        Sf = {k: fk[det].run_array(X)[0] for k, X in test.items()}
+        Sp = {k: peers[det].statistics(X) for k, X in test.items()}
+        rel = max(float(np.max(np.abs(Sf[k] - Sp[k]) / np.maximum(1.0, np.abs(Sp[k])))) for k in test)
+        lim_rel = float(np.max(np.abs(fk[det].limits - peers[det].limits) / peers[det].limits))
+        checks[det] = {"max_rel_stat": rel, "max_rel_limit": lim_rel}
+        for i, s in enumerate(stat_names[det]):
+            tables[f"{det} {s}"] = rates({k: v[:, i] > fk[det].limits[i] for k, v in Sf.items()}, faults)
+            lim = peers[det].limits[i]
+            tables[f"peer {det} {s}"] = rates({k: v[:, i] > lim for k, v in Sp.items()}, faults)
+    print("fdikit vs peer (same data, same limits): largest relative difference of statistics / limits")
+    for det, c in checks.items():
+        print(f"  {det:5s} {c['max_rel_stat']:.1e} / {c['max_rel_limit']:.1e}")
+    result["peer_check"] = checks
+
+    # --- held-out thresholds (design_threshold at 1 % per sample) on combined indices ----------
+    print(f"\nheld-out designs: fitted on d00[:{N_FIT}], threshold at 1 % per sample on d00[{N_FIT}:]")
+    fk_fit = fdikit_monitors(d00[:N_FIT])
+    index = {}   # label -> (index per test set, index on d00)
+    for det, mon in fk_fit.items():
+        comb = lambda X, mon=mon: np.max(mon.run_array(X)[0] / mon.limits, axis=1)   # noqa: E731
+        index[det] = ({k: comb(X) for k, X in test.items()}, comb(d00))
+    if not a.quick:
+        try:
+            idx, i00, info = model_based(d00, test)
+            index["N4SID-Kalman T2"] = (idx, i00)
+            print(f"  model-based: N4SID order {info['order']}, mean validation fit {info['fit_mean']:.1f} %")
+            result["model_based"] = info
+        except Exception as exc:     # a refusal of identify or of the observer design: printed
+            print(f"  model-based detector refused: {type(exc).__name__}: {exc}")
+            result["model_based"] = {"refused": f"{type(exc).__name__}: {exc}"}
+    claims, designs = [], {}
+    for det, (idx, i00) in index.items():
+        pre = np.stack([idx[k][:ONSET] for k in faults])
+        label, d, note = held_out_design(det, i00[N_FIT:], pre)
+        if d is None:
+            claims.append({"design": f"{det} design_threshold", "claim": 0.01, "interval": None,
+                           "measured": None, "note": "refused: " + note})
+            continue
+        thr = float(d.threshold)
+        r = rates({k: v > thr for k, v in idx.items()}, faults)
+        tables[f"{label} @1%"] = r
+        ci = [float(c) for c in np.ravel(d.ci)]
+        n_eff = float(np.ravel(d.n_eff)[0])
+        designs[label] = {"threshold": thr, "ci": ci, "method": d.method, "n_eff": n_eff,
+                          "far_d00te": r["far_d00te"], "mean_mdr": mean_easy(r["mdr"]), "basis": note}
+        claims.append({"design": f"{label} design_threshold ({d.method}, n_eff {n_eff:.0f})",
+                       "claim": 0.01, "interval": ci, "measured": r["far_d00te"], "note": note})
+    for det in ("PCA", "DPCA", "CVA"):
+        for s in stat_names[det]:
+            claims.append({"design": f"{det} {s} 99 % limit", "claim": 0.01, "interval": [0.0, 0.02],
+                           "measured": tables[f"{det} {s}"]["far_d00te"], "note": "F / Jackson-Mudholkar; "
+                           "interval = the target rule (<= 2 %), the limit states none"})
+
+    # --- isolation ---------------------------------------------------------------------------
+    iso = None
+    if not a.no_isolation:
+        print(f"\nisolation (window {WINDOW}): training d00 + d01..d21, testing the _te sets after the onset")
+        iso = isolation(train, test, faults)
+        result["isolation"] = iso
+        if iso.get("pfa") is not None:
+            rep = iso["design_report"]
+            claims.append({"design": f"WindowedIsolator gate (pfa {iso['pfa']})", "claim": iso["pfa"],
+                           "interval": [float(x) for x in rep.get("interval", [np.nan, np.nan])],
+                           "measured": iso["gate_far_d00te"], "note": f"held-out rate in design "
+                           f"{rep.get('held_out_rate', float('nan')):.3f}"})
+
+    # --- MHSSPT ------------------------------------------------------------------------------
+    if a.mhsspt:
+        m = mhsspt(train, test, faults)
+        result["mhsspt"] = m
+        claims.append({"design": f"tempered MHSSPT (T = {m['temperature']:.1f}), posterior >= 0.9",
+                       "claim": 0.1, "interval": [0.0, 0.1], "measured": 1 - m["top_bin_frequency"],
+                       "note": "claim: decisions at P >= 0.9 wrong <= 10 % (all test sets); "
+                       f"fault P >= 0.9 on d00_te: {m['far_d00te']:.3f}"})
+
+    # --- the per-fault table ------------------------------------------------------------------
+    cols = ["PCA T2", "PCA Q", "peer PCA T2", "peer PCA Q", "DPCA T2", "DPCA Q", "peer DPCA T2",
+            "peer DPCA Q", "CVA T2s", "CVA T2r", "CVA Q", "peer CVA T2s", "peer CVA T2r", "peer CVA Q",
+            *[c for c in tables if c.endswith("@1%")]]
+    short = {c: c.replace("peer ", "p").replace(" @1%", "@1%").replace("N4SID-Kalman T2", "N4SID")
+             for c in cols}
+    print("\nmissed-detection rate after the onset (99 % limits; '@1%': held-out design_threshold); "
+          "pub = published PCA (recalled, unverified)")
+    w = 9
+    print("IDV  " + "".join(f"{short[c][:w]:>{w}}" for c in cols) + f"{'pubT2':>{w}}{'pubQ':>{w}}")
+    for k in faults:
+        pub = PUBLISHED_PCA_RECALLED.get(k, (None, None))
+        print(f"{k:3d}{'*' if k in HARD else ' '} " + "".join(fmt(tables[c]["mdr"][k], w) for c in cols)
+              + fmt(pub[0], w) + fmt(pub[1], w))
+    print("mean " + "".join(fmt(mean_easy(tables[c]["mdr"]), w) for c in cols)
+          + fmt(mean_easy({k: PUBLISHED_PCA_RECALLED[k][0] for k in faults}), w)
+          + fmt(mean_easy({k: PUBLISHED_PCA_RECALLED[k][1] for k in faults}), w))
+    print("FAR00" + "".join(fmt(tables[c]["far_d00te"], w) for c in cols) + fmt(None, w) + fmt(None, w))
+    print("FARpr" + "".join(fmt(float(np.mean(list(tables[c]["far_pre"].values()))), w) for c in cols)
+          + fmt(None, w) + fmt(None, w))
+    print("(* excluded from the means; FAR00: false-alarm rate on d00_te; FARpr: mean before the onset; "
+          "published DPCA/CVA and false-alarm rates: n/a)")
+
+    if iso is not None:
+        names = list(iso["accuracy"])
+        print("\nisolation accuracy after the onset (fdikit = WindowedIsolator, classifier "
+              f"{iso.get('classifier')}, gate pfa {iso.get('pfa')}); published: n/a")
+        print("IDV " + "".join(f"{n:>9}" for n in names))
+        for k in faults:
+            row = "".join(fmt(iso["accuracy"][n].get(k), 9) for n in names)
+            print(f"{k:3d}{'*' if k in HARD else ' '}" + row)
+        print("mean" + "".join(fmt(mean_easy(iso["accuracy"][n]), 9) for n in names))
+        row = "".join(fmt(iso["nominal_accuracy"][n], 8 if i == 0 else 9) for i, n in enumerate(names))
+        print("d00te" + row + "   (fraction of d00_te called nominal)")
+
+    # --- claims vs measured --------------------------------------------------------------------
+    print("\nclaims vs measured (false-alarm rate per sample on d00_te, never seen by any design)")
+    print(f"{'design':58s} {'claim':>6} {'interval':>17} {'measured':>9}  note")
+    for c in claims:
+        iv = "n/a" if c["interval"] is None else f"[{c['interval'][0]:.3f}, {c['interval'][1]:.3f}]"
+        print(f"{c['design'][:58]:58s} {c['claim']:6.3f} {iv:>17} {fmt(c['measured'], 9)}  {c['note']}")
+    result["claims"] = claims
+
+    # --- targets --------------------------------------------------------------------------------
+    print("\ntargets")
+    targets = {}
+    for label, d in designs.items():
+        lo, hi = d["ci"]
+        ok_far = lo <= d["far_d00te"] <= hi and d["far_d00te"] <= 0.02
+        ok_mdr = d["mean_mdr"] <= 0.05
+        targets[label] = {"far_within_interval": ok_far, "mean_mdr_le_0.05": ok_mdr}
+        print(f"  {label:24s} FAR on d00_te {d['far_d00te']:.3f} within [{lo:.3f}, {hi:.3f}] and <= 0.02: "
+              f"{'met' if ok_far else 'NOT met'}; mean MDR {d['mean_mdr']:.3f} <= 0.05: "
+              f"{'met' if ok_mdr else 'NOT met'}")
+    for c in claims:
+        if c["design"].endswith("design_threshold") and c["measured"] is None:
+            det = c["design"].split()[0]
+            targets[det] = {"far_within_interval": False, "mean_mdr_le_0.05": False, "refused": True}
+            print(f"  {det:24s} NOT met: design_threshold refused 1 % per sample (no claim, no rate)")
+    if iso is not None and iso["accuracy"].get("fdikit"):
+        fa, ra = mean_easy(iso["accuracy"]["fdikit"]), mean_easy(iso["accuracy"]["forest"])
+        targets["isolation_ge_forest"] = fa >= ra
+        print(f"  isolation: WindowedIsolator {fa:.3f} >= random forest {ra:.3f}: "
+              f"{'met' if fa >= ra else 'NOT met'}")
+    result["targets"] = targets
+    result["designs"] = designs
+    result["tables"] = {c: {"far_d00te": v["far_d00te"], "mean_mdr": mean_easy(v["mdr"]),
+                            "mdr": {str(k): x for k, x in v["mdr"].items()}} for c, v in tables.items()}
+    result["seconds"] = round(time.perf_counter() - t_start, 1)
+    print(f"\n{result['seconds']} s")
+    print(json.dumps(result, default=lambda o: o.tolist() if isinstance(o, np.ndarray) else str(o)))
+    return result
+
+
+if __name__ == "__main__":
+    main()

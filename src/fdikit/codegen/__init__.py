@@ -1,0 +1,29 @@
+"""Portable C99 from a designed monitor (issue 29): a fixed-size state struct, ``init``, ``reset``,
+``step``, ``checkpoint`` / ``restore``, events into a caller's buffer; no dynamic memory, no
+recursion, no globals with state, only ``<math.h>`` and ``<stdint.h>``; double and float32.
+
+* :func:`generate` (a config's artifacts) and :func:`generate_monitor` (a built Monitor) write
+  the code (:mod:`.generate`, :mod:`.emit`, the stages in :mod:`.stages`);
+* :class:`CMonitor` and :func:`compile_shared` are the equivalence harness (:mod:`.harness`).
+
+A stage the generator does not know is refused by name (``stage X cannot be generated yet``).
+"""
+
+from .emit import GeneratedSource, emit_monitor, stage_digest
+from .generate import config_digest, generate, generate_monitor
+from .harness import (
+    CFLAGS,
+    CMonitor,
+    c_to_py_state,
+    compile_shared,
+    driver_source,
+    find_compiler,
+    py_to_c_state,
+    run_driver,
+    signals_input,
+)
+from .stages import EMITTERS
+
+__all__ = ["CFLAGS", "EMITTERS", "CMonitor", "GeneratedSource", "c_to_py_state", "compile_shared",
+           "config_digest", "driver_source", "emit_monitor", "find_compiler", "generate", "generate_monitor",
+           "py_to_c_state", "run_driver", "signals_input", "stage_digest"]

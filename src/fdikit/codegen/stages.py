@@ -1,0 +1,476 @@
+"""C emitters of the monitor's stages: one class per supported stage (its state fields, its reset
+and its per-sample code, in the Python stage's exact order of floating-point operations), and
+:func:`stage_emitter`, which refuses every other stage by name."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ..errors import DataError
+
+__all__ = ["Field", "StageEmitter", "lit", "stage_emitter"]
+
+
+@dataclass(frozen=True)
+class Field:
+    """One array of the generated state struct: ``kind`` ``"real"`` (fdk_real: double or float),
+    ``"f64"`` (always double) or ``"i64"`` (int64_t); ``n`` elements."""
+
+    name: str
+    kind: str
+    n: int
+
+
+def lit(x: float) -> str:
+    """A C double literal that parses back to exactly ``x`` (shortest round trip)."""
+    x = float(x)
+    if math.isnan(x):
+        return "NAN"
+    if math.isinf(x):
+        return "HUGE_VAL" if x > 0 else "(-HUGE_VAL)"
+    s = repr(x)
+    if "e" not in s and "." not in s:
+        s += ".0"
+    return f"({s})" if s.startswith("-") else s
+
+
+def rl(x: float) -> str:
+    """A literal of the working precision (``FDK_R(x)`` casts to fdk_real)."""
+    return f"FDK_R({lit(x)})"
+
+
+class StageEmitter:
+    """Base of the stage emitters. ``prefix`` names the stage's fields in the state struct."""
+
+    #: Python class names this emitter generates (exact type match: a subclass may change the step)
+    kinds: tuple[str, ...] = ()
+    #: C functions (static) the stage's code calls, emitted once per generated file
+    helpers: str = ""
+
+    def __init__(self, obj: Any, prefix: str):
+        self.obj = obj
+        self.p = prefix
+
+    def fields(self) -> list[Field]:
+        return []
+
+    def reset_code(self) -> str:
+        """Statements putting the stage in its initial state (``s`` the state)."""
+        return ""
+
+    def step_code(self, inp: list[str], out: list[str]) -> str:
+        """Statements of one sample: ``inp`` C expressions of the inputs (fdk_real), ``out`` the
+        lvalues of the outputs. May ``return FDK_ERR_STAT`` (a non-finite statistic, as the Python
+        stage raises)."""
+        raise NotImplementedError
+
+    # checkpoint interop with the Python stage: its get_state() <-> the flat field arrays
+    def to_py(self, arrays: dict[str, np.ndarray]) -> dict[str, Any]:
+        return {}
+
+    def from_py(self, state: dict[str, Any]) -> dict[str, np.ndarray]:
+        return {}
+
+    def f(self, name: str) -> str:
+        return f"s->{self.p}_{name}"
+
+
+# ---------------------------------------------------------------------------- generators
+class FilterEmitter(StageEmitter):
+    """:class:`~fdikit.residuals.FaultDetectionFilter` (and :class:`~fdikit.residuals.ObserverResidual`):
+    ``r = C xi + Dv v; xi <- A xi + Bv v`` over the structural nonzeros of ``[[C, Dv], [A, Bv]]``,
+    each row summed from 0.0 in column order (the compiled Python kernel's order)."""
+
+    kinds = ("FaultDetectionFilter", "ObserverResidual")
+
+    def __init__(self, obj, prefix):
+        super().__init__(obj, prefix)
+        self.nf = obj._A.shape[0]
+        self.q = obj._C.shape[0]
+        self.m = obj._Dv.shape[1]
+        self.ptr, self.col, self.val = (np.asarray(a) for a in obj._rows)
+        self.x0 = np.asarray(obj.x0, float)
+
+    def fields(self):
+        return [Field(f"{self.p}_xi", "real", max(self.nf, 1))]
+
+    def reset_code(self):
+        return "\n".join(f"    {self.f('xi')}[{a}] = {rl(v)};" for a, v in enumerate(self.x0)) or ""
+
+    def step_code(self, inp, out):
+        nf, q = self.nf, self.q
+        decl = f"fdk_real z[{max(nf + self.m, 1)}], " + (f"nx[{nf}], " if nf else "") + "acc;"
+        lines = ["    {", f"        {decl}"]
+        lines += [f"        z[{a}] = {self.f('xi')}[{a}];" for a in range(nf)]
+        lines += [f"        z[{nf + j}] = {e};" for j, e in enumerate(inp)]
+        for row in range(q + nf):
+            terms = [f"        acc += {rl(self.val[e])} * z[{self.col[e]}];"
+                     for e in range(self.ptr[row], self.ptr[row + 1])]
+            dst = out[row] if row < q else f"nx[{row - q}]"
+            lines += ["        acc = FDK_R(0.0);", *terms, f"        {dst} = acc;"]
+        lines += [f"        {self.f('xi')}[{a}] = nx[{a}];" for a in range(nf)]
+        lines.append("    }")
+        return "\n".join(lines)
+
+    def to_py(self, arrays):
+        return {"_xi": arrays[f"{self.p}_xi"][:self.nf].astype(float).reshape(1, self.nf)}
+
+    def from_py(self, state):
+        xi = np.asarray(state["_xi"], float).reshape(-1)
+        return {f"{self.p}_xi": xi if self.nf else np.zeros(1)}
+
+
+# ---------------------------------------------------------------------------- processors
+class FeatureNormsEmitter(StageEmitter):
+    """:class:`~fdikit.detect.FeatureNorms`: ``x += alpha (|r_group| - x)``."""
+
+    kinds = ("FeatureNorms",)
+
+    def __init__(self, obj, prefix):
+        super().__init__(obj, prefix)
+        self.idx, self.starts = list(obj._idx), list(obj._starts)
+        self.nout = len(obj.output_names)
+
+    def fields(self):
+        return [Field(f"{self.p}_x", "real", self.nout)]
+
+    def reset_code(self):
+        return "\n".join(f"    {self.f('x')}[{j}] = FDK_R(0.0);" for j in range(self.nout))
+
+    def step_code(self, inp, out):
+        lines = ["    {", "        fdk_real acc, v;"]
+        for j in range(self.nout):
+            lines.append("        acc = FDK_R(0.0);")
+            for c in range(self.starts[j], self.starts[j + 1]):
+                lines += [f"        v = {inp[self.idx[c]]};", "        acc += v * v;"]
+            x = self.f("x") + f"[{j}]"
+            lines += [f"        {x} = {x} + {rl(self.obj.alpha)} * (FDK_SQRT(acc) - {x});",
+                      f"        {out[j]} = {x};"]
+        lines.append("    }")
+        return "\n".join(lines)
+
+    def to_py(self, arrays):
+        return {"_x": arrays[f"{self.p}_x"].astype(float).reshape(1, -1), "_first": True}
+
+    def from_py(self, state):
+        return {f"{self.p}_x": np.asarray(state["_x"], float).reshape(-1)}
+
+
+class HoldEmitter(StageEmitter):
+    """:class:`~fdikit.detect.Hold`: a count of consecutive exceedances; alarm at ``Z``."""
+
+    kinds = ("Hold",)
+
+    def fields(self):
+        return [Field(f"{self.p}_count", "i64", len(self.obj.input_names))]
+
+    def reset_code(self):
+        return "\n".join(f"    {self.f('count')}[{j}] = 0;" for j in range(len(self.obj.input_names)))
+
+    def step_code(self, inp, out):
+        n = len(inp)
+        lines = ["    {", f"        fdk_real v[{n}];"]
+        lines += [f"        v[{j}] = {e};" for j, e in enumerate(inp)]
+        # refused before the state changes, as the Python stage raises
+        lines += [f"        if (!FDK_FINITE(v[{j}])) return FDK_ERR_STAT;" for j in range(n)]
+        for j in range(n):
+            x = f"FDK_ABS(v[{j}])" if self.obj.absolute else f"v[{j}]"
+            c = self.f("count") + f"[{j}]"
+            lines += [f"        {c} = ({x} > {rl(self.obj.threshold[j])}) ? {c} + 1 : 0;",
+                      f"        {out[j]} = ({c} >= {int(self.obj.Z)}) ? FDK_R(1.0) : FDK_R(0.0);"]
+        lines.append("    }")
+        return "\n".join(lines)
+
+    def to_py(self, arrays):
+        return {"_count": arrays[f"{self.p}_count"].astype(int).reshape(1, -1)}
+
+    def from_py(self, state):
+        return {f"{self.p}_count": np.asarray(state["_count"], np.int64).reshape(-1)}
+
+
+class SignatureEmitter(StageEmitter):
+    """:class:`~fdikit.isolate.SignatureDecision`: the nearest signatures (Hamming) to the alarm
+    pattern, ``1 / m`` each (nothing when the nominal pattern is among them)."""
+
+    kinds = ("SignatureDecision",)
+
+    def step_code(self, inp, out):
+        rows = np.asarray(self.obj._rows, int)
+        nr, n = rows.shape
+        lines = ["    {", f"        int b[{n}], d[{nr}], dmin, m;"]
+        lines += [f"        if (!FDK_FINITE({e})) return FDK_ERR_STAT;" for e in inp]
+        lines += [f"        b[{j}] = ({e} > FDK_R(0.5)) ? 1 : 0;" for j, e in enumerate(inp)]
+        for i in range(nr):
+            terms = " + ".join(f"(b[{j}] != {int(rows[i, j])})" for j in range(n)) or "0"
+            lines.append(f"        d[{i}] = {terms};")
+        lines.append("        dmin = d[0];")
+        lines += [f"        if (d[{i}] < dmin) dmin = d[{i}];" for i in range(1, nr)]
+        lines.append("        m = (d[0] == dmin) ? 0 : (" + " + ".join(
+            f"(d[{i}] == dmin)" for i in range(1, nr)) + ");")
+        for i in range(1, nr):
+            lines.append(f"        {out[i - 1]} = (m > 0 && d[{i}] == dmin) ? FDK_R(1.0) / (fdk_real)m : "
+                         "FDK_R(0.0);")
+        lines.append("    }")
+        return "\n".join(lines)
+
+    def to_py(self, arrays):
+        return {}
+
+
+class GLRTEmitter(StageEmitter):
+    """:class:`~fdikit.detect.GLRT` (luo-et-al eq. (24)): prefix sums re-anchored every ``W``
+    samples, the maximum over the window's change times."""
+
+    kinds = ("GLRT",)
+
+    def __init__(self, obj, prefix):
+        super().__init__(obj, prefix)
+        self.C, self.W = len(obj.input_names), int(obj.W)
+        self.scale = 1.0 / (2.0 * np.asarray(obj.sigma2, float))
+
+    def fields(self):
+        return [Field(f"{self.p}_Q", "real", self.C * (2 * self.W + 1)),
+                Field(f"{self.p}_pos", "i64", self.C),
+                Field(f"{self.p}_count", "i64", self.C), Field(f"{self.p}_k", "i64", 1)]
+
+    def reset_code(self):
+        return ("    "
+                f"{{ int i; for (i = 0; i < {self.C * (2 * self.W + 1)}; ++i) "
+                f"{self.f('Q')}[i] = FDK_R(0.0);\n"
+                f"      for (i = 0; i < {self.C}; ++i) "
+                f"{{ {self.f('pos')}[i] = 0; {self.f('count')}[i] = 0; }}\n"
+                f"      {self.f('k')}[0] = 0; }}")
+
+    def step_code(self, inp, out):
+        W, top = self.W, 2 * self.W
+        lines = ["    {", "        fdk_real *Q, base, d, v, best, tp;", "        int64_t p, i, L;"]
+        lines += [f"        if (!FDK_FINITE({e})) return FDK_ERR_STAT;" for e in inp]
+        lines.append(f"        {self.f('k')}[0] += 1;")
+        for c, e in enumerate(inp):
+            lines += [
+                f"        Q = {self.f('Q')} + {c * (top + 1)}; p = {self.f('pos')}[{c}];",
+                f"        if (p == {top}) {{ base = Q[{top - W}]; for (i = 0; i <= {W}; ++i) "
+                f"Q[i] = Q[{top - W} + i] - base; p = {W}; }}",
+                f"        Q[p + 1] = Q[p] + ({e} - {rl(self.obj.mu0[c])}); p += 1;",
+                f"        if ({self.f('count')}[{c}] < {W}) {self.f('count')}[{c}] += 1;",
+                "        tp = Q[p]; best = FDK_R(0.0);",
+                f"        for (L = 1; L <= {self.f('count')}[{c}]; ++L) {{ d = tp - Q[p - L]; "
+                "v = d * d * (FDK_R(1.0) / (fdk_real)L); if (v > best) best = v; }",
+                f"        {self.f('pos')}[{c}] = p;",
+                f"        {out[c]} = best * {rl(self.scale[c])};"]
+        lines.append("    }")
+        return "\n".join(lines)
+
+    def to_py(self, arrays):
+        Q = arrays[f"{self.p}_Q"].astype(float).reshape(1, self.C, 2 * self.W + 1)
+        return {"_state": (Q, arrays[f"{self.p}_pos"].astype(np.int64).reshape(1, -1),
+                           arrays[f"{self.p}_count"].astype(np.int64).reshape(1, -1)),
+                "_k": int(arrays[f"{self.p}_k"][0])}
+
+    def from_py(self, state):
+        Q, pos, cnt = state["_state"]
+        return {f"{self.p}_Q": np.asarray(Q, float).reshape(-1), f"{self.p}_pos": np.asarray(pos).reshape(-1),
+                f"{self.p}_count": np.asarray(cnt).reshape(-1), f"{self.p}_k": np.array([state["_k"]])}
+
+
+class TimeGatedEmitter(StageEmitter):
+    """:class:`~fdikit.detect.TimeGated` (luo-et-al eq. (35)): above ``q`` after ``T`` s, never
+    above it before."""
+
+    kinds = ("TimeGated",)
+    needs_time = True
+
+    def fields(self):
+        n = len(self.obj.input_names)
+        return [Field(f"{self.p}_t0", "f64", 1), Field(f"{self.p}_has_t0", "i64", 1),
+                Field(f"{self.p}_early", "i64", n), Field(f"{self.p}_k", "i64", 1)]
+
+    def reset_code(self):
+        n = len(self.obj.input_names)
+        return (f"    {self.f('t0')}[0] = 0.0; {self.f('has_t0')}[0] = 0; {self.f('k')}[0] = 0;\n"
+                + "\n".join(f"    {self.f('early')}[{j}] = 0;" for j in range(n)))
+
+    def step_code(self, inp, out):
+        lines = ["    {", f"        if (!{self.f('has_t0')}[0]) "
+                          f"{{ {self.f('t0')}[0] = t; {self.f('has_t0')}[0] = 1; }}",
+                 f"        if (t - {self.f('t0')}[0] <= {lit(self.obj.T)}) {{"]
+        for j, e in enumerate(inp):
+            lines += [f"            if ({e} > {rl(self.obj.q[j])}) {self.f('early')}[{j}] = 1;",
+                      f"            {out[j]} = FDK_R(0.0);"]
+        lines.append("        } else {")
+        for j, e in enumerate(inp):
+            lines.append(f"            {out[j]} = ({e} > {rl(self.obj.q[j])} && !{self.f('early')}[{j}]) "
+                         "? FDK_R(1.0) : FDK_R(0.0);")
+        lines += ["        }", "    }"]
+        return "\n".join(lines)
+
+    def to_py(self, arrays):
+        has = bool(arrays[f"{self.p}_has_t0"][0])
+        return {"_early": arrays[f"{self.p}_early"].astype(bool).reshape(1, -1),
+                "_t0": float(arrays[f"{self.p}_t0"][0]) if has else None, "_k": int(arrays[f"{self.p}_k"][0])}
+
+    def from_py(self, state):
+        t0 = state["_t0"]
+        return {f"{self.p}_early": np.asarray(state["_early"]).reshape(-1).astype(np.int64),
+                f"{self.p}_t0": np.array([0.0 if t0 is None else t0]),
+                f"{self.p}_has_t0": np.array([t0 is not None]), f"{self.p}_k": np.array([state["_k"]])}
+
+
+#: The exact uniform-mean Gaussian log density and the log-domain Shiryayev recursion of
+#: :mod:`fdikit.detect.mhsspt` (``kernels.py``, ``recursion.py``), in double precision.
+MHSSPT_HELPERS = """
+static double fdk_log_ndtr(double x)
+{
+    double z, s;
+    if (x > 0.0) return log1p(-0.5 * erfc(x / sqrt(2.0)));
+    if (x > -37.0) return log(0.5 * erfc(-x / sqrt(2.0)));
+    z = 1.0 / (x * x);
+    s = 1.0 + z * (-1.0 + z * (3.0 + z * (-15.0 + z * (105.0 + z * (-945.0 + z * 10395.0)))));
+    return -0.5 * x * x - log(-x) - 0.5 * log(2.0 * FDK_PI) + log(s);
+}
+
+static double fdk_umg(double x, double low, double high, double std, int point, double logw)
+{
+    double u, v, hi, lo, p, lhi, d;
+    if (point) {
+        double z = (x - low) / std;
+        return -0.5 * z * z - log(std) - 0.5 * log(2.0 * FDK_PI);
+    }
+    u = (x - low) / std;
+    v = (x - high) / std;
+    if (v > 0.0) { hi = -v; lo = -u; } else { hi = u; lo = v; }
+    if (hi > -30.0) {
+        p = 0.5 * (erfc(-hi * FDK_INV_SQRT2) - erfc(-lo * FDK_INV_SQRT2));
+        if (p > 0.0) return log(p) - logw;
+    }
+    lhi = fdk_log_ndtr(hi);
+    d = fdk_log_ndtr(lo) - lhi;
+    if (d > 0.0) d = 0.0;
+    return lhi + log1p(-exp(d)) - logw;
+}
+
+static double fdk_logaddexp(double a, double b)
+{
+    double d;
+    if (a < b) { d = a; a = b; b = d; }
+    if (a == -HUGE_VAL) return -HUGE_VAL;
+    d = b - a;
+    if (d < -40.0) return a;
+    return a + log(1.0 + exp(d));
+}
+
+/* one step of the log-domain Shiryayev recursion (fdikit.detect.mhsspt.recursion.mhsspt_update) */
+static void fdk_mhsspt_update(double *logF, const double *ll, double *phi, int H, double log1mp,
+                              const double *logp_pi, double logq, double log1mq)
+{
+    double m, s, x, lz, lf0;
+    int j;
+    if (logq == -HUGE_VAL) {
+        phi[0] = logF[0] + log1mp;
+    } else {
+        double lse_f = -HUGE_VAL;
+        m = -HUGE_VAL;
+        for (j = 1; j < H; ++j) if (logF[j] > m) m = logF[j];
+        if (m > -HUGE_VAL) {
+            double sf = 0.0;
+            for (j = 1; j < H; ++j) { x = logF[j] - m; if (x > -40.0) sf += exp(x); }
+            lse_f = m + log(sf);
+        }
+        phi[0] = fdk_logaddexp(logF[0] + log1mp, logq + lse_f);
+    }
+    lf0 = logF[0];
+    for (j = 1; j < H; ++j) phi[j] = fdk_logaddexp(logF[j] + log1mq, lf0 + logp_pi[j]);
+    m = -HUGE_VAL;
+    for (j = 0; j < H; ++j) { phi[j] += ll[j]; if (phi[j] > m) m = phi[j]; }
+    s = 0.0;
+    for (j = 0; j < H; ++j) { x = phi[j] - m; if (x > -40.0) s += exp(x); }
+    lz = m + log(s);
+    for (j = 0; j < H; ++j) logF[j] = phi[j] - lz;
+}
+"""
+
+
+class MHSSPTEmitter(StageEmitter):
+    """:class:`~fdikit.detect.MHSSPT` with exact :class:`~fdikit.detect.UniformMeanGaussian`
+    densities (not tabulated): log densities, the log-domain recursion, the posteriors and group
+    sums. Computed in double in both variants (the recursion's logs and exps need it)."""
+
+    kinds = ("MHSSPT",)
+    helpers = MHSSPT_HELPERS
+
+    def __init__(self, obj, prefix):
+        if obj.tabulate is not None or obj._umg is None:
+            raise DataError("stage MHSSPT (tabulated densities) cannot be generated yet; the exact "
+                            "densities (tabulate=None) can")
+        super().__init__(obj, prefix)
+        self.H, self.C = len(obj.hypotheses), len(obj.input_names)
+        from ..detect.mhsspt.kernels import _shared_components
+
+        self.sh = _shared_components(*obj._umg)
+
+    def fields(self):
+        return [Field(f"{self.p}_logF", "f64", self.H), Field(f"{self.p}_k", "i64", 1)]
+
+    def reset_code(self):
+        return "\n".join([f"    {self.f('logF')}[0] = 0.0;",
+                          *(f"    {self.f('logF')}[{j}] = -HUGE_VAL;" for j in range(1, self.H)),
+                          f"    {self.f('k')}[0] = 0;"])
+
+    def step_code(self, inp, out):
+        ulow, uhigh, ustd, upoint, ulogw, uoff, jmap = self.sh
+        o = self.obj
+        H = self.H
+        lines = ["    {", f"        double xs[{self.C}], vals[{len(ulow)}], ll[{H}], phi[{H}];",
+                 f"        static const double logp_pi[{H}] = {{{', '.join(lit(v) for v in o._logp_pi)}}};"]
+        lines += [f"        xs[{c}] = (double){e};" for c, e in enumerate(inp)]
+        lines += [f"        if (!FDK_FINITE(xs[{c}])) return FDK_ERR_STAT;" for c in range(self.C)]
+        for c in range(self.C):
+            for e in range(uoff[c], uoff[c + 1]):
+                lines.append(f"        vals[{e}] = fdk_umg(xs[{c}], {lit(ulow[e])}, {lit(uhigh[e])}, "
+                             f"{lit(ustd[e])}, {int(upoint[e])}, {lit(ulogw[e])});")
+        for j in range(H):
+            terms = "".join(f" + vals[{jmap[j, c]}]" for c in range(self.C))
+            lines.append(f"        ll[{j}] = 0.0{terms};")
+        lines.append(f"        fdk_mhsspt_update({self.f('logF')}, ll, phi, {H}, {lit(o._log1mp)}, logp_pi, "
+                     f"{lit(o._logq)}, {lit(o._log1mq)});")
+        lines.append(f"        {self.f('k')}[0] += 1;")
+        for j in range(H):
+            v = f"{self.f('logF')}[{j}]"
+            lines.append(f"        phi[{j}] = ({v} > -746.0) ? exp({v}) : 0.0;")
+            lines.append(f"        {out[j]} = FDK_R(phi[{j}]);")
+        for g in range(o._gmat.shape[0]):
+            terms = "".join(f" + phi[{int(e)}]" for e in o._gmat[g] if e >= 0)
+            lines.append(f"        {out[H + g]} = FDK_R(0.0{terms});")
+        lines.append("    }")
+        return "\n".join(lines)
+
+    def to_py(self, arrays):
+        return {"_logF": arrays[f"{self.p}_logF"].astype(float).reshape(1, -1),
+                "_k": int(arrays[f"{self.p}_k"][0])}
+
+    def from_py(self, state):
+        return {f"{self.p}_logF": np.asarray(state["_logF"], float).reshape(-1),
+                f"{self.p}_k": np.array([state["_k"]])}
+
+
+EMITTERS: dict[str, type[StageEmitter]] = {k: e for e in (FilterEmitter, FeatureNormsEmitter, HoldEmitter,
+                                                          SignatureEmitter, GLRTEmitter, TimeGatedEmitter,
+                                                          MHSSPTEmitter)
+                                           for k in e.kinds}
+
+
+def stage_emitter(obj: Any, prefix: str) -> StageEmitter:
+    """The emitter of one stage, or a :class:`DataError` naming a stage that cannot be generated."""
+    name = type(obj).__name__
+    cls = EMITTERS.get(name)
+    module = type(obj).__module__
+    if cls is None or not module.startswith("fdikit.") or module.startswith("fdikit.systems"):
+        raise DataError(f"stage {name} cannot be generated yet (fdikit.codegen supports "
+                        f"{', '.join(sorted(EMITTERS))})")
+    if any(hasattr(obj, a) for a in ("resume",)):
+        raise DataError(f"stage {name} cannot be generated yet: it has a resume() rule")
+    return cls(obj, prefix)
