@@ -1,5 +1,6 @@
 """Residual processors: threshold rules, GLRT, directional GLRT, MHSSPT (also from labelled real data,
-pre-whitened), feature norms, sensor-fault detectors (stuck, drift, gain, intermittent:
+pre-whitened), feature norms, peer checks of redundant sensors (:mod:`.redundancy`),
+sensor-fault detectors (stuck, drift, gain, intermittent:
 :mod:`.sensor`), banks of tests designed together, and threshold design for a target per
 sample, per run or per hour (:mod:`.tail`: block bootstrap and GPD tails)."""
 
@@ -26,6 +27,7 @@ from .mhsspt import (
     reliability,
     shrunk_covariance,
 )
+from .redundancy import PeerCheck, design_peer_check
 from .sensor import (
     DriftDetector,
     GainDetector,
@@ -51,6 +53,7 @@ __all__ = [
     "IntermittentDetector",
     "LineMeanGaussian",
     "MHSSPTCalibration",
+    "PeerCheck",
     "StuckDetector",
     "TestBank",
     "TestSpec",
@@ -68,6 +71,7 @@ __all__ = [
     "design_gain",
     "design_intermittent",
     "design_mhsspt",
+    "design_peer_check",
     "design_stuck",
     "design_threshold",
     "detection_time",

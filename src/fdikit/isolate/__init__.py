@@ -17,6 +17,7 @@ from .classify import WindowedIsolator, moving_average
 from .codegen import compile_python, to_c, to_listing, to_python
 from .decide import Diagnosis, diagnose_likelihood, diagnose_ml, diagnose_tree
 from .dmatrix import DMatrix, wilson_interval
+from .fault_type import FAULT_TYPES, FaultTypeClassifier
 from .online import DMatrixDecision
 from .sequencing import DiagnosticTree, TreeNode, ao_star, exhaustive, huffman_cost
 from .signature import SignatureDecision, SignatureIsolator
@@ -34,11 +35,13 @@ def __getattr__(name: str):
     raise AttributeError(f"module 'fdikit.isolate' has no attribute {name!r}")
 
 __all__ = [
+    "FAULT_TYPES",
     "BlockedStratifiedKFold",
     "DMatrix",
     "DMatrixDecision",
     "Diagnosis",
     "DiagnosticTree",
+    "FaultTypeClassifier",
     "SVMDecision",
     "SVMIsolator",
     "SignatureDecision",

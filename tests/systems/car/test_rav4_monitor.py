@@ -307,13 +307,28 @@ def test_rav4_artifacts_round_trip_exactly(tmp_path):
         a, b = obj.to_dict(), loaded[name].to_dict()
         assert json.dumps(a, default=lambda x: np.asarray(x).tolist(), sort_keys=True) == \
             json.dumps(b, default=lambda x: np.asarray(x).tolist(), sort_keys=True), name
-    sensors = sorted((k for k in loaded if k.startswith("sensor_") and k[7:].isdigit()),
-                     key=lambda k: int(k[7:]))
-    m2 = Monitor([loaded["filter"], loaded["sensor_channels"]],
-                 [loaded["features"], loaded["mhsspt"], loaded["hold"], *(loaded[k] for k in sensors),
-                  loaded["sensor_hold"]], mon.decision)
+    st = mon.record["stages"]
+    assert sorted(st["generators"] + st["processors"]) == sorted(loaded)
+    m2 = Monitor([loaded[k] for k in st["generators"]], [loaded[k] for k in st["processors"]], mon.decision)
     r1, r2 = mon.run(mon.raw), m2.run(mon.raw)
     assert np.array_equal(r1.statistics.values, r2.statistics.values)
+
+
+@rav4
+def test_example_config_chains_what_rav4_monitor_chains():
+    """examples/rav4-lateral/monitor.toml names the stages of rav4_monitor() in its order and
+    announces the same channels under the same names, at the same level and clearing time."""
+    from fdikit.monitor.config import load_config
+    from fdikit.systems.car.monitor_rav4 import rav4_monitor
+
+    mon = rav4_monitor()
+    cfg = load_config(EXAMPLE)
+    assert cfg.generators == mon.record["stages"]["generators"]
+    assert cfg.processors == mon.record["stages"]["processors"]
+    d = mon.decision
+    assert cfg.decision["channels"] == list(d.alarm_channels)
+    assert cfg.decision["names"] == {c: d.names[c] for c in d.alarm_channels}
+    assert cfg.decision["level"] == d.level and cfg.decision["clear_after"] == d.clear_after
 
 
 @rav4

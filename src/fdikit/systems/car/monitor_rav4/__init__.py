@@ -88,6 +88,18 @@ fault per run, onsets in both halves): stuck STEER_ANGLE_SENSOR at 15 / 45 s ann
 "wheel_rl:intermittent" follows after 4.3 s); each isolated, no false announcement, and none on
 the fault-free minute.
 
+Peer checks and fault types (issue 27)
+--------------------------------------
+The gain and intermittent detectors above named a wheel from a sign (wrong for gains below 1) and
+the drift detector called every yaw-rate fault a drift. By default (``peer_checks=True``) only the
+steering stuck check stays; each wheel speed is checked against the other three and the yaw rate,
+the accelerometer and the steering against each other and the wheels (:mod:`.peers`,
+:class:`~fdikit.detect.PeerCheck`), and the isolated sensor's fault is typed by
+:class:`~fdikit.isolate.FaultTypeClassifier` (``"wheel_fl:gain"``, ``"yaw_rate:stuck"`` ...). A
+1 % gain of WHEEL_SPEED_FL at 20 / 50 s is now announced on that wheel after 1.56 / 2.32 s (first
+as a bias, then revised to a gain; the peer check's 0.2 Hz low-pass costs the second); see
+:mod:`.peers` for the wheel group's design and its numbers.
+
 Runtime form (issue 9)
 ----------------------
 The whole monitor is a chain of saveable artifacts (:func:`design`, the recipe of
@@ -105,7 +117,8 @@ One concept per module, every name importable from this package as before the sp
 :mod:`.channels` (raw CAN sources, monitor channels, preprocessing, loading the log),
 :mod:`.fit` (the design model fitted on the calibration half), :mod:`.filters` (filter sets 4-6 and
 the runtime filter bank), :mod:`.mhsspt` (features, real-data densities, the MHSSPT),
-:mod:`.sensor_checks` (the sensor-fault channels and detectors), :mod:`.injection` (fault
+:mod:`.sensor_checks` (the sensor-fault channels and detectors), :mod:`.peers` (the redundant
+groups the peer checks and the fault-type stage read, issue 27), :mod:`.injection` (fault
 injection and the ``--inject`` syntax), :mod:`.build` (:func:`rav4_monitor`, :func:`design`, the
 designed monitor) and :mod:`.run` (:func:`run_rav4_log`: running and scoring).
 """

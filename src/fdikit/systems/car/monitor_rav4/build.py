@@ -24,6 +24,7 @@ from .filters import Rav4LateralFilter, _design_sets
 from .fit import _linear_model, _preprocessing
 from .injection import _inject_raw
 from .mhsspt import MHSSPT_TABLE, Rav4FeatureNorms, Rav4MHSSPT, real_densities
+from .peers import Rav4PeerSignals, design_peer_stages
 from .sensor_checks import design_sensor_detectors, fit_sensor_channels
 
 __all__ = ["CLEAR_AFTER", "Rav4Monitor", "decision_for", "design", "rav4_monitor"]
@@ -38,7 +39,10 @@ class Rav4Monitor:
         Generator :class:`Rav4LateralFilter` (raw channels), processors :class:`Rav4FeatureNorms`,
         :class:`Rav4MHSSPT`, :class:`~fdikit.detect.Hold`, and the announcement decision.
     artifacts : dict
-        The saveable parts ``{"filter", "features", "mhsspt", "hold"}`` (what :func:`design` returns).
+        The saveable parts ``{"filter", "features", "mhsspt", "hold"}``, with the sensor checks also
+        ``"sensor_channels"``, ``"sensor_<i>"``, ``"sensor_hold"`` and, with the peer checks,
+        ``"peer_signals"``, ``"peer_check"``, ``"fault_type"``, ``"type_hold"`` (what :func:`design`
+        returns), generators first, each in the monitor's order.
     decision : Decision
     faults : list of str
     model : LinearFaultModel
@@ -48,7 +52,8 @@ class Rav4Monitor:
     raw : Signals
         The real minute (raw channels).
     record : dict
-        Preprocessing, fit and calibration record.
+        Preprocessing, fit and calibration record; ``record["stages"]`` the artifact names of the
+        generators and of the processors in the monitor's order (what the config lists).
     """
 
     def __init__(self, monitor, artifacts, decision, faults, model, designs, raw, record):
@@ -91,7 +96,8 @@ def rav4_monitor(path: str | None = None, *, rate: float = 50.0, q_weight: float
                  inflate: float = 2.5, hold: int = 10, tau: float = 0.0, n_speeds: int = 4,
                  band_hz: float = 3.0, h0_window: float = 0.2, warmup: float = 2.0,
                  level: float = 0.95, nuisance: tuple[str, ...] = (), settle: float = 0.04,
-                 sensor_checks: bool = True, sensor_warmup: float = 5.0) -> Rav4Monitor:
+                 sensor_checks: bool = True, sensor_warmup: float = 5.0,
+                 peer_checks: bool = True) -> Rav4Monitor:
     """Design and calibrate the RAV4 lateral monitor on the first half of the real minute.
 
     Parameters
@@ -134,6 +140,14 @@ def rav4_monitor(path: str | None = None, *, rate: float = 50.0, q_weight: float
     sensor_warmup : float
         Seconds at the start (and after a gap) during which the sensor detectors take nothing in
         (the low-pass transients of :class:`Rav4SensorChannels`; at least ``warmup``).
+    peer_checks : bool
+        With ``sensor_checks``: isolate the sensor by the generic peer checks of its redundant
+        group (:class:`~fdikit.detect.PeerCheck` on :class:`Rav4PeerSignals`: each wheel against
+        the other three; the yaw rate, the accelerometer and the steering against each other and
+        the wheels) and type its fault (:class:`~fdikit.isolate.FaultTypeClassifier`: bias, drift,
+        gain, stuck, intermittent, spike), announced ``"wheel_rr:gain"``, ``"yaw_rate:stuck"`` ...
+        (issue 27); of the issue-16 detectors only the steering stuck check stays (the others named
+        a wheel from a sign and called every yaw-rate fault a drift). False: the issue-16 detectors.
 
     Examples
     --------
@@ -184,29 +198,46 @@ def rav4_monitor(path: str | None = None, *, rate: float = 50.0, q_weight: float
     test = Rav4MHSSPT(feats.output_names, cal.densities, p=p, groups=cal.groups, warmup=round(warmup / dt),
                       tabulate=MHSSPT_TABLE, interpolation="cubic")
     announce = Hold([f"P:{f}" for f in faults], level, Z=max(1, int(hold)), absolute=False)
-    gens, procs = [gen], [feats, test, announce]
-    arts_extra: dict[str, Any] = {}
+    gens: dict[str, Any] = {"filter": gen}
+    procs: dict[str, Any] = {"features": feats, "mhsspt": test, "hold": announce}
     sensor_names: dict[str, str] = {}
     if sensor_checks:
         chk = fit_sensor_channels(raw, half_s, pre, rec)
         dets, sensor_names = design_sensor_detectors(
             chk.run(Signals(raw.t[cal_t], raw.values[:, cal_t], raw.names, check=False)), dt,
             skip=round(max(warmup, sensor_warmup) / dt), nominal_coef=chk.coef)
+        if peer_checks:
+            from ....detect import StuckDetector
+
+            dets = [d for d in dets if isinstance(d, StuckDetector)]
+            kept = {n for d in dets for n in d.output_names}
+            sensor_names = {k: v for k, v in sensor_names.items() if k in kept}
         sensor_hold = Hold([n for d in dets for n in d.output_names if n in sensor_names], 1.0,
                            Z=max(1, int(hold)), absolute=False)
-        gens.append(chk)
-        procs.extend([*dets, sensor_hold])
-        arts_extra = {"sensor_channels": chk, **{f"sensor_{i}": d for i, d in enumerate(dets)},
-                      "sensor_hold": sensor_hold}
+        gens["sensor_channels"] = chk
+        procs.update({f"sensor_{i}": d for i, d in enumerate(dets)})
+        procs["sensor_hold"] = sensor_hold
         rec["sensor_checks"] = {"coef": chk.coef, "detectors": [repr(d) for d in dets]}
+        if peer_checks:
+            psig = Rav4PeerSignals(pre, chk.coef["steer"], rec["k_f"], rec["k_r"])
+            sk = round(max(warmup, sensor_warmup) / dt)
+            pc, ftc, type_names = design_peer_stages(
+                psig.run(Signals(raw.t[cal_t], raw.values[:, cal_t], raw.names, check=False)), dt, skip=sk,
+                warmup=sk)
+            type_hold = Hold(list(type_names), 0.5, Z=max(1, int(hold)), absolute=False)
+            gens["peer_signals"] = psig
+            procs.update(peer_check=pc, fault_type=ftc, type_hold=type_hold)
+            sensor_names.update(type_names)
+            rec["peer_checks"] = {"thresholds": pc.thresholds, "coef": pc.coef, "sigma": ftc.sigma,
+                                  "stuck_after": ftc.stuck_after}
     dec = decision_for(faults, sensor_names)
-    mon = Monitor(gens, procs, dec)
+    mon = Monitor(list(gens.values()), list(procs.values()), dec)
     rec["filter_methods"] = {f"set{s}/{t_}": d.info.get("method") for s, ds in designs.items()
                              for t_, d in ds.items()}
     rec["calibration"] = {h: {"low": d.low.round(4).tolist(), "high": d.high.round(4).tolist(),
                               "std": d.std.round(4).tolist()} for h, d in cal.densities.items()}
-    arts = {"filter": gen, "features": feats, "mhsspt": test, "hold": announce, **arts_extra}
-    return Rav4Monitor(mon, arts, dec, faults, md, designs, raw, rec)
+    rec["stages"] = {"generators": list(gens), "processors": list(procs)}
+    return Rav4Monitor(mon, {**gens, **procs}, dec, faults, md, designs, raw, rec)
 
 
 def design(params: dict | None = None) -> dict[str, Any]:
@@ -219,13 +250,13 @@ def design(params: dict | None = None) -> dict[str, Any]:
     -------
     dict
         ``{"filter": Rav4LateralFilter, "features": Rav4FeatureNorms, "mhsspt": Rav4MHSSPT,
-        "hold": Hold}``.
+        "hold": Hold, ...}`` and the sensor and peer checks' stages (:attr:`Rav4Monitor.artifacts`).
 
     Examples
     --------
     >>> arts = design({})                                  # doctest: +SKIP
-    >>> sorted(arts)                                       # doctest: +SKIP
-    ['features', 'filter', 'hold', 'mhsspt']
+    >>> list(arts)[:4]                                     # doctest: +SKIP
+    ['filter', 'sensor_channels', 'peer_signals', 'features']
     """
     kw = dict(params or {})
     data = kw.pop("data", None)

@@ -1,0 +1,279 @@
+"""Peer checks of redundant sensors: each member of a redundant group against a reference built
+from its peers (issue 27, item 1).
+
+A system declares *redundant groups*: signals that measure, after the system's own conversion, the
+same quantity (the four wheel speeds; the yaw rate and the yaw rates that the accelerometer, the
+steering model and the wheels say). Each member ``m`` of a group is compared with the mean of
+the other members and the group's reference signals, with an affine map fitted on nominal data::
+
+    e_m = x_m - (c_0 + c_1 median_{j != m} x_j + sum_k d_k ref_k)
+
+The residual is low-passed (first order, ``band_hz``) and divided by its threshold, designed from
+the nominal residual (:func:`~fdikit.detect.design_threshold`); the member whose normalised
+residual is the largest of its group, and at least 1, is *isolated*. A fault of size ``f`` on one
+member moves its own residual by ``f``; the peers' references are medians (of at least 3 peers),
+which one faulty member does not move once it is outside their spread: the faulty member is the
+largest; no side is ever inferred from a sign.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from ..base.stage import ResidualProcessor
+from ..errors import DataError
+from ..signals import Signals
+
+__all__ = ["PeerCheck", "design_peer_check"]
+
+
+class PeerCheck(ResidualProcessor):
+    """Each member of each redundant group checked against its peers.
+
+    Parameters
+    ----------
+    groups : mapping str -> sequence of str
+        Group name -> its member channels (at least 2 each; a channel belongs to one group).
+    coef : mapping str -> sequence of float
+        Member -> ``[c_0, c_1, d_1, ..., d_K]`` (offset, gain on the peers' median, one per reference).
+    thresholds : mapping str -> float
+        Member -> threshold of its low-passed residual (its unit), > 0.
+    dt : float
+        Sample time (s).
+    references : mapping str -> sequence of str, optional
+        Group -> reference channels (default none).
+    band_hz : float or mapping str -> float
+        Cut-off of the first-order residual low-pass (Hz), per group or one for all.
+    announce : sequence of str, optional
+        Members that can be isolated (default all; the others only serve as peers).
+    warmup : int
+        Samples at the start (and after :meth:`resume`) during which nothing is isolated.
+
+    Outputs, per member ``m``: ``peer:m`` (|low-passed residual| / threshold), ``peer:m:r`` (the
+    low-passed residual, signed, in the member's unit), ``peer:m:ref`` (the reference the peers give,
+    ``x_m - e_m``: what a gain of the member scales), ``peer:m:e`` (the unfiltered residual) and, for
+    announced members, ``peer:m:isolated`` (1 where ``m`` is its group's largest ``peer:m`` and
+    that is >= 1, else 0).
+
+    Examples
+    --------
+    >>> pc = PeerCheck({"w": ["a", "b", "c"]}, {m: [0.0, 1.0] for m in "abc"}, {m: 0.1 for m in "abc"},
+    ...                0.01, band_hz=1000.0)
+    >>> pc.reset(1)
+    >>> out = pc.step([[1.0, 1.0, 1.6]])[0]        # c reads 0.6 high: e_c = 0.6, e_a = e_b = -0.3
+    >>> [round(float(out[pc.output_names.index(f"peer:{m}:isolated")]), 1) for m in "abc"]
+    [0.0, 0.0, 1.0]
+    """
+
+    _state_attrs = ("_z", "_k")
+
+    def __init__(self, groups: Mapping[str, Sequence[str]], coef: Mapping[str, Sequence[float]],
+                 thresholds: Mapping[str, float], dt: float, *,
+                 references: Mapping[str, Sequence[str]] | None = None,
+                 band_hz: float | Mapping[str, float] = 1.0, announce: Sequence[str] | None = None,
+                 warmup: int = 0):
+        self.groups = {str(g): [str(m) for m in ms] for g, ms in groups.items()}
+        self.references = {g: [str(r) for r in (references or {}).get(g, [])] for g in self.groups}
+        bad = [g for g in (references or {}) if g not in self.groups]
+        if bad:
+            raise DataError(f"references name unknown groups {bad}; groups: {sorted(self.groups)}")
+        members = [m for ms in self.groups.values() for m in ms]
+        if len(set(members)) != len(members) or any(len(ms) < 2 for ms in self.groups.values()):
+            raise DataError(f"each group needs >= 2 members and a channel may be in one group only: "
+                            f"{self.groups}")
+        self.members = members
+        self.dt = float(dt)
+        if not (np.isfinite(self.dt) and self.dt > 0):
+            raise DataError(f"dt must be > 0, got {dt!r}")
+        bh = band_hz if isinstance(band_hz, Mapping) else {g: band_hz for g in self.groups}
+        self.band_hz = {g: float(bh[g]) for g in self.groups}
+        self.coef = {}
+        for g, ms in self.groups.items():
+            for m in ms:
+                c = np.asarray(coef[m], float)
+                if c.shape != (2 + len(self.references[g]),) or not np.all(np.isfinite(c)):
+                    raise DataError(f"member {m!r}: coef must be {2 + len(self.references[g])} finite "
+                                    f"numbers (c_0, c_1, one per reference), got {coef[m]!r}")
+                self.coef[m] = [float(v) for v in c]
+        self.thresholds = {m: float(thresholds[m]) for m in members}
+        if any(not (np.isfinite(h) and h > 0) for h in self.thresholds.values()):
+            raise DataError(f"thresholds must be finite and > 0, got {self.thresholds}")
+        self.announce = list(members if announce is None else [str(a) for a in announce])
+        if set(self.announce) - set(members):
+            raise DataError(f"announce names {sorted(set(self.announce) - set(members))}, not members")
+        if isinstance(warmup, bool) or int(warmup) != warmup or warmup < 0:
+            raise DataError(f"warmup must be an integer >= 0 (samples), got {warmup!r}")
+        self.warmup = int(warmup)
+        refs = [r for g in self.groups for r in self.references[g] if r not in members]
+        self.input_names = members + list(dict.fromkeys(refs))
+        self.output_names = ([f"peer:{m}" for m in members] + [f"peer:{m}:r" for m in members]
+                             + [f"peer:{m}:ref" for m in members] + [f"peer:{m}:e" for m in members]
+                             + [f"peer:{m}:isolated" for m in self.announce])
+        self._build()
+        self.reset(1)
+
+    def _build(self) -> None:
+        """e = x[m] - c_1 median(x[peers]) - x[refs] d - c_0, per member."""
+        ix = {n: i for i, n in enumerate(self.input_names)}
+        self._self = np.array([ix[m] for m in self.members], np.int64)
+        self._peers = [np.array([ix[p] for p in ms if p != m], np.int64)
+                       for ms in self.groups.values() for m in ms]
+        self._refs = [np.array([ix[r] for r in self.references[g]], np.int64)
+                      for g, ms in self.groups.items() for _m in ms]
+        self._c = [np.asarray(self.coef[m], float) for m in self.members]
+        self._alpha = np.array([1.0 - np.exp(-2.0 * np.pi * self.band_hz[g] * self.dt)
+                                for g, ms in self.groups.items() for _m in ms])
+        self._h = np.array([self.thresholds[m] for m in self.members])
+        self._gidx = [[self.members.index(m) for m in ms] for ms in self.groups.values()]
+        self._ann = np.array([self.members.index(m) for m in self.announce], np.int64)
+        self._xidx = self._self
+
+    def residuals(self, x: np.ndarray) -> np.ndarray:
+        """The unfiltered residuals e (..., M) of inputs x (..., n_in)."""
+        out = np.empty((*x.shape[:-1], len(self.members)))
+        for j in range(len(self.members)):
+            c = self._c[j]
+            e = x[..., self._self[j]] - c[0] - c[1] * np.median(x[..., self._peers[j]], axis=-1)
+            for r, d in zip(self._refs[j], c[2:], strict=True):
+                e = e - d * x[..., r]
+            out[..., j] = e
+        return out
+
+    def reset(self, runs: int = 1) -> None:
+        self._R = int(runs)
+        self._z = np.zeros((self._R, len(self.members)))
+        self._k = 0
+
+    def resume(self, n_held: int) -> None:
+        """After held samples: start again with the warm-up."""
+        self.reset(self._R)
+
+    def _step(self, r: np.ndarray) -> np.ndarray:
+        if r.shape[0] != self._R:
+            raise DataError(f"sample has {r.shape[0]} runs; the PeerCheck was reset for {self._R}")
+        if not np.all(np.isfinite(r)):
+            run, c = np.argwhere(~np.isfinite(r))[0]
+            raise DataError(f"PeerCheck input {self.input_names[c]!r} is not finite at sample {self._k} "
+                            f"(run {run})")
+        e = self.residuals(r)
+        if self._k == 0:
+            self._z = e.copy()        # the low-pass starts at the first residual
+        else:
+            self._z = self._z + self._alpha * (e - self._z)
+        self._k += 1
+        stat = np.abs(self._z) / self._h
+        iso = np.zeros_like(stat)
+        if self._k > self.warmup:
+            for gi in self._gidx:
+                best = np.argmax(stat[:, gi], axis=1)
+                top = stat[np.arange(self._R), np.asarray(gi)[best]]
+                iso[np.arange(self._R), np.asarray(gi)[best]] = top >= 1.0
+        else:
+            stat = np.zeros_like(stat)
+        return np.concatenate([stat, self._z, r[:, self._xidx] - e, e, iso[:, self._ann]], axis=1)
+
+    def run(self, signals: Signals) -> Signals:
+        """The outputs over a whole record: the residuals vectorised, the low-pass a loop over the
+        samples (the same numbers as :meth:`step`)."""
+        r = signals.values[:, :, signals.index(self.input_names)]
+        if not np.all(np.isfinite(r)) or r.shape[1] == 0:
+            return super().run(signals)       # the step loop names the sample it refuses
+        self.reset(signals.runs)
+        R, T = r.shape[:2]
+        e = self.residuals(r)
+        z = np.empty_like(e)
+        zk = e[:, 0].copy()
+        z[:, 0] = zk
+        for k in range(1, T):
+            zk = zk + self._alpha * (e[:, k] - zk)
+            z[:, k] = zk
+        self._z, self._k = zk.copy(), T
+        stat = np.abs(z) / self._h
+        iso = np.zeros_like(stat)
+        rr, kk = np.meshgrid(np.arange(R), np.arange(T), indexing="ij")
+        for gi in self._gidx:
+            g = np.asarray(gi)
+            best = g[np.argmax(stat[:, :, g], axis=2)]
+            iso[rr, kk, best] = stat[rr, kk, best] >= 1.0
+        stat[:, :self.warmup] = 0.0
+        iso[:, :self.warmup] = 0.0
+        out = np.concatenate([stat, z, r[:, :, self._xidx] - e, e, iso[:, :, self._ann]], axis=2)
+        return Signals(signals.t, out, self.output_names, check=False)
+
+    def __repr__(self) -> str:
+        return (f"PeerCheck(groups={self.groups}, references={self.references}, band_hz={self.band_hz}, "
+                f"announce={self.announce})")
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"groups": self.groups, "coef": self.coef, "thresholds": self.thresholds, "dt": self.dt,
+                "references": self.references, "band_hz": self.band_hz, "announce": self.announce,
+                "warmup": self.warmup}
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> PeerCheck:
+        return cls(d["groups"], d["coef"], d["thresholds"], d["dt"], references=d["references"],
+                   band_hz=d["band_hz"], announce=d["announce"], warmup=d["warmup"])
+
+
+def design_peer_check(nominal: Signals, groups: Mapping[str, Sequence[str]], *,
+                      references: Mapping[str, Sequence[str]] | None = None,
+                      band_hz: float | Mapping[str, float] = 1.0, announce: Sequence[str] | None = None,
+                      skip: int = 0, warmup: int = 0, pfa: float = 1.0, per: str | float = "hour",
+                      margin: float = 0.0) -> PeerCheck:
+    """A :class:`PeerCheck` fitted and thresholded on nominal (fault-free) data.
+
+    Each member's coefficients are the least-squares fit of the member on the median of its peers,
+    the references and a constant (samples from ``skip`` on); each threshold is the level of the
+    member's low-passed nominal |residual| for ``pfa`` false alarms per ``per``
+    (:func:`~fdikit.detect.design_threshold`; on a record too short for the target, the nominal
+    maximum scaled by extreme-value growth, as the sensor-fault detectors), times ``1 + margin``.
+
+    Parameters
+    ----------
+    nominal : Signals
+        Fault-free data holding every member and reference channel.
+    groups, references, band_hz, announce, warmup
+        As :class:`PeerCheck`.
+    skip : int
+        Samples at the start left out of the fit and of the thresholds.
+    pfa, per, margin
+        The false-alarm target (see :func:`~fdikit.detect.design_threshold`).
+
+    Returns
+    -------
+    PeerCheck
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(0)
+    >>> U = 20 + np.cumsum(rng.normal(0, 0.05, 2000))
+    >>> x = U[:, None] * [1.0, 1.01, 0.99] + 0.01 * rng.standard_normal((2000, 3))
+    >>> nom = Signals(np.arange(2000) * 0.02, x[None], ["a", "b", "c"])
+    >>> pc = design_peer_check(nom, {"w": ["a", "b", "c"]})
+    >>> f = x.copy(); f[1000:, 1] *= 0.98                  # b reads 2 % low from 20 s
+    >>> out = pc.run(Signals(nom.t, f[None], ["a", "b", "c"]))
+    >>> bool(out["peer:b:isolated"][0, 1100] == 1.0), float(out["peer:a:isolated"][0].max())
+    (True, 0.0)
+    """
+    from .sensor.calibrate import _threshold
+
+    refs = {g: list((references or {}).get(g, [])) for g in groups}
+    coef: dict[str, list[float]] = {}
+    for g, ms in groups.items():
+        for m in ms:
+            peers = np.median([nominal[p][:, skip:] for p in ms if p != m], axis=0).ravel()
+            X = np.column_stack([np.ones_like(peers), peers]
+                                + [nominal[r][:, skip:].ravel() for r in refs[g]])
+            c = np.linalg.lstsq(X, nominal[m][:, skip:].ravel(), rcond=None)[0]
+            coef[m] = [float(v) for v in c]
+    probe = PeerCheck(groups, coef, {m: 1.0 for ms in groups.values() for m in ms}, float(np.mean(np.diff(
+        nominal.t))), references=refs, band_hz=band_hz, announce=announce, warmup=0)
+    out = probe.run(nominal)
+    chans = [f"peer:{m}:r" for m in probe.members]
+    z = np.abs(out.values[:, skip:][:, :, out.index(chans)])
+    thr = _threshold(z, pfa, per, margin, probe.dt, 1, "design_peer_check")
+    return PeerCheck(groups, coef, {m: float(v) for m, v in zip(probe.members, thr, strict=True)}, probe.dt,
+                     references=refs, band_hz=band_hz, announce=announce, warmup=warmup)
