@@ -84,7 +84,10 @@ def emit_monitor(mon: Any, *, name: str = "fdk_monitor", precision: str = "doubl
     n_warm = mon._warm_samples(dt)
     n_clear = dec.clear_samples(dt) if dec is not None else 1
     limit = mon._gap_limit(dt)
-    start = n_warm if mon.warmup else 0
+    # the start of a record as the Python monitor treats it (streaming._set_dt): an explicit
+    # warm-up, or by default the filters' start-up transient, ended early once quiet
+    n_start = mon._start_warm_samples(dt)
+    start = n_warm if mon.warmup else n_start
     fields = [*CORE_FIELDS, Field("last", "f64", max(P, 1)), Field("active", "i64", max(A, 1)),
               Field("below", "i64", max(A, 1)), Field("ep_id", "i64", max(A, 1))]
     for e in (*gens, *procs):
@@ -173,7 +176,7 @@ def emit_monitor(mon: Any, *, name: str = "fdk_monitor", precision: str = "doubl
           f"    for (i = 0; i < {max(P, 1)}; ++i) s->last[i] = 0.0;",
           f"    for (i = 0; i < {max(A, 1)}; ++i) {{ s->active[i] = 0; s->below[i] = 0; s->ep_id[i] = 0; }}",
           f"    s->warm_left[0] = {start}; s->reset_due[0] = {int(start > 0)};",
-          "    s->warm_min[0] = 0; s->quiet[0] = -1;",
+          f"    s->warm_min[0] = 0; s->quiet[0] = {0 if n_start else -1};",
           "}", "", f"void {name}_init({name}_state *s) {{ {name}_reset(s); }}", ""]
     # checkpoint / restore: every field as doubles, in struct order
     ck, rs, off = [], [], 0
