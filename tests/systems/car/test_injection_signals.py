@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -16,6 +18,7 @@ from fdikit.systems.car.monitor_rav4.injection import (
 )
 
 PRE = Rav4Preprocessing(16.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0)
+RAV4 = Path(__file__).resolve().parents[3] / ".." / "shared" / "data" / "rav4-highway"
 
 
 def _raw():
@@ -69,3 +72,19 @@ def test_internal_channel_magnitude_is_reported_in_the_signal_unit():
 def test_every_injected_sensor_is_judged():
     fs = parse_inject("bias:ACCEL_Y:1@20,drift:YAW_RATE:0.02/s@30,yaw_rate:0.01@40")
     assert injected_sensors(fs, PRE) == ["lateral_accelerometer", "yaw_rate"]
+
+
+@pytest.mark.skipif(not RAV4.exists(), reason="the RAV4 log is not in ../shared/data/rav4-highway")
+def test_a_two_fault_run_judges_both_faults_and_reports_the_applied_magnitudes():
+    """With two faults on two sensors, announcing the second one is right, not false (issue 27
+    item 5); the JSON gives what each signal received, in its unit."""
+    from fdikit.systems.car.monitor_rav4 import run_rav4_log
+
+    res = run_rav4_log(None, "bias:ACCEL_Y:1.0@35,gain:WHEEL_SPEED_RR:0.97@35")
+    assert set(res["expected_sensors"]) == {"lateral_accelerometer", "wheel_rr"}
+    named = {a["fault"] for a in res["announcements"] if a["t"] >= 35.0}
+    assert any("wheel_rr" in h for h in named) or any("lateral" in h for h in named), res["announcements"]
+    assert not [a for a in res["false_announcements"]
+                if "wheel_rr" in a["fault"] or "lateral" in a["fault"]], res["false_announcements"]
+    applied = {a["signal"]: a for f in res["injected"] for a in f["applied"]}
+    assert any(k.endswith("ACCEL_Y") for k in applied), applied
