@@ -162,3 +162,18 @@ def test_the_status_does_not_change_fhat(designs):
         rec.transient_level = old
     assert np.array_equal(fh, fh_off)
     assert n_off > 0  # without the transient test the jumps are called sliding
+
+
+# ----------------------------------------------------------------------------- L2 bound, whole band
+def test_the_band_wide_probe_refuses_a_layer_the_low_frequency_probe_accepted():
+    # seed 2: gamma-bar 1.6e-4; the paper's 1e-5 layer meets it on xi at 0.5-8 rad/s (the old
+    # probe claimed the bound) and misses it by two orders at 3e4 rad/s
+    _sys, m = _model(2)
+    rec = design_reconstructor(m, xi_bound=1.0, delta=1e-5, delta2=1e-5, hinf_check=False)
+    info, sc = rec.info, rec.info["self_check"]
+    assert sc["xi_gain_smooth"] <= info["l2_bound"]  # what the old probe saw
+    assert info["l2_bound_claimed"] is False
+    assert info["l2_bound_worst_ratio"] > 10 and info["l2_bound_worst_w"] > 1e3
+    assert "rad/s" in info["l2_bound_note"]
+    probes = sc["xi_probes"]
+    assert len(probes) >= 5 and max(p["w"] for p in probes) == pytest.approx(info["l2_bound_band_rad_s"])
