@@ -177,3 +177,37 @@ def test_the_band_wide_probe_refuses_a_layer_the_low_frequency_probe_accepted():
     assert "rad/s" in info["l2_bound_note"]
     probes = sc["xi_probes"]
     assert len(probes) >= 5 and max(p["w"] for p in probes) == pytest.approx(info["l2_bound_band_rad_s"])
+
+
+# ----------------------------------------------------------------------------- large plants
+def test_the_primary_riccati_solution_is_the_lmi_optimum():
+    from fdikit.design.smo_lmi import primary_smo_lmi
+
+    _sys, m = _model(2)
+    rec = design_reconstructor(m, check=False, hinf_check=False)
+    cf = rec.details["canonical"]
+    V1, V2 = 100.0 * np.eye(cf.A.shape[0]), np.eye(cf.C.shape[0])
+    a = primary_smo_lmi(cf.A, cf.C, V1, V2, method="lmi")
+    b = primary_smo_lmi(cf.A, cf.C, V1, V2, method="riccati")
+    assert b.solver["solver"] == "riccati" and b.solver["verified"]
+    assert b.trace_X == pytest.approx(a.trace_X, rel=1e-4)
+    for x, y in ((a.L, b.L), (a.Gl, b.Gl), (a.Po, b.Po)):
+        assert np.abs(x - y).max() <= 1e-4 * np.abs(x).max()
+
+
+@pytest.mark.slow
+def test_a_60_state_random_plant_designs():
+    # the time is the benchmark's to print (bench_smo_random.py --large 60)
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / "bench_smo_random.py"
+    spec = importlib.util.spec_from_file_location("bench_smo_random", path)
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    A, M, C, Q = bench.large_system(0, 60)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        rec = design_reconstructor(as_fault_model(A, M, C, Q), hinf_check=False)
+    assert rec.info["n_aug"] == 62 and rec.info["solver"]["primary"]["solver"] == "riccati"
+    assert rec.info["l2_bound"] > 0 and rec.info["l2_bound_claimed"] is not None
