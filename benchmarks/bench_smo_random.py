@@ -349,7 +349,9 @@ def main(n_systems: int = 40, large: tuple[int, ...] = (30, 60), noise_systems: 
         "noise_rmse_ratio": {s: {"median": float(np.median([x["rmse_ratio"] for x in v])),
                                  "max": float(np.max([x["rmse_ratio"] for x in v])),
                                  "median_lpf_tau": float(np.median([x["lpf_tau"] for x in v]))}
-                             for s, v in noise.items() if v},
+                             for s, v0 in noise.items()
+                             if (v := [x for x in v0 if "rmse_ratio" in x])},
+        "noise_refused": [{"noise_std": s, **x} for s, v in noise.items() for x in v if "refused" in x],
         "solver_inaccurate_designs": solver_inaccurate,
         "solver_refined": refined,
         "gamma_o_retried": sum(r.get("gamma_o", 100.0) != 100.0 for r in ok_rows),
