@@ -23,8 +23,8 @@ import numpy as np
 
 from ..errors import ConditionError, DataError
 
-__all__ = ["GAMMA_O_FACTORS", "PrimaryGains", "SecondaryGains", "primary_smo_lmi", "secondary_smo_lmi",
-           "secondary_smo_lmi_search"]
+__all__ = ["GAMMA_O_FACTORS", "PRIMARY_LMI_MAX_STATES", "PrimaryGains", "SecondaryGains", "primary_smo_lmi",
+           "secondary_smo_lmi", "secondary_smo_lmi_search"]
 
 _OK = ("optimal", "optimal_inaccurate")
 
@@ -32,6 +32,10 @@ _OK = ("optimal", "optimal_inaccurate")
 #: tolerances, more iterative refinement of the KKT solves).
 REFINE_SETTINGS = {"max_iter": 400, "tol_gap_abs": 1e-10, "tol_gap_rel": 1e-10, "tol_feas": 1e-10,
                    "tol_ktratio": 1e-8, "iterative_refinement_max_iter": 50}
+
+
+#: Clarabel settings of the first solve (empty: Clarabel's defaults).
+SOLVER_SETTINGS: dict = {}
 
 
 def _sym(M: np.ndarray) -> np.ndarray:
@@ -87,11 +91,11 @@ def _solve(prob, what: str, eps: float = 1e-7) -> tuple[float, dict]:
         attempts.append(_stats(prob, prob.status, attempt))
         return prob.status
 
-    status = run("default")
+    status = run("default", **SOLVER_SETTINGS)
     refined = False
     if status == "optimal_inaccurate":
         refined = True
-        status = run("refine", **REFINE_SETTINGS)
+        status = run("refine", **{**SOLVER_SETTINGS, **REFINE_SETTINGS})
     record = {"solver": "CLARABEL", "status": status, "attempts": attempts, "refined": refined}
     if status == "solver_error":
         raise ConditionError("LMI", f"{what} has no solution: the Clarabel solver failed "
@@ -187,8 +191,74 @@ class PrimaryGains:
     solver: dict = field(default_factory=dict)
 
 
+#: Largest state dimension for which :func:`primary_smo_lmi` (``method="auto"``) solves the LMIs
+#: (42)-(43) with Clarabel; above it the equivalent Riccati equation is solved instead. Measured
+#: (2 cores): the LMI takes 0.3 s at n = 9, 14.5 s at n = 22 (0.8 s per interior-point
+#: iteration: two dense PSD cones of size 2n) and does not finish in 10 min at n = 60; the
+#: Riccati solve takes milliseconds.
+PRIMARY_LMI_MAX_STATES = 16
+
+
+def _primary_riccati(A: np.ndarray, C: np.ndarray, V1: np.ndarray, V2: np.ndarray, eps: float
+                     ) -> tuple[np.ndarray, np.ndarray, float, dict]:
+    """``P, X, trace X`` of the primary program from its Riccati equation (no SDP solver).
+
+    With ``Y = P^-1``, (42) is (Schur complement on ``-V1^-1``) the filter Riccati inequality
+    ``A Y + Y A^T + V1 - Y C^T V2^-1 C Y < 0``; every ``Y > 0`` satisfying it lies above the
+    stabilising solution ``Y+`` of the equation, and (43) is ``X > Y``. The infimum of
+    ``trace X`` is therefore ``trace Y+``, approached but not attained. Here ``Y`` solves the
+    equation with ``V1`` enlarged by ``O(eps)`` terms (so that (42) holds with margin ``eps``) and
+    ``X = (P - 2 eps I)^-1 + 2 eps I`` (so does (43)); both LMIs are then verified at the point
+    (margin ``eps / 2``).
+    """
+    from scipy.linalg import solve_continuous_are
+
+    n = A.shape[0]
+    I = np.eye(n)
+    t0 = __import__("time").perf_counter()
+    # (42) <= -eps I  <=>  P A + A^T P - C^T V2^-1 C + eps I + P V1e P <= 0 with
+    # V1e = (V1^-1 - eps I)^-1; the Riccati equation with V1e + mu I gives -P (mu I) P there, so
+    # mu >= eps ||Y||^2 is the margin (Y grows with mu: a few rounds)
+    V1e = _sym(np.linalg.inv(np.linalg.inv(V1) - eps * I))
+
+    def are(mu: float) -> np.ndarray:
+        try:
+            return _sym(solve_continuous_are(A.T, C.T, V1e + mu * I, V2))
+        except (np.linalg.LinAlgError, ValueError) as exc:
+            raise ConditionError("LMI", f"primary observer Riccati equation (42) has no stabilising "
+                                 f"solution ({exc}): (A, C) must be detectable",
+                                 {"status": "riccati_failed", "solver": {"solver": "riccati"}}) from None
+
+    Y = are(0.0)
+    for _ in range(4):
+        mu = 4.0 * eps * max(1.0, float(np.linalg.eigvalsh(Y).max())) ** 2
+        Y = are(mu)
+        if 2.0 * eps * float(np.linalg.eigvalsh(Y).max()) ** 2 <= mu:
+            break
+    P = _sym(np.linalg.inv(Y))
+    # (43) <= -eps I  <=>  P > eps I and X >= (P - eps I)^-1 + eps I
+    X = _sym(np.linalg.inv(P - 2.0 * eps * I)) + 2.0 * eps * I
+    V1i, V2i = np.linalg.inv(V1), np.linalg.inv(V2)
+    L42 = np.block([[P @ A + A.T @ P - C.T @ V2i @ C, P], [P, -V1i]])
+    L43 = np.block([[-P, I], [I, -X]])
+    # each LMI as "<= -eps I": its largest eigenvalue + eps (the violation, 0 when it holds)
+    viol = max(0.0, float(np.linalg.eigvalsh(_sym(L42)).max()) + eps,
+               float(np.linalg.eigvalsh(_sym(L43)).max()) + eps)
+    rec = {"solver": "riccati", "status": "optimal", "refined": False, "max_violation": viol,
+           "attempts": [{"attempt": "riccati", "status": "optimal", "iterations": None,
+                         "solve_seconds": __import__("time").perf_counter() - t0,
+                         "value": float(np.trace(X))}]}
+    rec["verified"] = bool(viol <= 0.5 * eps)
+    if not rec["verified"]:
+        raise ConditionError("LMI", f"primary observer Riccati solution violates (42)-(43) by "
+                             f"{viol:.3g} (> eps/2 = {0.5 * eps:.3g}): the equation is badly "
+                             f"conditioned; scale V1 or the model's states",
+                             {"status": "riccati_inaccurate", "solver": rec})
+    return P, X, float(np.trace(X)), rec
+
+
 def primary_smo_lmi(A: np.ndarray, C: np.ndarray, V1: np.ndarray, V2: np.ndarray, *,
-                    eps: float = 1e-7) -> PrimaryGains:
+                    eps: float = 1e-7, method: str = "auto") -> PrimaryGains:
     """Primary observer design, ng-tan-edwards-kuang eqs. (42)-(44) (Tan & Edwards 2001).
 
     Minimise ``trace X`` subject to
@@ -204,6 +274,11 @@ def primary_smo_lmi(A: np.ndarray, C: np.ndarray, V1: np.ndarray, V2: np.ndarray
         s.p.d. weights (paper: ``V1 = 100 I``, ``V2 = I``).
     eps : float
         Margin of the strict inequalities.
+    method : {"auto", "lmi", "riccati"}
+        ``"lmi"``: the SDP with Clarabel. ``"riccati"``: the same optimum from the stabilising
+        solution of the filter Riccati equation (:func:`_primary_riccati`; milliseconds at any
+        size). ``"auto"``: the LMI up to :data:`PRIMARY_LMI_MAX_STATES` states, else Riccati.
+        ``solver["solver"]`` records which.
 
     Returns
     -------
@@ -230,19 +305,26 @@ def primary_smo_lmi(A: np.ndarray, C: np.ndarray, V1: np.ndarray, V2: np.ndarray
     V1 = _square(V1, n, "V1", spd=True)
     V2 = _square(V2, p, "V2", spd=True)
     eps = _positive(eps, "eps")
+    if method not in ("auto", "lmi", "riccati"):
+        raise DataError(f"method must be 'auto', 'lmi' or 'riccati', got {method!r}")
+    if method == "auto":
+        method = "lmi" if n <= PRIMARY_LMI_MAX_STATES else "riccati"
     T = C[:, n - p:]
     V2i = np.linalg.inv(V2)
     V1i = np.linalg.inv(V1)
-    P = cp.Variable((n, n), symmetric=True)
-    X = cp.Variable((n, n), symmetric=True)
-    I = np.eye(n)
-    lmi42 = cp.bmat([[P @ A + A.T @ P - C.T @ V2i @ C, P], [P, -V1i]])  # ng-tan-edwards-kuang, eq. (42)
-    lmi43 = cp.bmat([[-P, I], [I, -X]])  # ng-tan-edwards-kuang, eq. (43)
-    cons = [0.5 * (lmi42 + lmi42.T) << -eps * np.eye(2 * n),
-            0.5 * (lmi43 + lmi43.T) << -eps * np.eye(2 * n)]
-    prob = cp.Problem(cp.Minimize(cp.trace(X)), cons)
-    val, rec = _solve(prob, "primary observer LMI (42)-(43)", eps)
-    Pv, Xv = _sym(P.value), _sym(X.value)
+    if method == "riccati":
+        Pv, Xv, val, rec = _primary_riccati(A, C, V1, V2, eps)
+    else:
+        P = cp.Variable((n, n), symmetric=True)
+        X = cp.Variable((n, n), symmetric=True)
+        I = np.eye(n)
+        lmi42 = cp.bmat([[P @ A + A.T @ P - C.T @ V2i @ C, P], [P, -V1i]])  # ng-tan-edwards-kuang, eq. (42)
+        lmi43 = cp.bmat([[-P, I], [I, -X]])  # ng-tan-edwards-kuang, eq. (43)
+        cons = [0.5 * (lmi42 + lmi42.T) << -eps * np.eye(2 * n),
+                0.5 * (lmi43 + lmi43.T) << -eps * np.eye(2 * n)]
+        prob = cp.Problem(cp.Minimize(cp.trace(X)), cons)
+        val, rec = _solve(prob, "primary observer LMI (42)-(43)", eps)
+        Pv, Xv = _sym(P.value), _sym(X.value)
     if np.linalg.eigvalsh(Pv).min() <= 0:
         raise ConditionError("LMI", "primary LMI returned a P that is not positive definite",
                              {"min_eig_P": float(np.linalg.eigvalsh(Pv).min())})

@@ -77,6 +77,7 @@ from .runtime import (
     integrate_observers,
 )
 from .selfcheck import (
+    band_frequencies,
     self_check,
 )
 from .status import (
@@ -94,6 +95,7 @@ __all__ = [
     "Lemma1Form",
     "SMOConditions",
     "SlidingModeReconstructor",
+    "band_frequencies",
     "check_conditions",
     "design_reconstructor",
     "fictitious_system",
