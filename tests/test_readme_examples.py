@@ -31,4 +31,7 @@ def test_reconstruction_example_reconstructs():
         exec(compile(block, "README.md reconstruction example", "exec"), {"__name__": "__readme__"})
     last = buf.getvalue().strip().splitlines()[-1]
     fhat, episodes = last.split(" ", 1)
-    assert abs(float(fhat) - 1.5) < 0.01 and episodes == "[]", last
+    # the status flags the reaching phase right after the fault's jump (issue 31: no wrong
+    # estimate is called sliding); a loss of sliding any longer than a millisecond is a failure
+    lost = [float(x) for x in episodes.strip("[]").split(",") if x.strip()]
+    assert abs(float(fhat) - 1.5) < 0.01 and all(d <= 1e-3 for d in lost), last

@@ -52,11 +52,14 @@ class PeerCheck(ResidualProcessor):
     warmup : int
         Samples at the start (and after :meth:`resume`) during which nothing is isolated.
 
-    Outputs, per member ``m``: ``peer:m`` (|low-passed residual| / threshold), ``peer:m:r`` (the
-    low-passed residual, signed, in the member's unit), ``peer:m:ref`` (the reference the peers give,
-    ``x_m - e_m``: what a gain of the member scales), ``peer:m:e`` (the unfiltered residual) and, for
-    announced members, ``peer:m:isolated`` (1 where ``m`` is its group's largest ``peer:m`` and
-    that is >= 1, else 0).
+    Notes
+    -----
+    Outputs, per member ``m``: ``peer:m`` (the absolute low-passed residual over the
+    threshold), ``peer:m:r`` (the low-passed residual, signed, in the member's unit),
+    ``peer:m:ref`` (the reference the peers give, ``x_m - e_m``: what a gain of the member
+    scales), ``peer:m:e`` (the unfiltered residual) and, for announced members,
+    ``peer:m:isolated`` (1 where ``m`` is its group's largest ``peer:m`` and that is >= 1,
+    else 0).
 
     Examples
     --------
@@ -227,7 +230,7 @@ def design_peer_check(nominal: Signals, groups: Mapping[str, Sequence[str]], *,
 
     Each member's coefficients are the least-squares fit of the member on the median of its peers,
     the references and a constant (samples from ``skip`` on); each threshold is the level of the
-    member's low-passed nominal |residual| for ``pfa`` false alarms per ``per``
+    member's absolute low-passed nominal residual for ``pfa`` false alarms per ``per``
     (:func:`~fdikit.detect.design_threshold`; on a record too short for the target, the nominal
     maximum scaled by extreme-value growth, as the sensor-fault detectors), times ``1 + margin``.
 
