@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import csv as _csv
 from pathlib import Path
 
 from ...errors import DataError
@@ -32,3 +33,17 @@ def _check_signal_list(signals) -> list[str]:
     if len(set(signals)) != len(signals):
         raise DataError(f"signals requested twice: {sorted({s for s in signals if signals.count(s) > 1})}")
     return signals
+
+
+def _csv_rows(p: Path, where: str) -> list[list[str]]:
+    """Every row of a UTF-8 CSV file; a file that is not UTF-8, not CSV or empty is refused."""
+    try:
+        with open(p, encoding="utf-8", newline="") as fh:
+            rows = list(_csv.reader(fh))
+    except UnicodeDecodeError as exc:
+        raise DataError(f"{where} is not UTF-8 text (byte {exc.start}: {exc.reason})") from None
+    except _csv.Error as exc:
+        raise DataError(f"{where} cannot be parsed as CSV: {exc}") from None
+    if not rows:
+        raise DataError(f"{where} is empty")
+    return rows

@@ -2,14 +2,13 @@
 
 from __future__ import annotations
 
-import csv as _csv
 from collections.abc import Mapping
 
 import numpy as np
 
 from ...errors import DataError
 from ..timebase import times_to_seconds
-from .checks import _check_file
+from .checks import _check_file, _csv_rows
 from .grid import LoadedSignals, SourceReport
 from .table import _check_table_time, _pick_columns, _pick_time, _table_to_grid
 
@@ -48,15 +47,7 @@ def read_table_csv(path, signals=None, rate=None, *, time: str | None = None,
     """
     p = _check_file(path, "CSV file")
     where = f"CSV file {p.name!r}"
-    try:
-        with open(p, encoding="utf-8", newline="") as fh:
-            rows = list(_csv.reader(fh))
-    except UnicodeDecodeError as exc:
-        raise DataError(f"{where} is not UTF-8 text (byte {exc.start}: {exc.reason})") from None
-    except _csv.Error as exc:
-        raise DataError(f"{where} cannot be parsed as CSV: {exc}") from None
-    if not rows:
-        raise DataError(f"{where} is empty")
+    rows = _csv_rows(p, where)
     header = [h.strip() for h in rows[0]]
     if len(set(header)) != len(header):
         raise DataError(f"{where}: duplicated column names in the header {header}")

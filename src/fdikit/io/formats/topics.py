@@ -25,6 +25,7 @@ import numpy as np
 
 from ...errors import DataError
 from ..timebase import ABSOLUTE_AFTER, TimeOrigin, times_to_seconds
+from .checks import _csv_rows
 from .grid import SourceReport
 from .multirate import MultiRateSignals, pick_channels, topics_to_grid
 from .table import _check_table_time, _pick_time
@@ -125,15 +126,7 @@ def _read_topic_csv(p: Path, time, time_unit: str):
         fast = None
     if fast is not None:
         return fast
-    try:
-        with open(p, encoding="utf-8", newline="") as fh:
-            rows = list(_csv.reader(fh))
-    except UnicodeDecodeError as exc:
-        raise DataError(f"{where} is not UTF-8 text (byte {exc.start}: {exc.reason})") from None
-    except _csv.Error as exc:
-        raise DataError(f"{where} cannot be parsed as CSV: {exc}") from None
-    if not rows:
-        raise DataError(f"{where} is empty")
+    rows = _csv_rows(p, where)
     header, units = _header(rows[0])
     if len(set(header)) != len(header):
         raise DataError(f"{where}: duplicated column names in the header {header}")
