@@ -137,6 +137,25 @@ names = {{ "r:diff:alarm" = "front wheels differ" }}
 """
 
 
+def wheel_difference_monitor(folder, dbc) -> Path:
+    """A config and its designs in ``folder``: a first-order low-passed front wheel-speed
+    difference (km/h) held over 0.3 for 5 samples; its real excursions in the RAV4 minute's
+    curves give announcements to compare. Returns the config's path."""
+    from fdikit.detect import Hold
+    from fdikit.monitor import save_artifact
+    from fdikit.residuals import FilterDesign
+
+    a = float(np.exp(-0.02 / 0.2))
+    diff = FilterDesign(np.array([[a]]), np.zeros((1, 1)), np.array([[1 - a, -(1 - a)]]), np.ones((1, 1)),
+                        np.zeros((1, 1)), np.zeros((1, 2)), 0.02, ["speed"], ["wfl", "wfr"], ["r:diff"])
+    (folder / "designs").mkdir()
+    save_artifact(folder / "designs" / "diff", diff)
+    save_artifact(folder / "designs" / "hold", Hold(["r:diff"], 0.3, Z=5))
+    cfg = folder / "m.toml"
+    cfg.write_text(CONFIG.format(dbc=Path(dbc).resolve().as_posix()))
+    return cfg
+
+
 def cli(*args, stdin=None):
     return subprocess.run([sys.executable, "-m", "fdikit.cli", *map(str, args)], capture_output=True,
                           text=True, input=stdin, timeout=600)
@@ -146,19 +165,7 @@ def cli(*args, stdin=None):
 def test_follow_candump_equals_batch(tmp_path, frames):
     import can
 
-    from fdikit.detect import Hold
-    from fdikit.monitor import save_artifact
-    from fdikit.residuals import FilterDesign
-
-    # a first-order low-passed front wheel-speed difference (km/h); its real excursions in the
-    # minute's curves give announcements to compare
-    a = float(np.exp(-0.02 / 0.2))
-    diff = FilterDesign(np.array([[a]]), np.zeros((1, 1)), np.array([[1 - a, -(1 - a)]]), np.ones((1, 1)),
-                        np.zeros((1, 1)), np.zeros((1, 2)), 0.02, ["speed"], ["wfl", "wfr"], ["r:diff"])
-    (tmp_path / "designs").mkdir()
-    save_artifact(tmp_path / "designs" / "diff", diff)
-    save_artifact(tmp_path / "designs" / "hold", Hold(["r:diff"], 0.3, Z=5))
-    (tmp_path / "m.toml").write_text(CONFIG.format(dbc=DBC.resolve().as_posix()))
+    wheel_difference_monitor(tmp_path, DBC)
     with can.CanutilsLogWriter(str(tmp_path / "drive.log")) as w:
         for m in can.LogReader(str(BLF)):
             w.on_message_received(m)

@@ -288,58 +288,17 @@ assert not any(m == "fdikit.commands" or m.startswith("fdikit.commands.") or m =
 
 
 # ------------------------------------------------------------------------------------ candump
-CONFIG = """
-[monitor]
-name = "RAV4 wheel-speed difference"
-artifacts = "designs"
-on_invalid = "hold"
-
-[log]
-format = "can"
-dbc = "{dbc}"
-rate = 50
-
-[channels.speed]
-source = "SPEED.SPEED"
-unit = "km/h"
-
-[channels.wfl]
-source = "WHEEL_SPEEDS.WHEEL_SPEED_FL"
-unit = "km/h"
-
-[channels.wfr]
-source = "WHEEL_SPEEDS.WHEEL_SPEED_FR"
-unit = "km/h"
-
-[[generators]]
-artifact = "diff"
-
-[[processors]]
-artifact = "hold"
-
-[decision]
-channels = ["r:diff:alarm"]
-names = {{ "r:diff:alarm" = "front wheels differ" }}
-"""
 
 
 @pytest.mark.skipif(not (DATA / "drive.blf").exists(), reason=f"real RAV4 data not found at {DATA}")
 def test_candump_follow_resumed_equals_uninterrupted(tmp_path):
     """The first 25 s of the real RAV4 minute as candump lines, crashed mid-stream and resumed
     from a checkpoint file: the gridder's state goes through its public API."""
-    from fdikit.detect import Hold
     from fdikit.io.decode import read_blf_table
-    from fdikit.monitor import save_artifact
-    from fdikit.residuals import FilterDesign
 
-    a = float(np.exp(-0.02 / 0.2))
-    diff = FilterDesign(np.array([[a]]), np.zeros((1, 1)), np.array([[1 - a, -(1 - a)]]), np.ones((1, 1)),
-                        np.zeros((1, 1)), np.zeros((1, 2)), 0.02, ["speed"], ["wfl", "wfr"], ["r:diff"])
-    (tmp_path / "designs").mkdir()
-    save_artifact(tmp_path / "designs" / "diff", diff)
-    save_artifact(tmp_path / "designs" / "hold", Hold(["r:diff"], 0.3, Z=5))
-    cfg = tmp_path / "m.toml"
-    cfg.write_text(CONFIG.format(dbc=(DATA / "toyota_rav4.dbc").resolve().as_posix()))
+    from .test_follow_candump import wheel_difference_monitor
+
+    cfg = wheel_difference_monitor(tmp_path, DATA / "toyota_rav4.dbc")
     ts, ids, pay, _ = read_blf_table(DATA / "drive.blf")
     keep = np.flatnonzero(ts - ts[0] <= 25.0)
     lines = [f"({ts[k]:.6f}) can0 {ids[k]:03X}#{pay[k].hex().upper()}\n" for k in keep]
