@@ -4,7 +4,11 @@ recursion, no globals with state, only ``<math.h>`` and ``<stdint.h>``; double a
 
 * :func:`generate` (a config's artifacts) and :func:`generate_monitor` (a built Monitor) write
   the code (:mod:`.generate`, :mod:`.emit`, the stages in :mod:`.stages`);
-* :class:`CMonitor` and :func:`compile_shared` are the equivalence harness (:mod:`.harness`).
+* :class:`CMonitor` and :func:`compile_shared` are the equivalence harness (:mod:`.harness`);
+* :func:`register_emitter` adds the emitter of another stage class (:mod:`.registry`: system
+  stages register from their own package, found by the plugin convention); the sensor checks
+  (:mod:`.sensor`) and the scheduled blend (:mod:`.scheduled`) register there;
+* :func:`subset_monitor` cuts a monitor after a processor (``generate(..., stop_after=...)``).
 
 A stage the generator does not know is refused by name (``stage X cannot be generated yet``).
 """
@@ -22,8 +26,14 @@ from .harness import (
     run_driver,
     signals_input,
 )
+from .registry import class_path, register_emitter, registered_emitter
+from .scheduled import ScheduledFilterEmitter
+from .sensor import PeerCheckEmitter, StuckEmitter
 from .stages import EMITTERS
+from .subset import subset_monitor
 
-__all__ = ["CFLAGS", "EMITTERS", "CMonitor", "GeneratedSource", "c_to_py_state", "compile_shared",
-           "config_digest", "driver_source", "emit_monitor", "find_compiler", "generate", "generate_monitor",
-           "py_to_c_state", "run_driver", "signals_input", "stage_digest"]
+__all__ = ["CFLAGS", "EMITTERS", "CMonitor", "GeneratedSource", "PeerCheckEmitter", "ScheduledFilterEmitter",
+           "StuckEmitter", "c_to_py_state", "class_path", "compile_shared", "config_digest", "driver_source",
+           "emit_monitor", "find_compiler", "generate", "generate_monitor", "py_to_c_state",
+           "register_emitter", "registered_emitter", "run_driver", "signals_input", "stage_digest",
+           "subset_monitor"]

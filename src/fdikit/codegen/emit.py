@@ -165,7 +165,7 @@ def emit_monitor(mon: Any, *, name: str = "fdk_monitor", precision: str = "doubl
          f'static const char FDK_HASH[] = "{design_hash}";',
          f"const char *{name}_design_hash(void) {{ return FDK_HASH; }}",
          f"int {name}_state_size(void) {{ return (int)sizeof({name}_state); }}", "",
-         *dict.fromkeys(e.helpers for e in (*gens, *procs) if e.helpers),
+         *dict.fromkeys(h for e in (*gens, *procs) for h in _helpers(e)),
          f"static void fdk_reset_processors({name}_state *s)", "{"]
     c += [e.reset_code() for e in procs if e.reset_code()]
     c += ["    (void)s;", "}", "", f"void {name}_reset({name}_state *s)", "{", "    int i;"]
@@ -219,7 +219,8 @@ def emit_monitor(mon: Any, *, name: str = "fdk_monitor", precision: str = "doubl
           "    if (n_gap) { s->missing[0] += n_gap; s->last_gap = n_gap; }",
           "    if (invalid) return fdk_hold(s, out, 1, t);",
           "    n_resume = s->missing[0] + s->held_t[0];",
-          f"    if (n_resume) {{ s->warm_left[0] = {n_warm}; s->reset_due[0] = 1;"]
+          f"    if (n_resume) {{ s->warm_left[0] = {n_warm}; s->reset_due[0] = 1;",
+          *(e.resume_code() for e in (*gens, *procs) if e.resume_code())]
     if mon.warmup is None and dec is not None:
         c.append(f"        s->warm_min[0] = {n_warm} < 10 * n_resume ? {n_warm} : 10 * n_resume;")
         c.append("        s->quiet[0] = 0;")
@@ -272,6 +273,13 @@ def emit_monitor(mon: Any, *, name: str = "fdk_monitor", precision: str = "doubl
     out = GeneratedSource(name, header, source, layout)
     out.emitters = (gens, procs)  # type: ignore[attr-defined]
     return out
+
+
+def _helpers(e: Any) -> tuple[str, ...]:
+    """The C helper blocks of an emitter (a string, or a tuple of blocks shared between emitters:
+    each block is emitted once per file)."""
+    h = e.helpers
+    return tuple(x for x in ((h,) if isinstance(h, str) else tuple(h)) if x)
 
 
 def stage_digest(mon: Any) -> str:

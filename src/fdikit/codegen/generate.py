@@ -66,7 +66,7 @@ def generate_monitor(mon: Any, out_dir: str | Path, *, name: str = "fdk_monitor"
 
 
 def generate(config: str | Path, out_dir: str | Path, *, name: str | None = None,
-             precisions=("double", "float")) -> dict[str, Any]:
+             precisions=("double", "float"), stop_after: str | None = None) -> dict[str, Any]:
     """Generate C99 for the monitor a config describes, from its designed artifacts.
 
     Parameters
@@ -78,6 +78,11 @@ def generate(config: str | Path, out_dir: str | Path, *, name: str | None = None
         Where the header, source and layout go.
     name : str, optional
         C prefix (default: ``fdk_`` and the config's file stem parent, sanitised).
+    stop_after : str, optional
+        The artifact name of the last processor to generate (:func:`~fdikit.codegen.subset_monitor`):
+        the later processors are left out and the decision keeps the alarm channels still produced
+        (e.g. ``"peer_check"`` for the RAV4 monitor, whose fault-type stage is not generated).
+        The result's ``monitor`` is that monitor (what the C must equal).
 
     Raises
     ------
@@ -88,11 +93,22 @@ def generate(config: str | Path, out_dir: str | Path, *, name: str | None = None
 
     cfg = load_config(config)
     mon = build_monitor(cfg)
+    digest = config_digest(cfg)
+    if stop_after is not None:
+        from .subset import subset_monitor
+
+        if stop_after not in cfg.processors:
+            raise DataError(f"stop_after = {stop_after!r} is not a processor of {config}; processors: "
+                            f"{cfg.processors}")
+        n = cfg.processors.index(stop_after) + 1
+        mon = subset_monitor(mon, n)
+        digest = hashlib.sha256(f"{digest}\0stop_after={stop_after}".encode()).hexdigest()
     if name is None:
         stem = "".join(ch if ch.isalnum() else "_" for ch in Path(config).resolve().parent.name.lower())
         name = f"fdk_{stem or 'monitor'}"
     if not name.isidentifier():
         raise DataError(f"the C name prefix must be an identifier, got {name!r}")
-    res = generate_monitor(mon, out_dir, name=name, design_hash=config_digest(cfg), precisions=precisions)
+    res = generate_monitor(mon, out_dir, name=name, design_hash=digest, precisions=precisions)
     res["name"] = name
+    res["monitor"] = mon
     return res

@@ -78,6 +78,11 @@ class StageEmitter:
     def f(self, name: str) -> str:
         return f"s->{self.p}_{name}"
 
+    def resume_code(self) -> str:
+        """Statements of the stage's ``resume`` rule (data back after held samples or a gap;
+        ``n_resume`` the samples missed), for emitters with ``handles_resume``."""
+        return ""
+
 
 # ---------------------------------------------------------------------------- generators
 class FilterEmitter(StageEmitter):
@@ -464,8 +469,19 @@ EMITTERS: dict[str, type[StageEmitter]] = {k: e for e in (FilterEmitter, Feature
 
 
 def stage_emitter(obj: Any, prefix: str) -> StageEmitter:
-    """The emitter of one stage, or a :class:`DataError` naming a stage that cannot be generated."""
+    """The emitter of one stage, or a :class:`DataError` naming a stage that cannot be generated.
+
+    Emitters registered in :mod:`fdikit.codegen.registry` (other core stages, system stages) are
+    looked up first, by the stage's exact class path."""
+    from .registry import registered_emitter
+
     name = type(obj).__name__
+    reg = registered_emitter(obj)
+    if reg is not None:
+        if hasattr(obj, "resume") and not getattr(reg, "handles_resume", False):
+            raise DataError(f"stage {name} cannot be generated yet: its emitter does not generate its "
+                            "resume() rule")
+        return reg(obj, prefix)
     cls = EMITTERS.get(name)
     module = type(obj).__module__
     if cls is None or not module.startswith("fdikit.") or module.startswith("fdikit.systems"):
