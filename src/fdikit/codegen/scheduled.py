@@ -52,24 +52,24 @@ class ScheduledFilterEmitter(StageEmitter):
     def step_code(self, inp, out):
         o, q, K = self.obj, self.q, len(self.subs)
         decl, u, y, v = self.inputs(inp)
-        lines = ["    {", *decl, f"        fdk_real rk[{K}][{max(q, 1)}], W[{K}], x, w, acc;",
+        lines = ["    {", *decl, f"        fdk_real rk[{K}][{max(q, 1)}], W[{K}], sx, w, acc;",
                  "        int p, c;", "        (void)p; (void)w;"]
         for k, e in enumerate(self.subs):
             code = e.step_code([*u, *y], [f"rk[{k}][{c}]" for c in range(q)])
             lines.append("    " + code.replace("\n", "\n    "))
-        lines.append(f"        x = {v};")
+        lines.append(f"        sx = {v};")
         lines += [f"        W[{k}] = FDK_R(0.0);" for k in range(K)]
         if K == 1:
             lines.append("        W[0] = FDK_R(1.0);")
         else:
             sp = ", ".join(f"FDK_R({lit(s)})" for s in o.speeds)
             lines += [f"        {{ static const fdk_real S[{K}] = {{{sp}}};",
-                      "          if (x == x) { x = x > S[0] ? x : S[0];",
-                      f"              x = x < S[{K - 1}] ? x : S[{K - 1}];",
+                      "          if (sx == sx) { sx = sx > S[0] ? sx : S[0];",
+                      f"              sx = sx < S[{K - 1}] ? sx : S[{K - 1}];",
                       "              p = 0;",
-                      f"              while (p < {K} && !(x < S[p])) ++p; }} else p = {K};",
+                      f"              while (p < {K} && !(sx < S[p])) ++p; }} else p = {K};",
                       f"          p = p - 1 < 0 ? 0 : p - 1; if (p > {K - 2}) p = {K - 2};",
-                      "          w = (x - S[p]) / (S[p + 1] - S[p]);",
+                      "          w = (sx - S[p]) / (S[p + 1] - S[p]);",
                       "          W[p] = FDK_R(1.0) - w; W[p + 1] = w; }"]
         lines += [f"        for (c = 0; c < {q}; ++c) {{ acc = FDK_R(0.0);"]
         lines += [f"            acc += W[{k}] * rk[{k}][c];" for k in range(K)]

@@ -126,16 +126,16 @@ class PeerCheckEmitter(StageEmitter):
     def step_code(self, inp, out):
         o, M, f = self.obj, self.M, self.f
         n_in = len(inp)
-        lines = ["    {", f"        fdk_real x[{n_in}], e[{M}], st[{M}], iso[{M}], med;",
+        lines = ["    {", f"        fdk_real px[{n_in}], e[{M}], st[{M}], iso[{M}], med;",
                  "        int i;"]
-        lines += [f"        x[{i}] = {v};" for i, v in enumerate(inp)]
-        lines += [f"        for (i = 0; i < {n_in}; ++i) if (!FDK_FINITE(x[i])) return FDK_ERR_STAT;"]
+        lines += [f"        px[{i}] = {v};" for i, v in enumerate(inp)]
+        lines += [f"        for (i = 0; i < {n_in}; ++i) if (!FDK_FINITE(px[i])) return FDK_ERR_STAT;"]
         for j in range(M):
             c = o._c[j]
-            lines += median_code("med", [f"x[{int(p)}]" for p in o._peers[j]])
-            lines.append(f"        e[{j}] = x[{int(o._self[j])}] - {rl(c[0])} - {rl(c[1])} * med;")
+            lines += median_code("med", [f"px[{int(p)}]" for p in o._peers[j]])
+            lines.append(f"        e[{j}] = px[{int(o._self[j])}] - {rl(c[0])} - {rl(c[1])} * med;")
             for r, d in zip(o._refs[j], c[2:]):
-                lines.append(f"        e[{j}] = e[{j}] - {rl(d)} * x[{int(r)}];")
+                lines.append(f"        e[{j}] = e[{j}] - {rl(d)} * px[{int(r)}];")
         z, k = f("z"), f("k")
         lines += [f"        if ({k}[0] == 0) {{ for (i = 0; i < {M}; ++i) {z}[i] = e[i]; }}",
                   "        else {"]
@@ -152,7 +152,7 @@ class PeerCheckEmitter(StageEmitter):
         lines += [f"        }} else {{ for (i = 0; i < {M}; ++i) st[i] = FDK_R(0.0); }}"]
         for j in range(M):
             lines += [f"        {out[j]} = st[{j}];", f"        {out[M + j]} = {z}[{j}];",
-                      f"        {out[2 * M + j]} = x[{int(o._xidx[j])}] - e[{j}];",
+                      f"        {out[2 * M + j]} = px[{int(o._xidx[j])}] - e[{j}];",
                       f"        {out[3 * M + j]} = e[{j}];"]
         lines += [f"        {out[4 * M + a]} = iso[{int(j)}];" for a, j in enumerate(o._ann)]
         lines.append("    }")
