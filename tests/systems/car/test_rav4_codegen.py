@@ -1,0 +1,130 @@
+"""The RAV4 lateral monitor as C (issue 29) on the real minute: the chain up to the peer checks
+(``generate(..., stop_after="peer_check")``; the fault-type stage is refused by name) gives bitwise
+the Python monitor's outputs, statuses and events, with injected faults, NaN samples and a gap;
+checkpoints cross between C and Python; the float32 variant's error is measured."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fdikit.codegen import (
+    CMonitor,
+    c_to_py_state,
+    compile_shared,
+    emit_monitor,
+    find_compiler,
+    generate,
+    py_to_c_state,
+)
+from fdikit.errors import DataError
+
+ROOT = Path(__file__).resolve().parents[3]
+DATA = ROOT / ".." / "shared" / "data" / "rav4-highway"
+pytestmark = [
+    pytest.mark.skipif(find_compiler() is None, reason="no C compiler (cc, gcc or clang) on PATH"),
+    pytest.mark.skipif(not (DATA / "drive.blf").exists(),
+                       reason=f"RAV4 data not found at {DATA} (../shared/data/rav4-highway from the repo)"),
+    pytest.mark.slow,   # the design (~15 s) and the compilation of the 240k-coefficient tables
+]
+#: The fault each run injects (CAN names, DBC units; fdikit.systems.car.monitor_rav4.parse_inject).
+FAULTS = ["stuck:STEER_ANGLE_SENSOR@15,YAW_RATE:3.0@40", "gain:WHEEL_SPEED_FL:1.03@20,ACCEL_Y:1.5@45"]
+
+
+def rav4_config(tmp: Path) -> Path:
+    """The RAV4 example config designed into ``tmp`` (its DBC path made absolute)."""
+    from fdikit.monitor.config import load_config, run_design
+
+    text = (ROOT / "examples" / "rav4-lateral" / "monitor.toml").read_text()
+    text = text.replace('dbc = "../../../shared/data/rav4-highway/toyota_rav4.dbc"',
+                        f'dbc = "{(DATA / "toyota_rav4.dbc").resolve()}"')
+    cfg = tmp / "monitor.toml"
+    cfg.write_text(text)
+    run_design(load_config(cfg))
+    return cfg
+
+
+@pytest.fixture(scope="module")
+def rav4_c(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("rav4_codegen")
+    cfg = rav4_config(tmp)
+    res = generate(cfg, tmp / "gen", name="fdk_rav4", stop_after="peer_check")
+    libs = {v: CMonitor(compile_shared([tmp / "gen" / f"{n}.c"], tmp / "gen" / f"lib{n}.so"),
+                        tmp / "gen" / f"{n}.layout.json")
+            for v, n in (("double", "fdk_rav4"), ("float", "fdk_rav4_f32"))}
+    return cfg, res, libs
+
+
+def _log(mon, spec: str, bad: bool):
+    from fdikit.systems.car.monitor_rav4 import inject, load_rav4_raw, parse_inject
+
+    sig = inject(load_rav4_raw(DATA), parse_inject(spec), mon.generators[0].pre)
+    t, x = sig.t.copy(), sig.values[0].copy()
+    if bad:  # a NaN yaw rate, a sample of nonsense, then 0.3 s lost (the stages resume)
+        x[1500, 3] = np.nan
+        x[1501, 0] = 1e300
+        t[2200:] += 0.3
+    return t, x
+
+
+def _py(mon, t, x, names):
+    mon.reset(1)
+    out, status, ev = [], [], []
+    for k in range(len(t)):
+        r, s, e = mon.step(float(t[k]), x[k][None], names)
+        out.append(np.concatenate([r[0], s[0]]))
+        status.append(("ok", "cannot_judge", "warmup").index(mon.last_status))
+        ev += [(e_.k, e_.kind, e_.hypothesis, e_.episode) for e_ in e]
+    return np.array(out), np.array(status), ev
+
+
+def test_stages_refused_by_name_without_stop_after(rav4_c, tmp_path):
+    cfg, _res, _libs = rav4_c
+    with pytest.raises(DataError, match="FaultTypeClassifier"):
+        generate(cfg, tmp_path / "all")
+    with pytest.raises(DataError, match="stop_after"):
+        generate(cfg, tmp_path / "x", stop_after="nonsense")
+
+
+@pytest.mark.parametrize("spec", FAULTS)
+def test_rav4_c_equals_python_on_the_real_minute(rav4_c, spec):
+    _cfg, res, libs = rav4_c
+    mon, c64 = res["monitor"], libs["double"]
+    stages = ["Rav4LateralFilter", "Rav4SensorChannels", "Rav4PeerSignals", "FeatureNorms", "Rav4MHSSPT",
+              "Hold", "StuckDetector", "Hold", "PeerCheck"]
+    assert res["layout"]["stages"] == stages
+    t, x = _log(mon, spec, bad=True)
+    names = c64.layout["inputs"]
+    py_out, py_status, py_ev = _py(mon, t, x, names)
+    c = c64.run(t, x)
+    assert np.array_equal(c["status"], py_status) and {1, 2} <= set(py_status.tolist())
+    assert np.array_equal(c["out"], py_out)          # bitwise
+    assert [(e["k"], e["kind"], e["hypothesis"], e["episode"]) for e in c["events"]] == py_ev
+    assert any(e[1] == "onset" for e in py_ev)
+    # float32: the error relative to each channel's largest magnitude (measured: below 1e-3)
+    c32 = libs["float"].run(t, x)
+    scale = np.maximum(np.abs(py_out).max(axis=0), 1e-12)
+    assert np.max(np.abs(c32["out"] - py_out) / scale) < 1e-2
+
+
+def test_rav4_checkpoint_crosses_between_c_and_python(rav4_c):
+    _cfg, res, libs = rav4_c
+    mon, c64 = res["monitor"], libs["double"]
+    t, x = _log(mon, FAULTS[0], bad=False)
+    names = c64.layout["inputs"]
+    em = emit_monitor(mon, name="fdk_rav4").emitters
+    full = c64.run(t, x)
+    cut = 2100
+    c64.run(t[:cut], x[:cut])
+    mon.reset(1)
+    mon.restore(c_to_py_state(c64.layout, c64.checkpoint(), mon, em))
+    rest = np.array([np.concatenate([r[0], s[0]]) for r, s, _ in
+                     (mon.step(float(t[k]), x[k][None], names) for k in range(cut, len(t)))])
+    assert np.array_equal(rest, full["out"][cut:])
+    _py(mon, t[:cut], x[:cut], names)
+    fresh = CMonitor(c64.lib._name, c64.layout)
+    fresh.restore(py_to_c_state(c64.layout, mon.state(), em))
+    assert np.array_equal(fresh.run(t[cut:], x[cut:], reset=False)["out"], full["out"][cut:])
+
