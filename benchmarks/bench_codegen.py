@@ -7,7 +7,8 @@ log (``fdikit example-log`` or the example's own simulator), in the same run:
 
 * ns per sample of the generated C step (double and float32), timed inside a compiled C loop over
   the samples held in memory (no Python in the loop), and of ``Monitor.step`` (the streaming
-  path, its arithmetic in numba kernels);
+  path, its arithmetic in numba kernels); wall-clock and process CPU time (on a loaded machine
+  the CPU time is the cost of the code, the wall clock also counts the waits for a core);
 * the state size (``sizeof`` of the state struct) and the code size (the object file's text and
   data, and the C source) in bytes;
 * the equivalence: events equal, statistics bitwise equal (double), the float32 variant's
@@ -51,12 +52,13 @@ int main(int argc, char **argv)
     double out[CAP_N_OUT > 0 ? CAP_N_OUT : 1], *data, sink = 0.0;
     long n = 0, cap = 1 << 16, k, r, reps = argc > 1 ? atol(argv[1]) : 10;
     int ne;
-    struct timespec a, b;
+    struct timespec a, b, ca, cb;
     data = malloc(sizeof(double) * (CAP_N_IN + 1) * cap);
     while (fread(data + n * (CAP_N_IN + 1), sizeof(double), CAP_N_IN + 1, stdin) == CAP_N_IN + 1) {
         if (++n == cap) { cap *= 2; data = realloc(data, sizeof(double) * (CAP_N_IN + 1) * cap); }
     }
     clock_gettime(CLOCK_MONOTONIC, &a);
+    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ca);
     for (r = 0; r < reps; ++r) {
         NAME_reset(&s);
         for (k = 0; k < n; ++k) {
@@ -66,7 +68,9 @@ int main(int argc, char **argv)
         }
     }
     clock_gettime(CLOCK_MONOTONIC, &b);
-    printf("%.3f %g\n", ((b.tv_sec - a.tv_sec) * 1e9 + (b.tv_nsec - a.tv_nsec)) / (double)(n * reps), sink);
+    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &cb);
+    printf("%.3f %.3f %g\n", ((b.tv_sec - a.tv_sec) * 1e9 + (b.tv_nsec - a.tv_nsec)) / (double)(n * reps),
+           ((cb.tv_sec - ca.tv_sec) * 1e9 + (cb.tv_nsec - ca.tv_nsec)) / (double)(n * reps), sink);
     free(data);
     return 0;
 }
@@ -157,7 +161,8 @@ def _time_monitor(out: dict, mon, cdir: Path, t: np.ndarray, x: np.ndarray, repe
                            capture_output=True, check=True)
         cm = CMonitor(compile_shared([src], cdir / f"lib{stem}.so"), cdir / f"{stem}.layout.json")
         run = cm.run(t, x)
-        res[prec] = {"ns_per_sample": float(r.stdout.split()[0]), "state_bytes": cm.state_bytes,
+        wall, cpu = (float(v) for v in r.stdout.split()[:2])
+        res[prec] = {"ns_per_sample": wall, "cpu_ns_per_sample": cpu, "state_bytes": cm.state_bytes,
                      "code_bytes": _size(objf), "run": run}
     # the Python streaming path, same log, same process (a first pass compiles and warms it)
     mon.reset(1)
@@ -165,12 +170,13 @@ def _time_monitor(out: dict, mon, cdir: Path, t: np.ndarray, x: np.ndarray, repe
         mon.step(float(t[k]), x[k][None], names)
     mon.reset(1)
     py_out, py_ev = [], []
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     for k in range(t.size):
         r_, s_, ev = mon.step(float(t[k]), x[k][None], names)
         py_out.append(np.concatenate([r_[0], s_[0]]))
         py_ev += [(e.k, e.kind, e.hypothesis) for e in ev]
     py_ns = (time.perf_counter() - t0) / t.size * 1e9
+    py_cpu_ns = (time.process_time() - c0) / t.size * 1e9
     py_out = np.array(py_out)
     scale = np.maximum(np.abs(py_out).max(axis=0), 1e-300)
     for prec, d in res.items():
@@ -182,8 +188,10 @@ def _time_monitor(out: dict, mon, cdir: Path, t: np.ndarray, x: np.ndarray, repe
             d["bitwise_equal"] = bool(np.array_equal(run["out"], py_out))
         else:
             d["events_differing"] = sorted(set(ev) ^ set(py_ev))
-    out.update(python_stream_ns_per_sample=round(py_ns, 1), c=res, events=len(py_ev),
-               speedup_double=round(py_ns / res["double"]["ns_per_sample"], 1))
+    out.update(python_stream_ns_per_sample=round(py_ns, 1),
+               python_stream_cpu_ns_per_sample=round(py_cpu_ns, 1), c=res, events=len(py_ev),
+               speedup_double=round(py_ns / res["double"]["ns_per_sample"], 1),
+               speedup_double_cpu=round(py_cpu_ns / res["double"]["cpu_ns_per_sample"], 1))
     return out
 
 
@@ -294,9 +302,11 @@ def main(argv=None) -> int:
                 print(f"{ex:14s} not generated: {r.get('refused', r.get('note'))}")
                 continue
             c64, c32 = r["c"]["double"], r["c"]["float"]
-            print(f"{ex:14s} C {c64['ns_per_sample']:8.1f} ns/sample (float32 {c32['ns_per_sample']:.1f}), "
+            print(f"{ex:14s} C {c64['ns_per_sample']:8.1f} ns/sample (CPU {c64['cpu_ns_per_sample']:.1f}; "
+                  f"float32 {c32['ns_per_sample']:.1f}, CPU {c32['cpu_ns_per_sample']:.1f}), "
                   f"Python stream {r['python_stream_ns_per_sample']:9.1f} ns/sample "
-                  f"({r['speedup_double']}x); "
+                  f"(CPU {r['python_stream_cpu_ns_per_sample']:.1f}; {r['speedup_double']}x, "
+                  f"CPU {r['speedup_double_cpu']}x); "
                   f"state {c64['state_bytes']} B (float32 {c32['state_bytes']} B), code {c64['code_bytes']} "
                   "B; "
                   f"generation {r['generation_seconds']} s; {r['events']} events, "

@@ -21,12 +21,19 @@ def _codegen(args) -> int:
     from ._output import print_json
 
     t0 = time.perf_counter()
-    res = gen(args.config, args.out, name=args.name)
+    res = gen(args.config, args.out, name=args.name, stop_after=args.stop_after)
     name = res["name"]
     out = {"config": str(args.config), "out": str(args.out), "name": name, "design_hash": res["design_hash"],
            "stages": res["layout"]["stages"], "inputs": res["layout"]["inputs"],
            "files": res["files"], "code_bytes": res["code_bytes"],
            "generation_seconds": round(res["seconds"], 4)}
+    if args.can:  # the DBC decoder and the follow-mode gridder feeding the monitor's inputs
+        from ..codegen.can import generate_can
+
+        can = generate_can(args.config, args.out, res["layout"]["inputs"], name=f"{name}_can")
+        out["files"] += can["files"]
+        if args.compile:
+            compile_shared([Path(args.out) / f"{name}_can.c"], Path(args.out) / f"lib{name}_can.so")
     if args.compile:
         libs = {}
         for variant, stem in (("double", name), ("float", f"{name}_f32")):
@@ -66,5 +73,11 @@ def register(sub) -> None:
     p.add_argument("--name", help="C prefix of the generated names (default fdk_<config folder>)")
     p.add_argument("--compile", action="store_true",
                    help="compile both variants with the system C compiler (strict flags) and load them")
+    p.add_argument("--stop-after", metavar="ARTIFACT",
+                   help="generate the processors up to this one (the decision keeps its channels still "
+                        "produced), e.g. when a later stage cannot be generated yet")
+    p.add_argument("--can", action="store_true",
+                   help="also write <name>_can.h/.c: the DBC decoder of the config's CAN signals and the "
+                        "follow-mode gridder feeding the monitor's inputs (a CAN log config)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=_codegen)
