@@ -36,7 +36,8 @@ def _signal_code(k: int, msg: Any, sig: Any) -> str:
     if getattr(sig, "is_float", False):
         raise DataError(f"signal {msg.name}.{sig.name} is a float signal; the C decoder handles integers")
     if sig.length > 64 or msg.length > 8:
-        raise DataError(f"signal {msg.name}.{sig.name}: the C decoder handles classic CAN (8 bytes, <= 64 bits)")
+        raise DataError(f"signal {msg.name}.{sig.name}: the C decoder handles classic CAN (8 bytes, <= 64 "
+                        "bits)")
     mask = "UINT64_MAX" if sig.length == 64 else f"((UINT64_C(1) << {sig.length}) - 1)"
     if sig.byte_order == "little_endian":
         need = (sig.start + sig.length + 7) // 8
@@ -60,7 +61,8 @@ def _signal_code(k: int, msg: Any, sig: Any) -> str:
 
 
 def emit_can_frontend(dbc: Any, sources: list[str], rate: float, channels: list[tuple[int, float, float]], *,
-                      name: str = "fdk_can", max_gap: float = 3.0, max_jump: float = 3600.0) -> tuple[str, str]:
+                      name: str = "fdk_can", max_gap: float = 3.0,
+                      max_jump: float = 3600.0) -> tuple[str, str]:
     """The C99 header and source of a CAN decoder and gridder.
 
     Parameters
@@ -132,11 +134,13 @@ typedef struct {{
 }} {name}_grid;
 
 void {name}_init({name}_grid *g);
+int {name}_grid_size(void);
 /* the signals of one frame: v[source] set where the frame carries it (NaN if its payload is short);
    returns the number of signals it carries */
 int {name}_decode(uint32_t id, const uint8_t *data, int len, double *v, int *hit);
 /* one frame (absolute time, s): the grid samples it completes into out (at most cap), or an error */
-int {name}_push({name}_grid *g, double t, uint32_t id, const uint8_t *data, int len, {name}_sample *out, int cap);
+int {name}_push({name}_grid *g, double t, uint32_t id, const uint8_t *data, int len,
+        {name}_sample *out, int cap);
 /* at the end of the stream: the samples that sit on the last frames */
 int {name}_flush({name}_grid *g, {name}_sample *out, int cap);
 #endif
@@ -165,10 +169,14 @@ int {name}_flush({name}_grid *g, {name}_sample *out, int cap);
 void {name}_init({name}_grid *g)
 {{
     int i;
-    for (i = 0; i < {S}; ++i) {{ g->nf[i] = 0; g->niv[i] = 0; g->piv[i] = 0; g->has_first[i] = 0; g->first[i] = 0.0; }}
+    for (i = 0; i < {S}; ++i) {{
+        g->nf[i] = 0; g->niv[i] = 0; g->piv[i] = 0; g->has_first[i] = 0; g->first[i] = 0.0;
+    }}
     g->has_t0 = 0; g->has_last = 0; g->has_start = 0; g->t0 = 0.0; g->t_last = 0.0; g->start = 0.0;
     g->k = 0; g->frames = 0; g->npend = 0;
 }}
+
+int {name}_grid_size(void) {{ return (int)sizeof({name}_grid); }}
 
 int {name}_decode(uint32_t id, const uint8_t *data, int len, double *v, int *hit)
 {{
@@ -266,14 +274,17 @@ static int fdk_emit({name}_grid *g, int final, {name}_sample *out, int cap)
             int d = 0;
             while (d + 2 < g->nf[s] && g->ft[s][d + 2] <= gn) ++d;
             if (d) {{
-                for (j = d; j < g->nf[s]; ++j) {{ g->ft[s][j - d] = g->ft[s][j]; g->fv[s][j - d] = g->fv[s][j]; }}
+                for (j = d; j < g->nf[s]; ++j) {{
+                    g->ft[s][j - d] = g->ft[s][j]; g->fv[s][j - d] = g->fv[s][j];
+                }}
                 g->nf[s] -= d;
             }}
         }}
     }}
 }}
 
-int {name}_push({name}_grid *g, double t, uint32_t id, const uint8_t *data, int len, {name}_sample *out, int cap)
+int {name}_push({name}_grid *g, double t, uint32_t id, const uint8_t *data, int len,
+        {name}_sample *out, int cap)
 {{
     double v[{S}], tr;
     int hit[{S}], s, j, any;
@@ -311,7 +322,9 @@ int {name}_push({name}_grid *g, double t, uint32_t id, const uint8_t *data, int 
         }} else {{
             for (s = 0; s < {S}; ++s) if (g->nf[s] > 2) {{
                 int d = g->nf[s] - 2;
-                for (j = d; j < g->nf[s]; ++j) {{ g->ft[s][j - d] = g->ft[s][j]; g->fv[s][j - d] = g->fv[s][j]; }}
+                for (j = d; j < g->nf[s]; ++j) {{
+                    g->ft[s][j - d] = g->ft[s][j]; g->fv[s][j - d] = g->fv[s][j];
+                }}
                 g->nf[s] = 2;
             }}
         }}
@@ -363,11 +376,13 @@ def generate_can(config: str | Path, out_dir: str | Path, inputs: list[str], *, 
     missing = [n for n in inputs if n not in by_name]
     if missing:
         raise DataError(f"monitor inputs {missing} are not channels of {cfg.path} ({sorted(by_name)})")
-    chans = [(sources.index(by_name[n].source), float(by_name[n].scale), float(by_name[n].offset)) for n in inputs]
+    chans = [(sources.index(by_name[n].source), float(by_name[n].scale), float(by_name[n].offset))
+             for n in inputs]
     h, c = emit_can_frontend(config_path(cfg.path.parent, dbc, where=f"{cfg.path}: [log].dbc"), sources,
                              float(rate), chans, name=name)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     (out / f"{name}.h").write_text(h)
     (out / f"{name}.c").write_text(c)
-    return {"files": [str(out / f"{name}.h"), str(out / f"{name}.c")], "sources": sources, "inputs": list(inputs)}
+    return {"files": [str(out / f"{name}.h"), str(out / f"{name}.c")], "sources": sources,
+            "inputs": list(inputs)}
