@@ -24,6 +24,7 @@ from fdikit.codegen import (
     registered_emitter,
     subset_monitor,
 )
+from fdikit.codegen.stages import stage_emitter
 from fdikit.detect import Hold, PeerCheck, StuckDetector
 from fdikit.errors import DataError
 from fdikit.monitor import Decision, Monitor
@@ -148,6 +149,16 @@ def test_registry_refuses_and_finds():
     # found by the plugin convention (fdikit.systems.car.monitor_rav4.codegen)
     em = registered_emitter(Rav4PeerSignals(pre, [1.0, 0.0, 0.0], 1.5, 1.0))
     assert em.__name__ == "Rav4PeerSignalsEmitter"
+
+    class Own(StuckDetector):   # a subclass is not its base: no emitter until one is registered
+        pass
+
+    own = Own("x")
+    assert registered_emitter(own) is None
+    with pytest.raises(DataError, match="Own cannot be generated"):
+        stage_emitter(own, "p0")
+    register_emitter(class_path(own), registered_emitter(StuckDetector("x")))
+    assert stage_emitter(own, "p0").obj is own
 
 
 def test_subset_monitor_keeps_the_leading_stages():

@@ -77,8 +77,9 @@ def registered_emitter(obj: Any) -> type | None:
     if key in _REGISTRY:
         return _REGISTRY[key]
     pkg = key.split(":")[0].rpartition(".")[0]
-    plugin = f"{pkg}.codegen" if pkg else "codegen"
-    if pkg.startswith("fdikit.codegen") or plugin in _TRIED:
+    plugin = f"{pkg}.codegen"
+    # (a class of a top-level module, e.g. __main__, has no package to look in)
+    if not pkg or pkg.startswith("fdikit.codegen") or plugin in _TRIED:
         return _REGISTRY.get(key)
     _TRIED.add(plugin)
     try:
