@@ -26,7 +26,7 @@ from .harness import (
     run_driver,
     signals_input,
 )
-from .registry import class_path, register_emitter, registered_emitter
+from .registry import class_path, register_emitter, registered_emitter, registered_names
 from .scheduled import ScheduledFilterEmitter
 from .sensor import PeerCheckEmitter, StuckEmitter
 from .stages import EMITTERS
@@ -35,5 +35,5 @@ from .subset import subset_monitor
 __all__ = ["CFLAGS", "EMITTERS", "CMonitor", "GeneratedSource", "PeerCheckEmitter", "ScheduledFilterEmitter",
            "StuckEmitter", "c_to_py_state", "class_path", "compile_shared", "config_digest", "driver_source",
            "emit_monitor", "find_compiler", "generate", "generate_monitor", "py_to_c_state",
-           "register_emitter", "registered_emitter", "run_driver", "signals_input", "stage_digest",
-           "subset_monitor"]
+           "register_emitter", "registered_emitter", "registered_names", "run_driver", "signals_input",
+           "stage_digest", "subset_monitor"]

@@ -22,7 +22,7 @@ from __future__ import annotations
 import importlib
 from typing import Any
 
-__all__ = ["class_path", "register_emitter", "registered_emitter"]
+__all__ = ["class_path", "register_emitter", "registered_emitter", "registered_names"]
 
 _REGISTRY: dict[str, type] = {}
 _TRIED: set[str] = set()
@@ -88,3 +88,9 @@ def registered_emitter(obj: Any) -> type | None:
         if exc.name != plugin:   # the plugin exists but is broken: say so
             raise
     return _REGISTRY.get(key)
+
+
+def registered_names() -> list[str]:
+    """The class names of the stages with a registered emitter (those registered so far: a system's
+    emitters once its ``codegen`` module was imported)."""
+    return sorted({k.rsplit(":", 1)[1].rsplit(".", 1)[-1] for k in _REGISTRY})

@@ -473,7 +473,7 @@ def stage_emitter(obj: Any, prefix: str) -> StageEmitter:
 
     Emitters registered in :mod:`fdikit.codegen.registry` (other core stages, system stages) are
     looked up first, by the stage's exact class path."""
-    from .registry import registered_emitter
+    from .registry import registered_emitter, registered_names
 
     name = type(obj).__name__
     reg = registered_emitter(obj)
@@ -485,8 +485,9 @@ def stage_emitter(obj: Any, prefix: str) -> StageEmitter:
     cls = EMITTERS.get(name)
     module = type(obj).__module__
     if cls is None or not module.startswith("fdikit.") or module.startswith("fdikit.systems"):
-        raise DataError(f"stage {name} cannot be generated yet (fdikit.codegen supports "
-                        f"{', '.join(sorted(EMITTERS))})")
+        known = sorted({*EMITTERS, *registered_names()})
+        raise DataError(f"stage {name} cannot be generated yet (fdikit.codegen supports {', '.join(known)}; "
+                        "generate the stages before it with stop_after=)")
     if any(hasattr(obj, a) for a in ("resume",)):
         raise DataError(f"stage {name} cannot be generated yet: it has a resume() rule")
     return cls(obj, prefix)
