@@ -29,7 +29,7 @@ BO_ 37 KIN: 8 XXX
 def _candump(path, frames):
     lines = []
     for t, fid, val in frames:
-        raw = int(round(val * 100)) & 0xFFFF
+        raw = round(val * 100) & 0xFFFF
         data = (raw << 8).to_bytes(8, "big") if fid == 180 else (raw << 48).to_bytes(8, "big")
         lines.append(f"({t:.6f}) can0 {fid:03X}#{data.hex().upper()}")
     path.write_text("\n".join(lines) + "\n")
@@ -126,7 +126,8 @@ artifact = "g"
 channels = ["v"]
 """
     (tmp_path / "m.toml").write_text(text % "linear")
-    with pytest.raises(DataError, match=r"resample = 'linear' .*not causal.*follow mode needs the causal hold"):
+    refused = r"resample = 'linear' .*not causal.*follow mode needs the causal hold"
+    with pytest.raises(DataError, match=refused):
         LiveMonitor(load_config(tmp_path / "m.toml"), input="candump", monitor=_NoMonitor())
     (tmp_path / "bad.toml").write_text(text % "cubic")
     with pytest.raises(DataError, match=r"\[log\].resample must be 'previous' .* or 'linear'"):
