@@ -122,7 +122,11 @@ def _cell(x):
 
 
 def read(fmt, path, signals=SIG, **kw):
+    """Read with the campaign's grid: linear interpolation (``method="linear"``, non-causal,
+    on request), whose cell-by-cell rules the cases below check; the causal default is checked
+    by ``test_default_grid_*`` at the end."""
     dbc = kw.pop("dbc", DBC)
+    kw.setdefault("method", "linear")
     return read_log(path, dbc if fmt in FRAME_FORMATS else None, signals, rate=kw.pop("rate", RATE), **kw)
 
 
@@ -578,7 +582,7 @@ def test_not_a_log(ctx, case, tmp_path):
     dbc = DBC if Path(case).suffix in (".asc", ".log", ".blf", ".mf4") else None
     check(lambda: read_log(p, dbc, ["SPEED.SPEED"], rate=RATE), error=error)
     if case == "latin1.asc":  # with its encoding named, the same file reads
-        s = check(lambda: read_log(p, dbc, ["SPEED.SPEED"], rate=RATE, encoding="latin-1"))
+        s = check(lambda: read_log(p, dbc, ["SPEED.SPEED"], rate=RATE, encoding="latin-1", method="linear"))
         assert s.equals(read("asc", ctx["files"]["asc"], ["SPEED.SPEED"]))
 
 
@@ -818,7 +822,7 @@ def _brute_grid(t, v, grid, max_gap, method):
     tol = 1e-9 * max(1.0, abs(grid[-1]))  # documented: 1 ns outside the samples is the end sample
     for g_i, g0 in enumerate(grid):
         g = t[-1] if 0 < g0 - t[-1] <= tol else (t[0] if 0 < t[0] - g0 <= tol else g0)
-        prev = [i for i in range(n) if t[i] <= g]
+        prev = [i for i in range(n) if t[i] <= (g + 1e-9 if method == "previous" else g)]
         if not prev:
             continue
         i = prev[-1]
@@ -911,7 +915,7 @@ def test_hypothesis_candump_lines(tmp_path_factory, gen):
     t = np.array([f[0] for f in sp]) - ts[0]
     v = np.array([((d[5] << 8) | d[6]) * 0.01 if len(d) >= 7 else np.nan for _, _, d in sp])
     tm, vm = _merge(t, v)
-    ref = _brute_grid(tm, vm, out.t, 3.0, "linear")
+    ref = _brute_grid(tm, vm, out.t, 3.0, "previous")
     assert np.array_equal(np.isfinite(ref), out.valid[0, :, 0])
     np.testing.assert_allclose(out.values[0, :, 0], ref, rtol=1e-12, atol=1e-12, equal_nan=True)
     assert accounted(out, "SPEED.SPEED") == len(sp)
@@ -975,7 +979,7 @@ def test_hypothesis_csv_tables(tmp_path_factory, rows):
     out = check(lambda: read_log(p, signals=["a", "b"], rate=20.0, span="log"))
     for c, n in enumerate("ab"):
         tm, vm = _merge(np.array([x for x, _ in cells[n]]), np.array([float(y) for _, y in cells[n]]))
-        ref = _brute_grid(tm, vm, out.t, 3.0, "linear")
+        ref = _brute_grid(tm, vm, out.t, 3.0, "previous")
         assert np.array_equal(np.isfinite(ref), out.valid[0, :, c])
         np.testing.assert_allclose(out.values[0, :, c], ref, rtol=1e-12, atol=1e-12, equal_nan=True)
         assert accounted(out, n) == len(cells[n])
@@ -999,7 +1003,7 @@ def test_hypothesis_parquet_nulls_and_nonfinite(tmp_path_factory, rows):
         return
     out = check(lambda: read_log(p, signals=["x"], rate=20.0, span="log"))
     tm, vm = _merge(t[present], np.array([x for x in vals if x is not None], float))
-    ref = _brute_grid(tm, vm, out.t, 3.0, "linear")
+    ref = _brute_grid(tm, vm, out.t, 3.0, "previous")
     assert np.array_equal(np.isfinite(ref), out.valid[0, :, 0])
     np.testing.assert_allclose(out.values[0, :, 0], ref, rtol=1e-12, atol=1e-12, equal_nan=True)
     assert accounted(out, "x") == sum(present)

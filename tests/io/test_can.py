@@ -76,20 +76,26 @@ def test_names_units_rates_lengths(log):
 
 @needs_data
 def test_decoding_against_hand_bit_arithmetic(log):
-    """SPEED.SPEED and KINEMATICS.YAW_RATE decoded by hand from the DBC layout, interpolated by numpy."""
+    """SPEED.SPEED and KINEMATICS.YAW_RATE decoded by hand from the DBC layout, held (the causal
+    default grid: each grid sample is the last frame at or before it)."""
     ts, data = _raw_frames(BLF, 0xB4)  # SPEED: start bit 47, 16 bit Motorola, scale 0.01 km/h
     raw = np.array([(d[5] << 8) | d[6] for d in data], float) * 0.01
-    ref = np.interp(log.t, ts, raw)
+    ref = raw[np.searchsorted(ts, log.t, side="right") - 1]
     assert np.max(np.abs(log["SPEED.SPEED"][0] - ref)) < 1e-9
     ts, data = _raw_frames(BLF, 0x24)  # YAW_RATE: start bit 1, 10 bit Motorola, 0.244 deg/s, -125
     raw = np.array([((d[0] & 0x03) << 8) | d[1] for d in data], float) * 0.244 - 125.0
-    ref = np.interp(log.t, ts, raw)
+    ref = raw[np.searchsorted(ts, log.t, side="right") - 1]
+    # linear interpolation on request: numpy's interp
+    lin = read_can_log(BLF, DBC, ["KINEMATICS.YAW_RATE"], rate=50.0, method="linear")
+    assert np.max(np.abs(lin["KINEMATICS.YAW_RATE"][0] - np.interp(lin.t, ts, raw))) < 1e-9
     assert np.max(np.abs(log["KINEMATICS.YAW_RATE"][0] - ref)) < 1e-9
 
 
 @needs_data
 def test_facts_measured_in_the_readme():
-    s = read_can_log(BLF, DBC, SIGNALS, rate=None)
+    # the data README's figures compare signals of different messages at one instant: interpolated
+    # (a held grid adds up to one message period of staleness: the maximum reads 5.3 km/h)
+    s = read_can_log(BLF, DBC, SIGNALS, rate=None, method="linear")
     # mean yaw rate -0.42 deg/s; wheel-speed mean vs SPEED.SPEED 1.3 km/h on average, 2.8 at most
     assert np.mean(s["KINEMATICS.YAW_RATE"]) == pytest.approx(-0.42, abs=0.02)
     wheels = np.mean([s[f"WHEEL_SPEEDS.WHEEL_SPEED_{w}"][0] for w in ("FL", "FR", "RL", "RR")], axis=0)
@@ -137,7 +143,7 @@ def test_gap_is_marked_not_interpolated(tmp_path):
             if m.arbitration_id == 0xAA and gap[0] <= m.timestamp - t_first <= gap[1]:
                 continue
             w.on_message_received(m)
-    s = read_can_log(out, DBC, ["WHEEL_SPEEDS.WHEEL_SPEED_FL", "SPEED.SPEED"], rate=100.0)
+    s = read_can_log(out, DBC, ["WHEEL_SPEEDS.WHEEL_SPEED_FL", "SPEED.SPEED"], rate=100.0, method="linear")
     fl = s.valid[0, :, 0]
     inside = (s.t > gap[0] + 0.02) & (s.t < gap[1] - 0.02)
     assert not fl[inside].any() and np.isnan(s.values[0, inside, 0]).all()
@@ -155,7 +161,7 @@ def test_resample_to_grid_by_hand():
     t = np.array([0.0, 0.1, 0.2, 0.3, 1.0, 1.1])
     v = np.array([0.0, 1.0, 2.0, 3.0, 10.0, 11.0])
     grid = np.array([-0.05, 0.05, 0.25, 0.5, 1.05, 1.1, 1.2])
-    val, ok = resample_to_grid(t, v, grid, max_gap=3.0)
+    val, ok = resample_to_grid(t, v, grid, max_gap=3.0, method="linear")
     assert ok.tolist() == [False, True, True, False, True, True, False]
     assert np.allclose(val[ok], [0.5, 2.5, 10.5, 11.0])
     assert np.isnan(val[~ok]).all()

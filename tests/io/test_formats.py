@@ -310,7 +310,7 @@ def test_gap_marked_in_every_frame_format(conv, tmp_path):
     write_mf4_bus(kept, tmp_path / "g.mf4")
     sig = ["WHEEL_SPEEDS.WHEEL_SPEED_FL", "SPEED.SPEED"]
     for name in ["g.asc", "g.log", "g.mf4"]:
-        s = read_log(tmp_path / name, DBC, sig, rate=100.0)
+        s = read_log(tmp_path / name, DBC, sig, rate=100.0, method="linear")
         fl = s.valid[0, :, 0]
         inside = (s.t > gap[0] + 0.02) & (s.t < gap[1] - 0.02)
         far = (s.t < gap[0] - 0.04) | (s.t > gap[1] + 0.04)
@@ -361,7 +361,7 @@ def test_stuck_signal_reported_not_refused(conv, tmp_path):
 def test_series_to_grid_by_hand():
     t = np.array([0.0, 0.1, 0.2, 0.3, 0.4, 1.0, 1.1])
     v = np.array([0.0, 1.0, np.inf, 3.0, 4.0, 10.0, 11.0])
-    s = series_to_grid({"x": (t, v)}, {"x": "km/h"}, rate=20.0, units="si", span="common")
+    s = series_to_grid({"x": (t, v)}, {"x": "km/h"}, rate=20.0, units="si", span="common", method="linear")
     # grid 0, 0.05, ..., 1.1; the inf at 0.2 spoils (0.1, 0.3); 0.4 -> 1.0 is a gap (6 periods > 3)
     g = s.t
     expect_bad = ((g > 0.1 + 1e-9) & (g < 0.3 - 1e-9)) | ((g > 0.4 + 1e-9) & (g < 1.0 - 1e-9))
@@ -373,7 +373,7 @@ def test_series_to_grid_by_hand():
     # same-time samples: equal ones merge, different ones become one bad sample
     t2 = np.array([0.0, 0.1, 0.1, 0.2, 0.3, 0.3, 0.4])
     v2 = np.array([0.0, 1.0, 1.0, 2.0, 3.0, 9.0, 4.0])
-    s2 = series_to_grid({"y": (t2, v2)}, {}, rate=10.0)
+    s2 = series_to_grid({"y": (t2, v2)}, {}, rate=10.0, method="linear")
     assert s2.info["y"].n_duplicates == 1 and s2.info["y"].n_conflicts == 1
     assert s2.valid[0].ravel().tolist() == [True, True, True, False, True]
     assert s2.info["y"].n_samples == 5
@@ -388,7 +388,7 @@ def test_frames_to_signals_short_payload_is_a_bad_sample_not_zero():
     full = bytes([0, 0, 0, 0, 0, 0x03, 0xE8, 0])  # 10.00 km/h
     short = full[:5]  # the signal lives in bytes 5..6: this frame cannot hold it
     s = frames_to_signals(np.arange(6) / 10.0, np.full(6, 180), [full, full, short, full, full, full], db,
-                          ["SPEED.SPEED"], rate=20.0)
+                          ["SPEED.SPEED"], rate=20.0, method="linear")
     assert s.info["SPEED.SPEED"].n_undecodable == 1 and s.info["SPEED.SPEED"].n_nonfinite == 1
     bad = (s.t > 0.1 + 1e-9) & (s.t < 0.3 - 1e-9)
     assert (~s.valid[0, :, 0]).tolist() == bad.tolist()
@@ -425,6 +425,6 @@ def test_parquet_datetime_time_column(tmp_path):
     start = pd.to_datetime("2026-01-01 12:00:00").tz_localize("UTC")
     t = start + pd.to_timedelta(np.arange(5) * 0.1, unit="s")
     pd.DataFrame({"time": t, "x": [0.0, 1.0, 2.0, 3.0, 4.0]}).to_parquet(tmp_path / "dt.parquet")
-    s = read_log(tmp_path / "dt.parquet", signals=["x"], rate=20.0)
+    s = read_log(tmp_path / "dt.parquet", signals=["x"], rate=20.0, method="linear")
     np.testing.assert_allclose(s.t, np.arange(9) * 0.05, atol=1e-12)  # seconds from the first row
     np.testing.assert_allclose(s["x"][0], np.arange(9) * 0.5, atol=1e-12)

@@ -129,7 +129,7 @@ def test_a_clock_jump_forward_is_a_gap(msgs, tmp_path):
     assert np.diff(s.t).max() > 2.0 and all(q.n_gaps == 1 for q in s.info.values())
     assert len(s.breaks) == 1 and "clock jump" in s.breaks[0][2] and s.n_segments == 1
     a, b, _ = s.breaks[0]
-    assert 29.9 < a < 30.0 and 32.0 < b < 32.1
+    assert 29.9 < a < 30.0 + 3 * 0.012 and 32.0 < b < 32.1  # the causal grid holds <= 3 periods
 
 
 def test_a_clock_step_back_gives_two_segments_and_a_flag(msgs, tmp_path):

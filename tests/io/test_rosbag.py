@@ -97,11 +97,11 @@ def test_round_trip(bag):
     # the held value is the last message at or before each grid time (independent computation)
     _, imu_m, odom_m = _messages(Stores.ROS1_NOETIC if kind == "ros1" else Stores.ROS2_HUMBLE)
     t_speed = ODOM_NS / 1e9
-    i = np.searchsorted(t_speed, s.t, side="right") - 1
+    i = np.searchsorted(t_speed, s.t + 1e-9, side="right") - 1
     np.testing.assert_array_equal(s["/speed.data"][0], [odom_m[k][1].data for k in i])
     np.testing.assert_allclose(s.age("/speed"), s.t - t_speed[i], atol=1e-12)
     t_imu = IMU_NS / 1e9
-    j = np.searchsorted(t_imu, s.t, side="right") - 1
+    j = np.searchsorted(t_imu, s.t + 1e-9, side="right") - 1
     np.testing.assert_array_equal(s["/imu/data.linear_acceleration.y"][0],
                                   [imu_m[k][1].linear_acceleration.y for k in j])
     np.testing.assert_array_equal(s["/imu/data.orientation_covariance[4]"][0], 4.0)
@@ -131,7 +131,7 @@ def test_header_time_and_selection(bag):
     assert s.names == ["/imu/data.angular_velocity.z", "/imu/data.__age__"]
     t_hdr = (IMU_NS - STAMP_LAG) / 1e9
     assert s.t[0] == t_hdr[0]
-    k = np.searchsorted(t_hdr, s.t, side="right") - 1
+    k = np.searchsorted(t_hdr, s.t + 1e-9, side="right") - 1
     np.testing.assert_allclose(s[s.names[0]][0], -0.1 * k)
     with pytest.raises(DataError, match=r"topic '/speed' .* has no header.stamp"):
         read_rosbag(path, ["/speed"], time="header")

@@ -25,7 +25,8 @@ def _frame(kmh: float) -> bytes:
 
 
 def test_far_future_frame_is_refused_and_the_stream_goes_on():
-    g = FrameGridder(cantools.database.load_string(DBC, database_format="dbc"), ["SPEED.SPEED"], rate=100.0)
+    g = FrameGridder(cantools.database.load_string(DBC, database_format="dbc"), ["SPEED.SPEED"], rate=100.0,
+                     method="linear")
     out = []
     for k in range(30):
         out += g.push(1.7e9 + 0.01 * k, 180, _frame(10.0 + k))
@@ -50,7 +51,9 @@ def test_a_long_real_gap_below_max_jump_is_cut_from_the_grid():
     # item 4, the batch loader's rule), not 600 NaN samples
     out += g.push(60.4, 180, _frame(10.0))
     out += g.flush()
-    assert [round(t, 6) for t, _, _ in out] == [0.0, 0.1, 0.2, 0.3, 0.4, 60.4]
+    # the causal default holds the last frame for max_gap = 3 source periods (0.5 .. 0.7 s), then
+    # the stretch is cut
+    assert [round(t, 6) for t, _, _ in out] == [0.0, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 60.4]
     assert all(why is None for _, _, why in out)
     # with a second signal still sending, the gap of the first is gridded as invalid samples
     db = cantools.database.load_string(DBC + '''

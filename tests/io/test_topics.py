@@ -44,10 +44,10 @@ def _brute_hold(t, v, grid):
     out = np.full(grid.shape, np.nan)
     age = np.full(grid.shape, np.nan)
     for k, g in enumerate(grid):
-        before = np.flatnonzero(t <= g)
+        before = np.flatnonzero(t <= g + 1e-9)  # a sample 1 ns after g (rounding) is at g
         if before.size:
             out[k] = v[before[-1]]
-            age[k] = g - t[before[-1]]
+            age[k] = max(g - t[before[-1]], 0.0)
     return out, age
 
 

@@ -90,10 +90,10 @@ def test_round_trip_names_values_and_time(tmp_path):
             v = s[f"{topic}.{f}"][0]
             col = np.array([r[j] for r in rows], float)
             for k, g in enumerate(s.t):
-                i = np.searchsorted(tt, g, side="right") - 1
+                i = np.searchsorted(tt, g + 1e-9, side="right") - 1
                 assert v[k] == col[i]
             age = s.age(topic)
-            i = np.searchsorted(tt, s.t, side="right") - 1
+            i = np.searchsorted(tt, s.t + 1e-9, side="right") - 1
             np.testing.assert_allclose(age, s.t - tt[i], atol=1e-12)
     assert s.valid.all()  # span common: every topic has a message at the grid start
 

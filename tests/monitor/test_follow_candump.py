@@ -71,7 +71,7 @@ def test_gridder_gap_and_bad_frames_flagged_like_batch(frames, tmp_path):
     assert bad_batch.sum() > 70  # the gap (~75 samples) and the corrupt frame
     assert np.array_equal(bad_stream, bad_batch)
     reasons = " ".join(o[2] for o in out if o[2])
-    assert "WHEEL_SPEEDS.WHEEL_SPEED_FL: frames" in reasons and "SPEED.SPEED: undecodable" in reasons
+    assert "WHEEL_SPEEDS.WHEEL_SPEED_FL: no frame for" in reasons and "SPEED.SPEED: undecodable" in reasons
     V = np.array([[o[1][s] for s in SIGNALS] for o in out])
     ok = ~bad_batch
     assert np.array_equal(V[ok], batch.values[0][ok])

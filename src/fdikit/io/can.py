@@ -217,8 +217,15 @@ class LogSignals(Signals):
 
 
 # ---------------------------------------------------------------------------------- resampling
+#: A source sample at most this much (s) after a grid time counts as at that time for the causal
+#: hold (``method="previous"``): time stamps made relative by a subtraction, or written as decimal
+#: text, carry rounding errors of ~1e-17 s to ~1e-12 s, and a hold that missed the sample exactly at
+#: its grid time by such an error would lag one whole source period.
+HOLD_TOL = 1e-9
+
+
 def resample_to_grid(t_src: np.ndarray, v_src: np.ndarray, grid: np.ndarray, *, max_gap: float = 3.0,
-                     method: str = "linear", period: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+                     method: str = "previous", period: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Resample one irregularly sampled signal onto ``grid`` without bridging gaps.
 
     Parameters
@@ -233,8 +240,10 @@ def resample_to_grid(t_src: np.ndarray, v_src: np.ndarray, grid: np.ndarray, *, 
         Longest bridgeable interval in source periods: a grid time is valid only when its two
         neighbouring source samples are at most ``max_gap * period`` apart (``"linear"``), or
         when the previous source sample is at most that old (``"previous"``).
-    method : {"linear", "previous"}
-        Linear interpolation between neighbours, or zero-order hold of the previous sample.
+    method : {"previous", "linear"}
+        Zero-order hold of the previous sample (causal, the default; a sample at most
+        :data:`HOLD_TOL` after a grid time counts as at it), or linear interpolation between
+        neighbours (uses the next sample: not causal).
     period : float, optional
         Nominal source period (s); default the median source interval.
 
@@ -247,7 +256,11 @@ def resample_to_grid(t_src: np.ndarray, v_src: np.ndarray, grid: np.ndarray, *, 
     Examples
     --------
     >>> import numpy as np
-    >>> v, ok = resample_to_grid(np.array([0., 1., 2., 10., 11.]), np.arange(5.), np.array([0.5, 5., 10.5]))
+    >>> t, grid = np.array([0., 1., 2., 10., 11.]), np.array([0.5, 5., 10.5])
+    >>> v, ok = resample_to_grid(t, np.arange(5.), grid, max_gap=2.0)
+    >>> v.tolist(), ok.tolist()
+    ([0.0, nan, 3.0], [True, False, True])
+    >>> v, ok = resample_to_grid(t, np.arange(5.), grid, method="linear")
     >>> v.tolist(), ok.tolist()
     ([0.5, nan, 3.5], [True, False, True])
     """
@@ -275,6 +288,7 @@ def _resample_plan(t_src: np.ndarray, grid: np.ndarray, max_gap: float, method: 
     i = np.searchsorted(t_src, grid, side="right") - 1
     inside = (i >= 0) & (grid <= t_src[-1])
     if method == "previous":
+        i = np.searchsorted(t_src, grid + HOLD_TOL, side="right") - 1
         ii = np.clip(i, 0, n - 1)
         ok = (i >= 0) & (grid - t_src[ii] <= lim)
         return ("previous", ii[ok], ok)

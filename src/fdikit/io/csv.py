@@ -95,6 +95,7 @@ def read_csv(
     time_unit: str = "auto",
     rebase: bool | None = None,
     encoding: str = "utf-8-sig",
+    method: str = "previous",
 ) -> LogSignals:
     """Read a CSV recording into :class:`~fdikit.io.LogSignals`.
 
@@ -127,6 +128,9 @@ def read_csv(
         ``t0`` (s) and ``time_origin`` (exact). A relative axis is kept as written.
     encoding : str
         Text encoding (default UTF-8 with an optional byte-order mark).
+    method : {"previous", "linear"}
+        With ``rate``: the causal hold of each column's last sample (the default: no grid value
+        depends on a later row), or linear interpolation with the next row (not causal).
 
     Returns
     -------
@@ -219,7 +223,8 @@ def read_csv(
 
         try:
             return series_to_grid({c: (t, v[:, j]) for j, c in enumerate(cols)}, dict(zip(cols, out_units)),
-                                  rate, max_gap=max_gap, source=SourceReport("csv", str(p), int(t.size)),
+                                  rate, max_gap=max_gap, method=method,
+                                  source=SourceReport("csv", str(p), int(t.size)),
                                   where=where, t0=t0, time_origin=time_origin)
         except DataError as exc:
             raise DataError(str(exc) + time_unit_hint(t, rate)) from None

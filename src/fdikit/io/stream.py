@@ -8,8 +8,10 @@ arithmetic as the batch loader, so on the same frames the two give the same valu
 * time 0 is the first frame of the stream (of any message);
 * the grid starts at the latest first-frame time of the requested signals (the batch loader's
   common span) and runs at ``rate`` Hz;
-* values are linear interpolations between the neighbouring frames (``v0 + w (v1 - v0)``, a
-  frame exactly at a grid time gives its value), or the previous frame (``method="previous"``);
+* values are the last frame at or before the grid time (``method="previous"``, the causal
+  default; a frame at most :data:`~fdikit.io.can.HOLD_TOL` after it counts as at it), or linear
+  interpolations between the neighbouring frames (``method="linear"``: ``v0 + w (v1 - v0)``, a
+  frame exactly at a grid time gives its value);
 * a grid sample is invalid (NaN, with the reason) when its neighbouring frames are more than
   ``max_gap`` source periods apart, or when it touches a frame that could not be decoded or
   carried a NaN/inf value.
@@ -41,7 +43,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import DataError
-from .can import _load_dbc, _resolve
+from .can import HOLD_TOL, _load_dbc, _resolve
 
 __all__ = ["FrameGridder", "parse_candump_line"]
 
@@ -110,7 +112,8 @@ class FrameGridder:
         Grid rate (Hz). Required: a stream cannot look ahead for the median source rate.
     max_gap : float
         Longest bridged interval, in source periods (as the batch loader).
-    method : {"linear", "previous"}
+    method : {"previous", "linear"}
+        Causal hold of the last frame (default) or linear interpolation (as the batch loader).
     channel : str, optional
         Keep only frames of this bus; without it, a requested message seen on two buses is refused
         (frames of two buses are never mixed into one signal), as in the batch loader.
@@ -137,7 +140,7 @@ class FrameGridder:
     """
 
     def __init__(self, dbc: Any, signals: Sequence[str], rate: float, *, max_gap: float = 3.0,
-                 method: str = "linear", channel: str | None = None, max_jump: float = 3600.0):
+                 method: str = "previous", channel: str | None = None, max_jump: float = 3600.0):
         if isinstance(signals, str) or not signals:
             raise DataError("signals must be a non-empty list of 'MESSAGE.SIGNAL' names")
         self.signals = [str(s) for s in signals]
@@ -183,7 +186,8 @@ class FrameGridder:
         t, v = s.t, s.v
         # i: the last frame at or before g (frames before it were trimmed)
         i = 0
-        while i + 1 < len(t) and t[i + 1] <= g:
+        g_at = g + HOLD_TOL if self.method == "previous" else g
+        while i + 1 < len(t) and t[i + 1] <= g_at:
             i += 1
         lim = self.max_gap * self._period(s)
         bad = f"{name}: undecodable or non-finite frame"
@@ -213,8 +217,9 @@ class FrameGridder:
         while True:
             g = self._start + self._k / self.rate
             # ready: every signal has a frame after g (at the end: at or after g)
+            g_at = g + HOLD_TOL if self.method == "previous" else g
             for s in self._series.values():
-                if s.t[-1] < g or (s.t[-1] == g and not final):
+                if s.t[-1] < g or (s.t[-1] <= g_at and not final):
                     return out
             vals, why = {}, []
             n_gap = 0

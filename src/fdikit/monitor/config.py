@@ -102,7 +102,7 @@ RUNTIMES = {
 _SCHEMA: dict[str, dict[str, type | tuple[type, ...]]] = {
     "monitor": {"name": str, "artifacts": str, "on_invalid": str, "max_gap": (int, float),
                 "warmup": (int, float), "max_abs": (int, float)},
-    "log": {"format": str, "time": str, "dbc": str, "rate": (int, float), "time_unit": str},
+    "log": {"format": str, "time": str, "dbc": str, "rate": (int, float), "time_unit": str, "resample": str},
     "design": {"recipe": str, "params": dict, "sample_time": (int, float), "plant": dict, "faults": dict,
                "disturbances": dict, "noise": dict, "alarm": dict, "structure": dict},
     "decision": {"channels": list, "level": (int, float), "names": dict, "clear_level": (int, float),
@@ -294,6 +294,10 @@ def load_config(path: str | Path) -> MonitorConfig:
     if "rate" in log and not (np.isfinite(log["rate"]) and log["rate"] > 0):
         raise DataError(f"config: [log].rate must be a positive, finite number of samples per second (Hz), "
                         f"got {log['rate']!r}")
+    if log.get("resample", "previous") not in ("previous", "linear"):
+        raise DataError(f"config: [log].resample must be 'previous' (the causal hold of each signal's "
+                        f"last sample, the default) or 'linear' (interpolation with the next sample: "
+                        f"not causal), got {log['resample']!r}")
     if log.get("time_unit", "auto") not in TIME_UNITS:
         raise DataError(f"config: [log].time_unit must be one of {list(TIME_UNITS)}, got "
                         f"{log['time_unit']!r}")
@@ -547,6 +551,8 @@ def read_log(cfg: MonitorConfig, path: str | Path) -> Signals:
     kw: dict[str, Any] = {}
     if "time_unit" in cfg.log:
         kw["time_unit"] = cfg.time_unit
+    if "resample" in cfg.log:
+        kw["method"] = cfg.log["resample"]
     if fmt == "csv" or (fmt == "auto" and path.suffix.lower() == ".csv"):
         _supported(io.read_csv, list(kw), "CSV reader (fdikit.io.read_csv)")
         return io.read_csv(path, time=cfg.log.get("time", "t"), columns=sources, rate=cfg.log.get("rate"),

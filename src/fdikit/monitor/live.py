@@ -274,6 +274,11 @@ class LiveMonitor:
             if rate is None:
                 raise DataError(f"{cfg.path}: following candump lines needs [log].rate (Hz): a stream "
                                 "cannot measure the source rate ahead of time")
+            if cfg.log.get("resample", "previous") != "previous":
+                raise DataError(f"{cfg.path}: [log].resample = {cfg.log['resample']!r} interpolates with "
+                                "the next frame (not causal): a live monitor would date its decisions "
+                                "before the data they rest on; follow mode needs the causal hold "
+                                "(remove [log].resample or set it to 'previous')")
             sources = list(dict.fromkeys(c.source for c in cfg.channels))
             self.gridder = FrameGridder(cfg.path.parent / dbc, sources, rate)
         self.samples = 0             # grid samples (candump) or data rows (CSV) stepped

@@ -22,9 +22,12 @@ interpolation only on request (``method="linear"``), and then the result says it
 (:attr:`MultiRateSignals.causal` is ``False``), so a monitor following a live log can refuse it.
 
 **The gridding rule.** A grid value that uses a sample after its own time (linear
-interpolation) cannot be computed live. The CAN, CSV, Parquet and MDF4 readers keep their
-historical default ``method="linear"`` (the papers' numbers rest on it); pass
-``method="previous"`` for a causal grid. The topic-log readers default to the causal hold.
+interpolation) cannot be computed live, and a detector on such a grid dates its decisions before
+the data they rest on. Every reader (CAN, CSV, Parquet, MDF4 and the topic logs) therefore holds
+each signal's last sample by default (``method="previous"``, causal: a sample at most
+:data:`fdikit.io.can.HOLD_TOL` = 1 ns after a grid time counts as at it); linear interpolation is
+there on request (``method="linear"``, ``[log] resample = "linear"`` in a monitor config, which
+follow mode refuses). The simulated papers' numbers never pass through a reader.
 
 Bad-input policy (never crash, never lie)
 -----------------------------------------

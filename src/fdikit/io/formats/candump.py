@@ -33,7 +33,7 @@ def read_candump(path, dbc, signals, rate=None, **kw) -> LoadedSignals:
     ...                    "(100.100000) can0 0B4#000000000007D000 R\n")   # 20.00 km/h
     >>> s = read_candump(log, db, ["SPEED.SPEED"], rate=20)
     >>> s.t.tolist(), s["SPEED.SPEED"].round(6).tolist(), s.source.n_records
-    ([0.0, 0.05, 0.1], [[10.0, 15.0, 20.0]], 2)
+    ([0.0, 0.05, 0.1], [[10.0, 10.0, 20.0]], 2)
     """
     ts, ids, data, lines, chans, src = _read_text_frames(path, "candump", strict=True)
     return frames_to_signals(ts, ids, data, dbc, signals, rate, lines=lines, channels=chans, source=src,

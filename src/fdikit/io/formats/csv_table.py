@@ -40,10 +40,10 @@ def read_table_csv(path, signals=None, rate=None, *, time: str | None = None,
     >>> _ = p.write_text("t,speed,yaw\n0.0,36,\n0.05,,0.5\n0.1,nan,\n0.15,,0.7\n0.2,72,\n")
     >>> s = read_table_csv(p, rate=20, span="log", source_units={"speed": "km/h"},
     ...                    units={"speed": "m/s"})
-    >>> s.valid[0].astype(int).T.tolist()   # speed: its nan spoils 0.05 .. 0.15; yaw: only 0.05 .. 0.15
-    [[1, 0, 0, 0, 1], [0, 1, 1, 1, 0]]
-    >>> s["yaw"][0, 1:4].round(6).tolist(), s.info["speed"].n_nonfinite
-    ([0.5, 0.6, 0.7], 1)
+    >>> s.valid[0].astype(int).T.tolist()   # speed: its nan (held) spoils 0.1 .. 0.15; yaw from 0.05
+    [[1, 1, 0, 0, 1], [0, 1, 1, 1, 1]]
+    >>> s["yaw"][0, 1:5].round(6).tolist(), s.info["speed"].n_nonfinite
+    ([0.5, 0.5, 0.7, 0.7], 1)
     """
     p = _check_file(path, "CSV file")
     where = f"CSV file {p.name!r}"

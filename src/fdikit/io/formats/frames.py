@@ -46,7 +46,7 @@ def frames_to_signals(
     *,
     units: str | Mapping[str, str] | None = None,
     max_gap: float = 3.0,
-    method: str = "linear",
+    method: str = "previous",
     span: str = "common",
     stuck_after: float = 2.0,
     lines: np.ndarray | None = None,
@@ -210,12 +210,14 @@ def _cut_clock_gaps(out: LoadedSignals, t0: float, steps) -> LoadedSignals:
     for a, b in zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1)):
         lo = float(grid[a - 1]) if a > 0 else float(grid[a])
         hi = float(grid[b]) if b < grid.size else float(grid[b - 1])
-        why = [s for bt, at, s in steps if lo <= bt - t0 and at - t0 <= hi]
+        # a step's stretch overlaps the cut run (with a causal hold the run starts up to max_gap
+        # source periods after the step's last frame, so containment is not required)
+        why = [s for bt, at, s in steps if lo <= at - t0 and bt - t0 <= hi]
         breaks.append((lo, hi, "; ".join(why) if why else
                        f"no frame of any requested message from {lo:.6f} s to {hi:.6f} s (a clock jump "
                        f"or a logger pause): a gap of {b - a} grid samples, cut from the grid"))
     for bt, at, s in steps:
-        if not any(lo <= bt - t0 and at - t0 <= hi for lo, hi, _ in breaks):
+        if not any(lo <= at - t0 and bt - t0 <= hi for lo, hi, _ in breaks):
             breaks.append((bt - t0, at - t0, s))
     if not dead.any():
         out.breaks = breaks
@@ -288,7 +290,7 @@ def _decode_to_grid(resolved, signals: list[str], select, times, payloads, t0: f
 
 
 def _blf_to_signals(frames, dbc, signals, rate=None, *, units=None, max_gap: float = 3.0,
-                    method: str = "linear", span: str = "common", stuck_after: float = 2.0,
+                    method: str = "previous", span: str = "common", stuck_after: float = 2.0,
                     source: SourceReport | None = None, where: str = "CAN log",
                     plausibility: Mapping[str, Any] | None = None) -> LoadedSignals:
     """:func:`frames_to_signals` on a :class:`fdikit.io.decode.BlfFrames` (a BLF read on demand):

@@ -17,6 +17,7 @@ import numpy as np
 from ...errors import DataError
 from ..can import (
     _SI,
+    HOLD_TOL,
     LogSignals,
     SignalInfo,
     _norm_unit,
@@ -125,7 +126,7 @@ class LoadedSignals(LogSignals):
         >>> s = series_to_grid({"x": (np.r_[0.0, 0.1, 0.2, 1.0, 1.1], np.zeros(5))}, {}, rate=10.0)
         >>> s.invalid_reason(1) is None
         True
-        >>> s.invalid_reason(5)
+        >>> s.invalid_reason(6)  # held up to max_gap = 3 periods (0.5 s), then a gap
         'x: gap, no sample from 0.200000 s to 1.000000 s (0.8 s, longer than max_gap = 3 periods of 0.1 s)'
 
         """
@@ -199,6 +200,8 @@ def _touches_bad(t: np.ndarray, fin: np.ndarray, grid: np.ndarray, method: str) 
         return np.zeros(grid.shape, bool)
     i = np.searchsorted(t, grid, side="right") - 1
     if method == "previous" or n == 1:
+        if method == "previous":
+            i = np.searchsorted(t, grid + HOLD_TOL, side="right") - 1
         return (i >= 0) & ~fin[np.clip(i, 0, n - 1)]
     i0 = np.clip(i, 0, n - 2)
     i1 = i0 + 1
@@ -250,7 +253,7 @@ def series_to_grid(
     *,
     units: str | Mapping[str, str] | None = None,
     max_gap: float = 3.0,
-    method: str = "linear",
+    method: str = "previous",
     span: str = "common",
     log_span: tuple[float, float] | None = None,
     stuck_after: float = 2.0,
@@ -279,7 +282,10 @@ def series_to_grid(
         Conversion, as in :func:`fdikit.io.read_can_log`.
     max_gap : float
         Longest bridged interval, in that channel's median source periods.
-    method : {"linear", "previous"}
+    method : {"previous", "linear"}
+        Zero-order hold of each channel's last sample (causal, the default; a sample at most
+        :data:`~fdikit.io.can.HOLD_TOL` after a grid time counts as at it) or linear
+        interpolation between the neighbouring samples (uses the next sample: not causal).
     span : {"common", "log"}
         Grid over the common span of the channels, or over ``log_span``.
     log_span : (float, float), optional
@@ -316,8 +322,8 @@ def series_to_grid(
     >>> import numpy as np
     >>> s = series_to_grid({"x": (np.arange(5.0), np.array([0.0, 1.0, np.nan, 3.0, 4.0]))},
     ...                    {"x": "m"}, rate=2.0)
-    >>> s.valid[0, :, 0].astype(int).tolist()
-    [1, 1, 1, 0, 0, 0, 1, 1, 1]
+    >>> s.valid[0, :, 0].astype(int).tolist()  # the NaN at 2 s is held until the next sample
+    [1, 1, 1, 1, 0, 0, 1, 1, 1]
     """
     names = list(series)
     if not names:
@@ -539,7 +545,7 @@ def _invalid_spans(name, t, fin, grid, ok, method, max_gap, period,
         out.append((name, a, b, f"{name}: no sample (outside its recorded span {t[0]:.6f} .. {t[-1]:.6f} s)"))
     for a, b in _runs(touches):
         out.append((name, a, b, f"{name}: interpolated from a NaN, inf or undecodable source sample"))
-    i = np.searchsorted(t, grid, side="right") - 1
+    i = np.searchsorted(t, grid + (HOLD_TOL if method == "previous" else 0.0), side="right") - 1
     for a, b in _runs(gap):
         i0 = int(np.clip(i[a], 0, t.size - 1))
         i1 = min(i0 + 1, t.size - 1)

@@ -18,10 +18,10 @@ message with several numeric fields) at its own rate: 250 Hz IMU, 19 Hz odometry
   follow mode must refuse it. Gaps longer than ``max_gap`` median periods are not bridged, as in
   :func:`~fdikit.io.formats.series_to_grid` (whose period is taken over the whole record).
 
-The CAN, CSV, Parquet and MDF4 readers keep their own default (``method="linear"`` through
-:func:`~fdikit.io.formats.series_to_grid`, which the papers' numbers rest on); the readers of
-topic logs (:func:`~fdikit.io.read_ulog`, :func:`~fdikit.io.read_rosbag`,
-:func:`~fdikit.io.read_topic_folder`) use this module and its causal default.
+The CAN, CSV, Parquet and MDF4 readers share the causal default (through
+:func:`~fdikit.io.formats.series_to_grid`); the readers of topic logs
+(:func:`~fdikit.io.read_ulog`, :func:`~fdikit.io.read_rosbag`,
+:func:`~fdikit.io.read_topic_folder`) use this module, which adds the age channels.
 """
 
 from __future__ import annotations
@@ -32,6 +32,7 @@ from collections.abc import Mapping
 import numpy as np
 
 from ...errors import DataError
+from ..can import HOLD_TOL
 from .grid import LoadedSignals, SourceReport, _runs, series_to_grid
 
 #: Suffix of the age channel of each topic: ``"<topic>.__age__"``.
@@ -84,10 +85,10 @@ class MultiRateSignals(LoadedSignals):
 
 def _age(t: np.ndarray, grid: np.ndarray) -> np.ndarray:
     """Seconds since the last sample at or before each grid time (NaN before the first)."""
-    i = np.searchsorted(t, grid, side="right") - 1
+    i = np.searchsorted(t, grid + HOLD_TOL, side="right") - 1
     out = np.full(grid.shape, np.nan)
     ok = i >= 0
-    out[ok] = grid[ok] - t[i[ok]]
+    out[ok] = np.maximum(grid[ok] - t[i[ok]], 0.0)  # a sample HOLD_TOL after g is at g
     # a grid time a rounding error (<= 1 ns) before the first sample is that sample
     tol = 1e-9 * max(1.0, abs(float(grid[-1]))) if grid.size else 0.0
     near = ~ok & (t[0] - grid <= tol)

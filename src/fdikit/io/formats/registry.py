@@ -140,12 +140,10 @@ def read_log(path, dbc=None, signals=None, rate=None, *, format: str | None = No
 
     Notes
     -----
-    The gridding rule differs by kind of log: the CAN, CSV, Parquet and MDF4 readers
-    interpolate linearly between samples by default (``method="linear"``, non-causal: a grid
-    value uses the next sample); the topic logs (ULog, ROS bags, topic folders) hold each
-    topic's last message (``method="previous"``, causal) and add its age, and mark a linear
-    grid non-causal (:mod:`fdikit.io.formats.multirate`). A monitor that follows a live log
-    needs a causal grid: pass ``method="previous"`` to the table and CAN readers as well.
+    Every reader holds each signal's last sample by default (``method="previous"``, causal:
+    no grid value depends on a later sample); ``method="linear"`` interpolates with the next
+    sample (non-causal). The topic logs (ULog, ROS bags, topic folders) add each topic's age and
+    mark a linear grid non-causal (:mod:`fdikit.io.formats.multirate`).
 
     Returns
     -------
@@ -211,7 +209,7 @@ def read_can_log(
     *,
     units: str | Mapping[str, str] | None = None,
     max_gap: float = 3.0,
-    method: str = "linear",
+    method: str = "previous",
     span: str = "common",
     plausibility: Mapping[str, Any] | None = None,
 ) -> LogSignals:
@@ -234,8 +232,9 @@ def read_can_log(
     max_gap : float
         Longest frame interval, in that signal's median source periods, that is interpolated
         across; longer gaps become NaN with ``valid == False`` (see the module docstring).
-    method : {"linear", "previous"}
-        Interpolation between neighbouring frames, or zero-order hold.
+    method : {"previous", "linear"}
+        Zero-order hold of the last frame (causal, the default), or linear interpolation between
+        the neighbouring frames (uses the next frame: not causal).
     span : {"common", "log"}
         Grid from the latest first frame to the earliest last frame of the chosen signals
         (default; no leading/trailing NaN), or over the whole log (channels are invalid outside
