@@ -35,8 +35,9 @@ SOURCES = ["FAST.A", "FAST.B", "SLOW.C", "SLOW.D"]
 class _Lib:
     """The compiled front end, through ctypes."""
 
-    def __init__(self, tmp: Path, db, sources, rate=50.0, name="fdk_t"):
-        h, c = emit_can_frontend(db, sources, rate, [(k, 1.0, 0.0) for k in range(len(sources))], name=name)
+    def __init__(self, tmp: Path, db, sources, rate=50.0, name="fdk_t", method="previous"):
+        h, c = emit_can_frontend(db, sources, rate, [(k, 1.0, 0.0) for k in range(len(sources))], name=name,
+                                 method=method)
         (tmp / f"{name}.h").write_text(h)
         (tmp / f"{name}.c").write_text(c)
         self.lib = ctypes.CDLL(str(compile_shared([tmp / f"{name}.c"], tmp / f"lib{name}.so")))
@@ -138,13 +139,14 @@ def _frames(rng):
     return db, out
 
 
-def test_gridder_equals_the_follow_mode_gridder(tmp_path):
+@pytest.mark.parametrize("method", ["previous", "linear"])
+def test_gridder_equals_the_follow_mode_gridder(tmp_path, method):
     from fdikit.errors import DataError
     from fdikit.io.stream import FrameGridder
 
     db, frames = _frames(np.random.default_rng(2))
-    lib = _Lib(tmp_path, db, SOURCES, rate=50.0)
-    py = FrameGridder(db, SOURCES, 50.0)
+    lib = _Lib(tmp_path, db, SOURCES, rate=50.0, method=method)
+    py = FrameGridder(db, SOURCES, 50.0, method=method)
     got, ref, refused = [], [], 0
     for t, fid, data in frames:
         c = lib.push(t, fid, data)

@@ -6,9 +6,11 @@ lines steps the generated monitor on the samples ``fdikit monitor --follow`` ste
 
 The gridder's rule, as the Python one: time 0 is the first frame of any message; the grid starts at
 the latest first frame of the signals and runs at ``[log].rate``; a sample is released once every
-signal has a frame after it; values are linear interpolations between the neighbouring frames; a
-sample whose bracket spans more than ``max_gap`` source periods (the median of the last 256
-intervals) is invalid (NaN), and a run of such samples is held back and dropped when at one of
+signal has a frame after it; values are the last frame at or before the grid time (the causal
+hold, the default; a frame at most :data:`fdikit.io.can.HOLD_TOL` after it counts as at it) and
+invalid (NaN) when that frame is older than ``max_gap`` source periods (the median of the last 256
+intervals), or, with ``method="linear"``, linear interpolations between the neighbouring frames,
+invalid when the bracket spans more than ``max_gap`` source periods; a run of such samples is held back and dropped when at one of
 them every signal is in a gap; frames going back in time, or more than ``max_jump`` s after the
 previous one, are refused. The config's channel scale and offset then map the signals to the
 monitor's inputs. Only ``<math.h>`` and ``<stdint.h>``; every buffer sized at generation time (a
@@ -60,9 +62,23 @@ def _signal_code(k: int, msg: Any, sig: Any) -> str:
     return "\n".join(lines)
 
 
+#: The causal hold's value (FrameGridder._value, method "previous"): the last frame, NaN and a gap
+#: when it is older than max_gap median periods (the median only when the age could exceed it: the
+#: median is at least the smallest interval).
+_HOLD_VALUE = """    if (gt - t[i] > 0.0) {
+        for (mn = HUGE_VAL, i0 = 0; i0 < g->niv[s]; ++i0) if (g->iv[s][i0] < mn) mn = g->iv[s][i0];
+        if (gt - t[i] > MAX_GAP * mn) {
+            lim = MAX_GAP * fdk_period(g, s);
+            if (gt - t[i] > lim) { *gap = 1; return NAN; }
+        }
+    }
+    return isfinite(v[i]) ? v[i] : NAN;
+"""
+
+
 def emit_can_frontend(dbc: Any, sources: list[str], rate: float, channels: list[tuple[int, float, float]], *,
                       name: str = "fdk_can", max_gap: float = 3.0,
-                      max_jump: float = 3600.0) -> tuple[str, str]:
+                      max_jump: float = 3600.0, method: str = "previous") -> tuple[str, str]:
     """The C99 header and source of a CAN decoder and gridder.
 
     Parameters
@@ -79,13 +95,19 @@ def emit_can_frontend(dbc: Any, sources: list[str], rate: float, channels: list[
         C prefix.
     max_gap, max_jump : float
         As :class:`~fdikit.io.stream.FrameGridder`.
+    method : {"previous", "linear"}
+        The gridding rule, as :class:`~fdikit.io.stream.FrameGridder` (causal hold by default).
 
     Returns
     -------
     (str, str)
         ``<name>.h`` and ``<name>.c``.
     """
-    from ..io.can import _load_dbc, _resolve
+    from ..io.can import HOLD_TOL, _load_dbc, _resolve
+
+    if method not in ("previous", "linear"):
+        raise DataError(f"unknown resampling method {method!r}; use 'previous' or 'linear'")
+    hold = method == "previous"
 
     if not name.isidentifier():
         raise DataError(f"the C name prefix must be an identifier, got {name!r}")
@@ -165,6 +187,7 @@ int {name}_flush({name}_grid *g, {name}_sample *out, int cap);
 #define RATE {lit(rate)}
 #define MAX_GAP {lit(max_gap)}
 #define MAX_JUMP {lit(max_jump)}
+#define HOLD_TOL {lit(HOLD_TOL if hold else 0.0)}
 
 void {name}_init({name}_grid *g)
 {{
@@ -203,15 +226,15 @@ static double fdk_period(const {name}_grid *g, int s)
     return (v[n / 2 - 1] + v[n / 2]) / 2.0;
 }}
 
-/* signal s at grid time gt (FrameGridder._value, method "linear"); *gap set for a gap */
+/* signal s at grid time gt (FrameGridder._value, method "{method}"); *gap set for a gap */
 static double fdk_value(const {name}_grid *g, int s, double gt, int *gap)
 {{
     const double *t = g->ft[s], *v = g->fv[s];
     int n = g->nf[s], i = 0, i0;
     double lim, t0, t1, v0, v1, span, w, mn;
     *gap = 0;
-    while (i + 1 < n && t[i + 1] <= gt) ++i;
-    i0 = i;
+    while (i + 1 < n && t[i + 1] <= gt + HOLD_TOL) ++i;
+{_HOLD_VALUE if hold else ""}    i0 = i;
     if (i + 1 >= n) {{
         if (n < 2) return isfinite(v[i]) ? v[i] : NAN;
         i0 = i - 1;
@@ -240,7 +263,7 @@ static int fdk_emit({name}_grid *g, int final, {name}_sample *out, int cap)
         gt = g->start + (double)g->k / RATE;
         for (s = 0; s < {S}; ++s) {{
             double last = g->ft[s][g->nf[s] - 1];
-            if (last < gt || (last == gt && !final)) return n;
+            if (last < gt || (last <= gt + HOLD_TOL && !final)) return n;
         }}
         n_gap = 0; bad = 0;
         for (s = 0; s < {S}; ++s) {{
@@ -379,7 +402,7 @@ def generate_can(config: str | Path, out_dir: str | Path, inputs: list[str], *, 
     chans = [(sources.index(by_name[n].source), float(by_name[n].scale), float(by_name[n].offset))
              for n in inputs]
     h, c = emit_can_frontend(config_path(cfg.path.parent, dbc, where=f"{cfg.path}: [log].dbc"), sources,
-                             float(rate), chans, name=name)
+                             float(rate), chans, name=name, method=str(cfg.log.get("resample", "previous")))
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     (out / f"{name}.h").write_text(h)
