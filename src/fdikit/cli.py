@@ -19,9 +19,13 @@ import argparse
 import importlib
 import os
 import sys
+from typing import TYPE_CHECKING
 
 from .base import interrupt  # first, and light: no NumPy before main() installs the signal policy
 from .errors import FdikitError
+
+if TYPE_CHECKING:
+    from .commands._output import print_json
 
 __all__ = ["build_parser", "main", "print_json"]
 

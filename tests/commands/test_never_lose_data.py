@@ -208,7 +208,7 @@ def test_a_stopped_batch_run_exits_cleanly_and_leaves_no_stats(setup, tmp_path, 
                 time.sleep(0.01)
         os.write(fd, (setup / "long.csv").read_bytes()[:32768])   # fits the pipe: never blocks
         p.send_signal(sig)
-        out, err = p.communicate(timeout=120)
+        err = p.communicate(timeout=120)[1]
     finally:
         if fd is not None:
             os.close(fd)
@@ -250,13 +250,14 @@ def test_ctrl_c_during_the_first_imports_exits_130_in_one_line(setup, delay):
     first = p.stderr.readline()
     time.sleep(delay)
     p.send_signal(signal.SIGINT)
-    out, err = p.communicate(timeout=120)
+    err = p.communicate(timeout=120)[1]
     assert first == "installed, numpy imported: False\n", first + err
     assert p.returncode == 130 and err == "fdikit: stopped (Ctrl-C)\n", err
 
 
 def test_fdikit_cli_imports_no_numpy_before_main():
-    code = "import sys, fdikit.cli; print(sorted(m for m in ('numpy', 'scipy', 'pandas') if m in sys.modules))"
+    code = ("import sys, fdikit.cli; "
+            "print(sorted(m for m in ('numpy', 'scipy', 'pandas') if m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=ENV, timeout=120)
     assert out.stdout.strip() == "[]", out.stdout + out.stderr
 
