@@ -21,6 +21,7 @@ import os
 import sys
 from typing import TYPE_CHECKING
 
+from . import __version__
 from .base import interrupt  # first, and light: no NumPy before main() installs the signal policy
 from .errors import FdikitError
 
@@ -44,8 +45,6 @@ COMMAND_MODULES += ("codegen",)  # issue 29
 
 def build_parser() -> argparse.ArgumentParser:
     """The ``fdikit`` argument parser: one subcommand per module of :data:`COMMAND_MODULES`."""
-    from . import __version__
-
     parser = argparse.ArgumentParser(
         prog="fdikit",
         description="Model-based fault detection, isolation and reconstruction for vehicles. Run "
