@@ -258,3 +258,12 @@ def test_design_hash_follows_the_identify_logs_contents(tmp_path):
     assert h1 != h0
     cfg.write_text(cfg.read_text().replace('time = "stamp"', 'time = "t"'))   # how the logs are read
     assert design_hash(load_config(cfg)) != h1
+
+
+def test_follow_mode_honours_the_declared_format(tmp_path):
+    from fdikit.monitor.live import LiveMonitor
+
+    cfg = _monitor(tmp_path, 'format = "csv"\ndbc = "car.dbc"\nrate = 50', prefix="WHEELS.")
+    assert LiveMonitor(cfg).kind == "csv"      # a DBC named, but the lines are declared CSV
+    cfg = _monitor(tmp_path, 'format = "candump"\ndbc = "car.dbc"\nrate = 50', prefix="WHEELS.")
+    assert LiveMonitor(cfg).kind == "candump"
