@@ -107,7 +107,7 @@ def read_options(log: Mapping[str, Any], path: str | Path, base_dir: str | Path,
 
     Examples
     --------
-    >>> read_options({"time": "stamp"}, "drive.parquet", ".", signals=["v"])
+    >>> read_options({"format": "parquet", "time": "stamp"}, "drive.bin", ".", signals=["v"])
     ('parquet', {'format': 'parquet', 'signals': ['v'], 'rate': None, 'time': 'stamp'})
     """
     fmt = log_format(log, path)
