@@ -996,7 +996,7 @@ CONFIG_TABLE = [
         r"on_invalid must be 'hold' or 'raise'",
         (),
     ),
-    ("range_format", cfg_set("log", "format", '"xml"'), r"format must be 'auto', 'csv' or 'can'", ()),
+    ("range_format", cfg_set("log", "format", '"xml"'), r"\[log\].format must be one of .*'auto', 'csv', 'can'.*got 'xml'", ()),
     ("range_time_unit", cfg_set("log", "time_unit", '"minutes"'), r"time_unit must be one of", ()),
     ("range_scale_zero", cfg_set("channels.pos1", "scale", "0"), r"scale must be finite and non-zero", ()),
     ("range_scale_nan", cfg_set("channels.pos1", "scale", "nan"), r"scale must be finite", ()),
