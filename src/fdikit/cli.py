@@ -19,13 +19,24 @@ import argparse
 import importlib
 import os
 import sys
+from typing import TYPE_CHECKING
 
 from . import __version__
-from .base import interrupt
-from .commands._output import print_json
+from .base import interrupt  # first, and light: no NumPy before main() installs the signal policy
 from .errors import FdikitError
 
+if TYPE_CHECKING:
+    from .commands._output import print_json
+
 __all__ = ["build_parser", "main", "print_json"]
+
+
+def __getattr__(name: str):
+    if name == "print_json":   # re-exported, loaded on first use (it imports NumPy)
+        from .commands._output import print_json
+
+        return print_json
+    raise AttributeError(f"module 'fdikit.cli' has no attribute {name!r}")
 
 #: Modules under fdikit.commands that register subcommands, in help order.
 COMMAND_MODULES = ("demo", "reconstruct", "abs", "car", "monitor", "report", "fleet")
@@ -33,6 +44,7 @@ COMMAND_MODULES += ("codegen",)  # issue 29
 
 
 def build_parser() -> argparse.ArgumentParser:
+    """The ``fdikit`` argument parser: one subcommand per module of :data:`COMMAND_MODULES`."""
     parser = argparse.ArgumentParser(
         prog="fdikit",
         description="Model-based fault detection, isolation and reconstruction for vehicles. Run "
@@ -72,10 +84,12 @@ def _stopped(exc: BaseException) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run the ``fdikit`` command; returns its exit code (see the module docstring)."""
     interrupt.reset()
-    interrupt.install()
+    interrupt.install()   # before any heavy import: Ctrl-C in the first second exits 130 too
     try:
         parser = build_parser()
+        interrupt.check()   # a stop that an import swallowed
         args = parser.parse_args(argv)
         if not getattr(args, "func", None):
             parser.print_help()

@@ -11,6 +11,7 @@ merging two vehicles through ``--path-fields``, and a persistent bias reported "
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import json
 import os
@@ -188,14 +189,79 @@ def _stop_after(args, sig, wait_for, **kw):
 @pytest.mark.parametrize("sig, code, word",
                          [(signal.SIGINT, 130, "Ctrl-C"), (signal.SIGTERM, 143, "SIGTERM")])
 def test_a_stopped_batch_run_exits_cleanly_and_leaves_no_stats(setup, tmp_path, sig, code, word):
+    """The log comes through a FIFO that is half written when the signal is sent: the run is
+    certainly in progress (reading), on a fast machine as on a slow one."""
     stats = tmp_path / "st.parquet"
-    rc, _, err, _ = _stop_after(["monitor", setup / "long.csv", "--config", setup / "monitor.toml",
-                                 "--stats", stats], sig, 6.0)
-    if rc == 0:
-        pytest.skip("the run finished before the signal (a very fast machine)")
-    assert rc == code and f"stopped ({word})" in err, err
+    fifo = tmp_path / "long.csv"
+    os.mkfifo(fifo)
+    p = subprocess.Popen([sys.executable, "-m", "fdikit.cli", "monitor", str(fifo), "--config",
+                          str(setup / "monitor.toml"), "--stats", str(stats)], stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True, env=ENV)
+    fd = None
+    try:
+        deadline = time.monotonic() + 120
+        while fd is None:   # the open succeeds once the command opened the log for reading
+            try:
+                fd = os.open(fifo, os.O_WRONLY | os.O_NONBLOCK)
+            except OSError as exc:
+                if exc.errno != errno.ENXIO or p.poll() is not None or time.monotonic() > deadline:
+                    raise AssertionError(f"the command never opened its log: {p.communicate()}") from None
+                time.sleep(0.01)
+        with contextlib.suppress(BlockingIOError):   # a page of the log: fits any pipe, never blocks
+            os.write(fd, (setup / "long.csv").read_bytes()[:4096])
+        p.send_signal(sig)
+        err = p.communicate(timeout=120)[1]
+    finally:
+        if fd is not None:
+            os.close(fd)
+        if p.poll() is None:
+            p.kill()
+            p.communicate()
+    assert p.returncode == code and f"stopped ({word})" in err, err
     no_traceback(err)
     assert not stats.exists() and not [f for f in os.listdir(tmp_path) if "partial" in f]
+
+
+_EARLY = r"""
+import sys
+from fdikit.base import interrupt
+from fdikit.cli import main
+
+_install = interrupt.install
+
+
+def install():   # report when the policy is in place, and whether NumPy was imported before it
+    _install()
+    print(f"installed, numpy imported: {'numpy' in sys.modules}", file=sys.stderr, flush=True)
+
+
+interrupt.install = install
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+@pytest.mark.parametrize("delay", [0.0, 0.05, 0.2])
+def test_ctrl_c_during_the_first_imports_exits_130_in_one_line(setup, delay):
+    """Ctrl-C while ``fdikit`` still imports NumPy, SciPy, numba ...: the signal policy is installed
+    before any of them (``import fdikit.cli`` is light), so the stop is one line and 130. The child
+    is the console script's ``from fdikit.cli import main; sys.exit(main())``, telling when the
+    policy is installed; the signal follows ``delay`` s later."""
+    p = subprocess.Popen([sys.executable, "-c", _EARLY, "monitor", str(setup / "long.csv"), "--config",
+                          str(setup / "monitor.toml")], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                         text=True, env=ENV)
+    first = p.stderr.readline()
+    time.sleep(delay)
+    p.send_signal(signal.SIGINT)
+    err = p.communicate(timeout=120)[1]
+    assert first == "installed, numpy imported: False\n", first + err
+    assert p.returncode == 130 and err == "fdikit: stopped (Ctrl-C)\n", err
+
+
+def test_fdikit_cli_imports_no_numpy_before_main():
+    code = ("import sys, fdikit.cli; "
+            "print(sorted(m for m in ('numpy', 'scipy', 'pandas') if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=ENV, timeout=120)
+    assert out.stdout.strip() == "[]", out.stdout + out.stderr
 
 
 def test_follow_mode_stops_on_ctrl_c_with_its_summary(setup):
@@ -347,3 +413,35 @@ def test_a_binary_file_named_csv_says_what_it_is(setup, tmp_path, kind, word):
         pd.read_csv(setup / "log.csv").to_parquet(p)
     with pytest.raises(DataError, match=word):
         read_csv(p, time="time")
+
+
+@pytest.mark.parametrize("cut", ["header", "half", "flipped"])
+def test_a_corrupt_mdf4_is_one_clear_error_and_nothing_else(setup, tmp_path, cut):
+    """asammdf's half-built MDF object used to print "Exception ignored in MDF4.__del__" and its
+    traceback after fdikit's clear error (a 100-byte MDF4)."""
+    import numpy as np
+    from asammdf import MDF, Signal
+
+    t = np.arange(200) * 0.01
+    m = MDF(version="4.10")
+    m.append([Signal(np.ones(200), t, name=n) for n in ("F", "P1", "P2")])
+    m.save(tmp_path / "good.mf4", overwrite=True)
+    m.close()
+    data = bytearray((tmp_path / "good.mf4").read_bytes())
+    if cut == "header":
+        data = data[:100]
+    elif cut == "half":
+        data = data[: len(data) // 2]
+    else:
+        for i in range(200, min(len(data), 2000), 7):
+            data[i] ^= 0xFF
+    bad = tmp_path / "bad.mf4"
+    bad.write_bytes(bytes(data))
+    cfg = tmp_path / "m.toml"
+    cfg.write_text((setup / "monitor.toml").read_text().replace('format = "csv"', 'format = "auto"')
+                   .replace('artifacts = "designs"', f'artifacts = "{(setup / "designs").as_posix()}"'))
+    out = run_cmd("monitor", bad, "--config", cfg)
+    assert out.returncode == 2, out.stderr
+    assert out.stderr.startswith("fdikit: error: MDF file 'bad.mf4' is not a readable MDF file"), out.stderr
+    assert out.stderr.count("\n") == 1, out.stderr
+    no_traceback(out.stderr)

@@ -205,7 +205,7 @@ def write_example_logs(
 
     cfg = load_config(config)
     recipe = cfg.design.get("recipe")
-    if cfg.log.get("dbc") or cfg.log.get("format") == "can":
+    if cfg.log.get("dbc") or cfg.log.get("format") in ("can", "blf", "asc", "candump"):
         raise DataError(
             f"{cfg.path}: this monitor reads a CAN log ([log].dbc); there is nothing to simulate: run "
             "it on the recorded log (for the RAV4: ../shared/data/rav4-highway/drive.blf)"

@@ -77,11 +77,12 @@ def process_log(task: LogTask) -> dict:
     events: list[dict] = []
     stats_table = None
     try:
-        from ..io.formats import detect_format
         from ..monitor.config import map_channels, read_log
+        from ..monitor.logs import log_format
 
         cfg, mon = _monitor_for(task.config)
-        row["format"] = detect_format(task.path)
+        fmt = log_format(cfg.log, task.path)   # the declared [log].format, as read_log reads it
+        row["format"] = "csv" if fmt == "recording" else fmt
         t0 = time.perf_counter()
         log = read_log(cfg, task.path)
         t1 = time.perf_counter()

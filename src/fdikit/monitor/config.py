@@ -14,8 +14,9 @@ Schema (every key is checked: an unknown key or a wrong type is an error naming 
     max_abs = 1e12                # a value of larger magnitude is invalid (a 1e300 spike)
 
     [log]                         # how `fdikit monitor LOG` reads a recorded log
-    format = "auto"               # "auto" (by extension), "csv" or "can"
-    time = "t"                    # CSV time column
+    format = "auto"               # "auto" (by extension), "csv", "can" (BLF, ASC or candump, by
+                                  # content) or a reader's name ("candump", "parquet", "mdf", ...)
+    time = "t"                    # time column of a table log (CSV, Parquet, topic folder)
     dbc = "car.dbc"               # CAN logs: the DBC, relative to this file
     rate = 100.0                  # Hz: resample onto this grid (CAN logs need it)
     time_unit = "auto"            # unit of the time column: "auto", "s", "ms", "us" or "ns";
@@ -85,6 +86,7 @@ from ..base.paths import config_path
 from ..errors import DataError
 from ..signals import Signals
 from .core import Decision, Monitor
+from .logs import check_log_table
 
 __all__ = ["TIME_UNITS", "ChannelMap", "MonitorConfig", "build_monitor", "design_hash", "load_config",
            "map_channels", "read_log", "run_design"]
@@ -289,8 +291,7 @@ def load_config(path: str | Path) -> MonitorConfig:
     if dec is not None and "channels" in dec:
         _check_decision(dec)
     log = dict(raw.get("log", {}))
-    if log.get("format", "auto") not in ("auto", "csv", "can"):
-        raise DataError(f"config: [log].format must be 'auto', 'csv' or 'can', got {log['format']!r}")
+    check_log_table(log)
     if "rate" in log and not (np.isfinite(log["rate"]) and log["rate"] > 0):
         raise DataError(f"config: [log].rate must be a positive, finite number of samples per second (Hz), "
                         f"got {log['rate']!r}")
@@ -301,9 +302,13 @@ def load_config(path: str | Path) -> MonitorConfig:
     if log.get("time_unit", "auto") not in TIME_UNITS:
         raise DataError(f"config: [log].time_unit must be one of {list(TIME_UNITS)}, got "
                         f"{log['time_unit']!r}")
-    return MonitorConfig(path=path, name=mon.get("name", path.stem),
-                         artifacts=config_path(path.parent, mon.get("artifacts", "designs"),
-                                                    where=f"{path}: [monitor].artifacts"),
+    artifacts = config_path(path.parent, mon.get("artifacts", "designs"),
+                            where=f"{path}: [monitor].artifacts")
+    if artifacts.exists() and not artifacts.is_dir():
+        raise DataError(f"{path}: [monitor].artifacts = {mon.get('artifacts', 'designs')!r} is a file "
+                        f"({str(artifacts)!r}); the design artifacts need a folder: name a folder (it is "
+                        "created by fdikit design) or move the file away")
+    return MonitorConfig(path=path, name=mon.get("name", path.stem), artifacts=artifacts,
                          on_invalid=on_invalid, channels=chans, generators=stages["generators"],
                          processors=stages["processors"], log=log, design=dict(raw.get("design", {})),
                          decision=dec, runtime=runtime)
@@ -353,7 +358,10 @@ def _check_decision(dec: dict) -> None:
 def design_hash(cfg: MonitorConfig) -> str:
     """The hash stamped on every artifact by :func:`run_design`: SHA-256 of the ``[design]``
     section (recipe, parameters, declarative tables; canonical JSON) and of the contents of the
-    files it names (``[design.plant].file``, ``[design.noise].nominal_log``).
+    files it names (``[design.plant].file``, ``[design.noise].nominal_log``, every log of
+    ``[design.plant].identify.logs``; a folder log by the contents of its files). A design read
+    from logs also hashes the ``[log]`` table that says how they are read (format, time column,
+    time unit, rate, and the DBC's contents).
 
     Examples
     --------
@@ -368,20 +376,45 @@ def design_hash(cfg: MonitorConfig) -> str:
     """
     text = json.dumps(cfg.design, sort_keys=True, default=str, separators=(",", ":"))
     h = hashlib.sha256(text.encode())
-    refs = [("plant", "file"), ("noise", "nominal_log")]
-    for sec, key in refs:
+    refs: list[tuple[str, Any]] = []
+    for sec, key in (("plant", "file"), ("noise", "nominal_log")):
         tab = cfg.design.get(sec)
         if isinstance(tab, dict) and isinstance(tab.get(key), str):
-            try:
-                f = config_path(cfg.path.parent, tab[key], where=f"[design.{sec}].{key}")
-            except DataError:
-                f = cfg.path.parent / tab[key]
-            h.update(f"\0{sec}.{key}\0".encode())
-            try:
-                h.update(hashlib.sha256(f.read_bytes()).digest())
-            except OSError:
-                h.update(b"missing")
+            refs.append((f"{sec}.{key}", tab[key]))
+    plant = cfg.design.get("plant")
+    ident = plant.get("identify") if isinstance(plant, dict) else None
+    logs = ident.get("logs") if isinstance(ident, dict) else None
+    for k, f in enumerate([logs] if isinstance(logs, str) else logs if isinstance(logs, list) else []):
+        if isinstance(f, str):
+            refs.append((f"plant.identify.logs[{k}]", f))
+    if any(r[0] != "plant.file" for r in refs):   # logs are read as [log] says
+        log = {k: cfg.log[k] for k in ("format", "time", "time_unit", "rate", "dbc", "resample") if k in cfg.log}
+        if log:
+            h.update(b"\0[log]\0" + json.dumps(log, sort_keys=True, separators=(",", ":")).encode())
+        if isinstance(log.get("dbc"), str):
+            refs.append(("log.dbc", log["dbc"]))
+    for name, ref in refs:
+        try:
+            f = config_path(cfg.path.parent, ref, where=f"[design.{name}]")
+        except DataError:
+            f = cfg.path.parent / ref
+        h.update(f"\0{name}\0".encode())
+        h.update(_file_digest(f))
     return h.hexdigest()
+
+
+def _file_digest(f: Path) -> bytes:
+    """SHA-256 of a file's contents; a folder: of its files' relative names and contents, sorted."""
+    try:
+        if f.is_dir():
+            d = hashlib.sha256()
+            for g in sorted(x for x in f.rglob("*") if x.is_file()):
+                name = g.relative_to(f).as_posix().encode()
+                d.update(name + b"\0" + hashlib.sha256(g.read_bytes()).digest())
+            return d.digest()
+        return hashlib.sha256(f.read_bytes()).digest()
+    except OSError:
+        return b"missing"
 
 
 def _import_recipe(cfg: MonitorConfig, recipe: str):
@@ -403,7 +436,7 @@ def run_design(cfg: MonitorConfig) -> dict[str, Path]:
     if not recipe and "plant" in cfg.design:
         from .declarative import design_monitor
 
-        designs = design_monitor(cfg.design, cfg.path.parent)
+        designs = design_monitor(cfg.design, cfg.path.parent, log=cfg.log)
         report = designs.pop("_report")
     else:
         if not recipe:
@@ -541,28 +574,19 @@ def read_log(cfg: MonitorConfig, path: str | Path) -> Signals:
 
     A ``.csv`` file (or ``format = "csv"``) is a table of signals with the time column
     ``[log].time``; anything else goes to :func:`fdikit.io.read_log` (BLF, ASC, candump, MDF4,
-    Parquet), with ``[log].dbc`` for raw CAN frames.
+    Parquet, ...), with ``[log].dbc`` for raw CAN frames, ``[log].time`` for every table format and
+    the declared ``[log].format`` whatever the file is called (:mod:`fdikit.monitor.logs`).
     """
     from .. import io
+    from .logs import read_options
 
-    path = Path(path)
-    fmt = cfg.log.get("format", "auto")
     sources = list(dict.fromkeys(c.source for c in cfg.channels))
-    kw: dict[str, Any] = {}
-    if "time_unit" in cfg.log:
-        kw["time_unit"] = cfg.time_unit
-    if "resample" in cfg.log:
-        kw["method"] = cfg.log["resample"]
-    if fmt == "csv" or (fmt == "auto" and path.suffix.lower() == ".csv"):
-        _supported(io.read_csv, list(kw), "CSV reader (fdikit.io.read_csv)")
-        return io.read_csv(path, time=cfg.log.get("time", "t"), columns=sources, rate=cfg.log.get("rate"),
-                           **kw)
-    dbc = cfg.log.get("dbc")
-    if fmt == "can" and not dbc:
-        raise DataError(f"{cfg.path}: a CAN log needs [log].dbc")
-    _supported(io.read_log, list(kw), "log reader (fdikit.io.read_log)")
-    dbc_path = config_path(cfg.path.parent, dbc, where=f"{cfg.path}: [log].dbc") if dbc else None
-    return io.read_log(path, dbc_path, sources, cfg.log.get("rate"), **kw)
+    fmt, kw = read_options(cfg.log, path, cfg.path.parent, signals=sources, where=str(cfg.path))
+    if fmt == "recording":
+        _supported(io.read_csv, [k for k in kw if k == "time_unit"], "CSV reader (fdikit.io.read_csv)")
+        return io.read_csv(path, **kw)
+    _supported(io.read_log, [k for k in kw if k == "time_unit"], "log reader (fdikit.io.read_log)")
+    return io.read_log(path, **kw)
 
 
 def map_channels(cfg: MonitorConfig, log: Signals) -> Signals:

@@ -196,9 +196,12 @@ IDENTIFY_KEYS: dict[str, type | tuple[type, ...]] = {
 
 
 def identification_from_config(spec: Mapping[str, Any], base_dir: str | Path = ".", *,
-                               where: str = "design.plant.identify"):
+                               where: str = "design.plant.identify", log: Mapping[str, Any] | None = None):
     """The :class:`~fdikit.estimate.Identification` of an ``identify = {...}`` table: the logs read
     (paths relative to the config, ``~`` and ``$VARS`` expanded) and pooled as records.
+
+    The logs are read as the config's ``log`` table (``[log]``: format, time column, time unit,
+    DBC; :mod:`fdikit.monitor.logs`) says; the table's own ``time`` overrides ``[log].time``.
 
     Examples
     --------
@@ -208,7 +211,6 @@ def identification_from_config(spec: Mapping[str, Any], base_dir: str | Path = "
     fdikit.errors.DataError: config: [design.plant.identify].logs must name at least one nominal log
     """
     from ..estimate import identify
-    from ..io import read_log
 
     spec = _check(spec, IDENTIFY_KEYS, where)
     logs = [spec["logs"]] if isinstance(spec.get("logs"), str) else list(spec.get("logs") or [])
@@ -229,12 +231,12 @@ def identification_from_config(spec: Mapping[str, Any], base_dir: str | Path = "
         path = config_path(base_dir, f, where=f"[{where}].logs[{k}]")
         if not Path(path).exists():
             raise DataError(f"config: [{where}].logs[{k}] {str(path)!r} does not exist")
-        log = read_log(path, **({"time": spec["time"]} if "time" in spec else {}))
-        missing = [c for c in [*spec["inputs"], *spec["outputs"]] if c not in log.names]
+        rec = _read_design_log(path, log, base_dir, [*spec["inputs"], *spec["outputs"]], spec.get("time"))
+        missing = [c for c in [*spec["inputs"], *spec["outputs"]] if c not in rec.names]
         if missing:
             raise DataError(f"config: [{where}].logs[{k}] {str(path)!r} has no channels {missing}; its "
-                            f"channels: {log.names}")
-        records.append(log)
+                            f"channels: {rec.names}")
+        records.append(rec)
     kw = {k: spec[k] for k in ("criterion", "block_rows", "validation") if k in spec}
     try:
         return identify(records, spec["inputs"], spec["outputs"], method=method,
@@ -244,7 +246,7 @@ def identification_from_config(spec: Mapping[str, Any], base_dir: str | Path = "
 
 
 def plant_from_config(design: Mapping[str, Any], base_dir: str | Path = ".", *,
-                      where: str = "design") -> LinearFaultModel:
+                      where: str = "design", log: Mapping[str, Any] | None = None) -> LinearFaultModel:
     """The plant of a declarative ``[design]`` table, with its faults and disturbances declared.
 
     Parameters
@@ -253,6 +255,10 @@ def plant_from_config(design: Mapping[str, Any], base_dir: str | Path = ".", *,
         The ``[design]`` table (``plant``, ``faults``, ``disturbances``; see the module docstring).
     base_dir : path
         Where relative file names and modules are looked up (the config's folder).
+    where : str
+        The table's name in messages.
+    log : mapping, optional
+        The config's ``[log]`` table: how identification logs are read.
 
     Returns
     -------
@@ -268,10 +274,21 @@ def plant_from_config(design: Mapping[str, Any], base_dir: str | Path = ".", *,
     >>> m.fault_names, m.dt is None
     (['actuator:u', 'sensor:y'], True)
     """
-    return _plant(design, base_dir, where)[0]
+    return _plant(design, base_dir, where, log)[0]
 
 
-def _plant(design: Mapping[str, Any], base_dir: str | Path, where: str):
+def _read_design_log(path, log: Mapping[str, Any] | None, base_dir, signals, time: str | None):
+    """A nominal log of the design, read as the config's ``[log]`` table says (every column of a
+    table; ``signals`` from a CAN or MDF log), ``time`` overriding ``[log].time``."""
+    from ..io import read_log
+    from .logs import read_options
+
+    _, kw = read_options(log or {}, path, base_dir, signals=signals, time=time,
+                         tables_as_recordings=False, where="config")
+    return read_log(path, **kw)
+
+
+def _plant(design: Mapping[str, Any], base_dir: str | Path, where: str, log: Mapping[str, Any] | None = None):
     """The plant of :func:`plant_from_config` and its Identification (None unless identified)."""
     if "plant" not in design:
         raise DataError(f"config: [{where}.plant] is missing (state-space matrices, a file, an object or "
@@ -288,7 +305,7 @@ def _plant(design: Mapping[str, Any], base_dir: str | Path, where: str):
         if extra:
             raise DataError(f"config: [{where}.plant] names and sample time come from the identification; "
                             f"remove {extra}")
-        ident = identification_from_config(spec["identify"], base, where=f"{where}.plant.identify")
+        ident = identification_from_config(spec["identify"], base, where=f"{where}.plant.identify", log=log)
         model = ident.model
     elif "object" in spec:
         model = _from_object(import_object(spec["object"], base, where=f"[{where}.plant].object"), spec,
@@ -409,7 +426,8 @@ def estimate_noise(signals: Signals, channels: Sequence[str] | None = None) -> d
 
 
 def noise_from_config(design: Mapping[str, Any], model: LinearFaultModel, base_dir: str | Path = ".", *,
-                      where: str = "design", identification: Any = None) -> dict[str, Any]:
+                      where: str = "design", identification: Any = None,
+                      log: Mapping[str, Any] | None = None) -> dict[str, Any]:
     """``{"measurement": {output: variance}, "process": (n,) variances}`` of a declarative config.
 
     Measurement variances are given per output (a number applies to every output) or estimated from
@@ -431,15 +449,13 @@ def noise_from_config(design: Mapping[str, Any], model: LinearFaultModel, base_d
     if meas is not None and "nominal_log" in spec:
         raise DataError(f"config: [{where}.noise]: give measurement or nominal_log, not both")
     if "nominal_log" in spec:
-        from ..io import read_log
-
         path = config_path(base_dir, spec["nominal_log"], where=f"[{where}.noise].nominal_log")
-        log = read_log(path, **({"time": spec["time"]} if "time" in spec else {}))
-        missing = [y for y in model.outputs if y not in log.names]
+        rec = _read_design_log(path, log, base_dir, list(model.outputs), spec.get("time"))
+        missing = [y for y in model.outputs if y not in rec.names]
         if missing:
             raise DataError(f"config: [{where}.noise].nominal_log {str(path)!r} has no column for the "
-                            f"outputs {missing}; its channels: {log.names}")
-        var = estimate_noise(log, model.outputs)
+                            f"outputs {missing}; its channels: {rec.names}")
+        var = estimate_noise(rec, model.outputs)
     elif isinstance(meas, int | float):
         var = {y: float(meas) for y in model.outputs}
     else:
@@ -548,7 +564,8 @@ def sample_time(design: Mapping[str, Any], model: LinearFaultModel, *, where: st
 
 
 def design_monitor(design: Mapping[str, Any], base_dir: str | Path = ".", *, where: str = "design",
-                   nominal_hours: float | None = None, seed: int = 0) -> dict[str, Any]:
+                   nominal_hours: float | None = None, seed: int = 0,
+                   log: Mapping[str, Any] | None = None) -> dict[str, Any]:
     """Design the whole monitor of a declarative ``[design]`` table: residual bank, features,
     thresholds for the false-alarm target, and isolation by the fault signature.
 
@@ -587,8 +604,8 @@ def design_monitor(design: Mapping[str, Any], base_dir: str | Path = ".", *, whe
     from ..residuals import FaultDetectionFilter, FilterDesign, design_residual_bank
     from ..sim import simulate
 
-    model, ident = _plant(design, base_dir, where)
-    noise = noise_from_config(design, model, base_dir, where=where, identification=ident)
+    model, ident = _plant(design, base_dir, where, log)
+    noise = noise_from_config(design, model, base_dir, where=where, identification=ident, log=log)
     alarm = alarm_from_config(design, where=where)
     dt = sample_time(design, model, where=where)
     structure = design.get("structure") or None

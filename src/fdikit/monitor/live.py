@@ -220,8 +220,9 @@ class LiveMonitor:
     config : MonitorConfig or path-like
         The monitor configuration (its artifacts made with ``fdikit design``).
     input : {"csv", "candump"}, optional
-        The line format; default candump when the config names a DBC file (``[log].dbc``), else
-        CSV.
+        The line format; default the config's ``[log].format`` (``"can"`` or ``"candump"``:
+        candump, ``"csv"``: CSV), else candump when the config names a DBC file (``[log].dbc``),
+        else CSV.
     monitor : Monitor, optional
         The monitor to step (default: built from the config's artifacts); it is reset to one run.
 
@@ -261,7 +262,9 @@ class LiveMonitor:
         mon = build_monitor(cfg) if monitor is None else monitor
         mon.reset(1)
         self.cfg, self.monitor = cfg, mon
-        self.kind = input or ("candump" if cfg.log.get("dbc") else "csv")
+        fmt = cfg.log.get("format", "auto")   # a declared format decides; else a DBC means candump
+        self.kind = input or ("candump" if fmt in ("can", "candump") else "csv" if fmt == "csv"
+                              else "candump" if cfg.log.get("dbc") else "csv")
         if self.kind not in ("csv", "candump"):
             raise DataError(f"unknown live input {self.kind!r}; use 'csv' or 'candump'")
         self.gridder = None

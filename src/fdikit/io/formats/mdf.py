@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import difflib
+import gc
 import os
+import sys
 import tempfile
 from pathlib import Path
 
@@ -13,6 +15,30 @@ from ...errors import DataError
 from ..can import _load_dbc, _resolve
 from .checks import _check_file, _check_signal_list
 from .grid import LoadedSignals, SourceReport, series_to_grid
+
+
+def _quiet_half_built(hook):
+    """``sys.unraisablehook`` that drops the error of an asammdf destructor (``MDF4.__del__`` of an
+    object whose constructor failed on a corrupt file has no ``_file`` to close and prints
+    "Exception ignored ..." after our clear error); everything else goes to ``hook``."""
+
+    def quiet(unraisable):
+        obj = unraisable.object
+        if str(getattr(obj, "__module__", "") or "").startswith("asammdf") and \
+                getattr(obj, "__name__", "") == "__del__":
+            return
+        hook(unraisable)
+
+    return quiet
+
+
+def _drop_frames(exc: BaseException) -> None:
+    """Release the frames (and the half-built objects in them) that an exception chain holds."""
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        seen.add(id(exc))
+        exc.__traceback__ = None
+        exc = exc.__context__ or exc.__cause__
 
 
 def _open_mdf(p: Path, where: str):
@@ -31,15 +57,21 @@ def _open_mdf(p: Path, where: str):
     h = _Collect()
     log = logging.getLogger("asammdf")
     log.addHandler(h)
+    hook = sys.unraisablehook
+    sys.unraisablehook = _quiet_half_built(hook)
     try:
         mdf = MDF(str(p))
         # touch every group's record layout now, so that a corrupt block fails here
         for i, g in enumerate(mdf.groups):
             _ = g.channel_group.cycles_nr, [c.name for c in g.channels], i
     except Exception as exc:  # asammdf raises many types for a corrupt or truncated file
-        raise DataError(f"{where} is not a readable MDF file (truncated or corrupt?): "
-                        f"{type(exc).__name__}: {str(exc)[:200]}") from None
+        msg = f"{type(exc).__name__}: {str(exc)[:200]}"
+        _drop_frames(exc)   # the half-built MDF object dies now, while its noise is filtered
+        del exc
+        gc.collect()
+        raise DataError(f"{where} is not a readable MDF file (truncated or corrupt?): {msg}") from None
     finally:
+        sys.unraisablehook = hook
         log.removeHandler(h)
     if h.records:
         mdf.close()

@@ -45,13 +45,23 @@ _MAGIC = ((b"LOGG", "blf"), (b"PAR1", "parquet"), (b"MDF ", "mdf"), (b"ULog\x01\
 _CANDUMP_LINE = re.compile(r"^\(\d+(\.\d+)?\)\s+\S+\s+[0-9A-Fa-f]+#")
 
 
-def detect_format(path) -> str:
+def detect_format(path, *, among: Sequence[str] | None = None) -> str:
     """The format of a log file or folder, by suffix, else by its first bytes.
 
     A folder is a ROS 2 bag when it holds ``metadata.yaml``, else a folder of per-topic CSV files
     (``"topics"``) when it holds ``*.csv`` files. A file is recognised by its suffix, else by its
     magic bytes: BLF ``LOGG``, Parquet ``PAR1``, MDF ``MDF``, ULog ``ULog\\x01\\x12\\x35``, ROS 1
     bag ``#ROSBAG V2.0``, MCAP ``\\x89MCAP0\\r\\n``, else the first text line (ASC, candump).
+
+    Parameters
+    ----------
+    path : path-like
+        The log file or folder.
+    among : sequence of str, optional
+        The formats the caller declared (e.g. the CAN frame logs ``("blf", "asc", "candump")`` of
+        a config's ``[log] format = "can"``): the suffix counts only when it names one of them,
+        else the content decides (a candump log named ``.csv``), and a file of none of them is
+        refused.
 
     Returns
     -------
@@ -61,7 +71,8 @@ def detect_format(path) -> str:
     Raises
     ------
     DataError
-        Missing file, or neither the suffix nor the content is a known format.
+        Missing file, or neither the suffix nor the content is a known format (or one of
+        ``among``).
 
     Examples
     --------
@@ -78,20 +89,35 @@ def detect_format(path) -> str:
                         "metadata.yaml) nor a folder of per-topic CSV files (no *.csv)")
     p = _check_file(path, "log")
     suffix = p.suffix.lower()
+    if among is not None:
+        unknown = [f for f in among if f not in FORMATS]
+        if unknown:
+            raise DataError(f"unknown log format(s) {unknown}; known formats: {sorted(FORMATS)}")
     for fmt, sufs in FORMATS.items():
-        if suffix in sufs:
+        if suffix in sufs and (among is None or fmt in among):
             return fmt
     with open(p, "rb") as fh:
         head = fh.read(4096)
+    found = None
     for magic, fmt in _MAGIC:
         if head.startswith(magic):
-            return fmt
-    text = head.decode("utf-8", "replace").lstrip()
-    first = text.splitlines()[0] if text else ""
-    if re.match(r"(date|base|begin\s+triggerblock)\s", first, re.IGNORECASE):
-        return "asc"
-    if _CANDUMP_LINE.match(first):
-        return "candump"
+            found = fmt
+            break
+    if found is None:
+        text = head.decode("utf-8", "replace").lstrip()
+        first = text.splitlines()[0] if text else ""
+        if re.match(r"(date|base|begin\s+triggerblock)\s", first, re.IGNORECASE):
+            found = "asc"
+        elif _CANDUMP_LINE.match(first):
+            found = "candump"
+    if among is not None:
+        if found in among:
+            return found
+        raise DataError(f"log {p.name!r} was declared one of {list(among)}, but its first bytes "
+                        f"{head[:24]!r} are none of them"
+                        + (f" (it looks like a {found} log)" if found else ""))
+    if found is not None:
+        return found
     raise DataError(f"unknown log format for {p.name!r}: the suffix {suffix!r} is none of "
                     f"{sorted(s for v in FORMATS.values() for s in v)} and the first bytes "
                     f"{head[:16]!r} are not BLF, Parquet, MDF, ULog, ROS bag, MCAP, ASC or candump")

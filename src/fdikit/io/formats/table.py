@@ -22,7 +22,8 @@ def _pick_time(columns: Sequence[str], time: str | None, where: str) -> str:
     for c in _TIME_NAMES:
         if c in columns:
             return c
-    raise DataError(f"{where} has no time column (looked for {list(_TIME_NAMES)}; pass time=); "
+    raise DataError(f"{where} has no time column (looked for {list(_TIME_NAMES)}; pass time=, "
+                    "or set [log].time in a monitor config); "
                     f"columns: {list(columns)}")
 
 
