@@ -35,9 +35,11 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
+from numba import njit
 
 from ..base.stage import ResidualProcessor
 from ..errors import DataError
+from ..signals import Signals
 
 __all__ = ["FAULT_TYPES", "FaultTypeClassifier"]
 
@@ -46,28 +48,111 @@ FAULT_TYPES = ("bias", "drift", "gain", "stuck", "intermittent", "spike")
 _BIAS, _DRIFT, _GAIN, _STUCK, _INTER, _SPIKE = range(6)
 
 
-def _glr_scores(r: np.ndarray, x: np.ndarray, sigma: float, min_len: int) -> np.ndarray:
-    """``[S_b, S_d, S_g]`` of residual r (n,) and signal x (n,), each maximised over the change
-    point j (segments of at least ``min_len`` samples ending at the newest sample)."""
+@njit(cache=True)
+def _classify(r, x, st, sigma, min_len, prefer, release, burst_gap, spike_max):
+    """Type and confidence of one member's fault from its window since the onset, oldest first:
+    residual r (n,), signal x (n,), normalised residual st (n,) (see the module docstring)."""
     n = r.size
-    rr, xr = r[::-1], x[::-1]
-    L = np.arange(1, n + 1, dtype=float)              # samples since the candidate change point
-    sr = np.cumsum(rr)                                # sum r over the last L samples
-    # sum tau r with tau = L - (age) : tau of the newest sample is L, of the oldest 1
-    sar = np.cumsum(np.arange(n) * rr)                # sum age r (age 0 = newest)
-    str_ = L * sr - sar
-    stt = L * (L + 1) * (2 * L + 1) / 6.0
-    sxr = np.cumsum(xr * rr)
-    sxx = np.cumsum(xr * xr)
-    ok = L >= min_len
-    if not ok.any():
-        return np.zeros(3)
-    s2 = sigma * sigma
-    sb = np.max((sr * sr / L)[ok]) / s2
-    sd = np.max((str_ * str_ / stt)[ok]) / s2
-    g = np.where(sxx > 0, sxr * sxr / np.where(sxx > 0, sxx, 1.0), 0.0)
-    sg = np.max(g[ok]) / s2
-    return np.array([sb, sd, sg])
+    # the GLRs [S_b, S_d, S_g], each maximised over the change point (segments of at least min_len
+    # samples ending at the newest sample): sums over the last L samples, newest first
+    sr = sar = sxr = sxx = 0.0
+    sb = sd = sg = -np.inf
+    for L in range(1, n + 1):
+        i = n - L
+        sr += r[i]
+        sar += (L - 1) * r[i]                         # age (0 = newest) times r
+        sxr += x[i] * r[i]
+        sxx += x[i] * x[i]
+        if L < min_len:
+            continue
+        s_tr = L * sr - sar                           # sum tau r, tau = 1 (oldest) .. L (newest)
+        stt = L * (L + 1) * (2 * L + 1) / 6.0
+        sb = max(sb, sr * sr / L)
+        sd = max(sd, s_tr * s_tr / stt)
+        sg = max(sg, sxr * sxr / sxx if sxx > 0 else 0.0)
+    S = np.zeros(3)
+    if n >= min_len:
+        s2 = sigma * sigma
+        S[0], S[1], S[2] = sb / s2, sd / s2, sg / s2
+    smax = max(S[0], max(S[1], S[2]))
+    e = np.exp(0.5 * (S - smax))
+    esum = e[0] + e[1] + e[2]
+    if S[2] > S[0] + prefer and S[2] >= S[1]:
+        return _GAIN, e[_GAIN] / esum                 # bursts in step with the signal: a gain
+    # episodes of the residual out, separated by at least burst_gap samples below release
+    first = last = -1
+    n_ep = 0
+    below = 0                                         # samples below release since the last one out
+    for i in range(n):
+        if st[i] >= 1.0:
+            if first < 0:
+                first = i
+                n_ep = 1
+            elif below >= burst_gap:
+                n_ep += 1
+            last = i
+            below = 0
+        elif st[i] < release:
+            below += 1
+    if first >= 0:
+        if n_ep >= 2:
+            return _INTER, 1.0 - 0.5 ** (n_ep - 1)
+        if last - first < spike_max and below >= burst_gap:
+            return _SPIKE, min(1.0, below / (2.0 * burst_gap))
+    best = _DRIFT if S[1] > S[0] + prefer else _BIAS
+    return best, e[best] / esum
+
+
+@njit(cache=True)
+def _run_kernel(V, ix, iraw, stuck, sigma, window, lookback, min_len, spike_max, burst_gap, release,
+                clear_after, prefer, k, rb, xb, sb, active, onset, typ, conf, below, zero, last, out):
+    """The classifier over samples V (R, T, inputs) from sample count k, state updated in place;
+    outputs into out (R, T, outputs). Returns the new sample count."""
+    R, T = V.shape[0], V.shape[1]
+    M, W, NT = ix.shape[0], window, 6
+    r_seg, x_seg, s_seg = np.empty(W), np.empty(W), np.empty(W)
+    for kk in range(T):
+        p = k % W
+        for run in range(R):
+            for j in range(M):
+                rb[run, j, p] = V[run, kk, ix[j, 2]]
+                xb[run, j, p] = V[run, kk, ix[j, 3]]
+                sb[run, j, p] = V[run, kk, ix[j, 1]]
+                if iraw[j] >= 0:
+                    raw = V[run, kk, iraw[j]]
+                    zero[run, j] = zero[run, j] + 1 if raw == last[run, j] else 0
+                    last[run, j] = raw
+        k += 1
+        for run in range(R):
+            for j in range(M):
+                stat = V[run, kk, ix[j, 1]]
+                is_stuck = stuck[j] > 0 and zero[run, j] >= stuck[j]
+                if not active[run, j] and (V[run, kk, ix[j, 0]] >= 1.0 or is_stuck):
+                    onset[run, j] = max(k - 1 - lookback, 0)
+                    active[run, j] = True
+                if active[run, j] and stat < release and not is_stuck:
+                    below[run, j] += 1
+                else:
+                    below[run, j] = 0
+                if below[run, j] >= clear_after:
+                    active[run, j] = False
+                if active[run, j]:
+                    if is_stuck:
+                        z = float(zero[run, j])
+                        typ[run, j], conf[run, j] = _STUCK, z / (z + stuck[j])
+                    else:
+                        n = min(W, k - onset[run, j])
+                        k0 = max(onset[run, j], k - W)
+                        for i in range(n):
+                            q = (k0 + i) % W
+                            r_seg[i], x_seg[i], s_seg[i] = rb[run, j, q], xb[run, j, q], sb[run, j, q]
+                        typ[run, j], conf[run, j] = _classify(r_seg[:n], x_seg[:n], s_seg[:n], sigma[j],
+                                                              min_len, prefer, release, burst_gap, spike_max)
+                for i in range(NT):
+                    out[run, kk, j * NT + i] = 1.0 if (active[run, j] and typ[run, j] == i) else 0.0
+                out[run, kk, M * NT + j] = conf[run, j] if active[run, j] else 0.0
+                out[run, kk, M * NT + M + j] = 1.0 if active[run, j] else 0.0
+    return k
 
 
 class FaultTypeClassifier(ResidualProcessor):
@@ -160,6 +245,7 @@ class FaultTypeClassifier(ResidualProcessor):
                              for m in self.members], np.int64)
         self._iraw = np.array([ix[self.raw[m]] if m in self.raw else -1 for m in self.members], np.int64)
         self._stuck = np.array([self.stuck_after.get(m, 0) for m in self.members], np.int64)
+        self._sigma = np.array([self.sigma[m] for m in self.members])
         self.output_names = [f"{m}:{t}" for m in self.members for t in FAULT_TYPES]
         self.output_names += [f"{m}:confidence" for m in self.members] + [f"{m}:active" for m in self.members]
         self.reset(1)
@@ -183,76 +269,34 @@ class FaultTypeClassifier(ResidualProcessor):
         """After held samples: start again (the window would span the gap)."""
         self.reset(self._R)
 
-    def _segment(self, run: int, j: int, n: int, k0: int) -> tuple[np.ndarray, np.ndarray]:
-        """n samples of run's member j from sample k0 (still in the buffer), oldest first."""
-        W = self.window
-        k0 = max(k0, self._k - W)
-        idx = (np.arange(k0, k0 + n) % W)
-        return self._rb[run, j, idx], self._xb[run, j, idx]
+    def _advance(self, v: np.ndarray) -> np.ndarray:
+        """Samples v (runs, T, inputs) through the kernel -> outputs (runs, T, outputs)."""
+        out = np.empty((v.shape[0], v.shape[1], len(self.output_names)))
+        self._k = _run_kernel(v, self._ix, self._iraw, self._stuck, self._sigma, self.window, self.lookback,
+                              self.min_len, self.spike_max, self.burst_gap, self.release, self.clear_after,
+                              self.prefer, self._k, self._rb, self._xb, self._sb, self._active, self._onset,
+                              self._type, self._conf, self._below, self._zero, self._last, out)
+        return out
 
-    def _classify(self, run: int, j: int) -> tuple[int, float]:
-        m = self.members[j]
-        if self._stuck[j] > 0 and self._zero[run, j] >= self._stuck[j]:
-            z = float(self._zero[run, j])
-            return _STUCK, z / (z + self._stuck[j])
-        n = int(min(self.window, self._k - self._onset[run, j]))
-        r, x = self._segment(run, j, n, int(self._onset[run, j]))
-        S = _glr_scores(r, x, self.sigma[m], self.min_len)
-        e = np.exp(0.5 * (S - S.max()))
-        if S[2] > S[0] + self.prefer and S[2] >= S[1]:
-            return _GAIN, float(e[_GAIN] / e.sum())   # bursts in step with the signal: a gain
-        st = self._stat_seg(run, j, n, int(self._onset[run, j]))
-        on = np.flatnonzero(st >= 1.0)
-        if on.size:
-            # episodes of the residual out, separated by at least burst_gap samples below release
-            cq = np.concatenate([[0], np.cumsum(st < self.release)])
-            sep = (cq[on[1:]] - cq[on[:-1] + 1]) >= self.burst_gap
-            n_ep = 1 + int(sep.sum())
-            if n_ep >= 2:
-                return _INTER, 1.0 - 0.5 ** (n_ep - 1)
-            quiet_end = cq[-1] - cq[on[-1] + 1]
-            if on[-1] - on[0] < self.spike_max and quiet_end >= self.burst_gap:
-                return _SPIKE, min(1.0, quiet_end / (2.0 * self.burst_gap))
-        best = _DRIFT if S[1] > S[0] + self.prefer else _BIAS
-        return best, float(e[best] / e.sum())
-
-    def _stat_seg(self, run: int, j: int, n: int, k0: int) -> np.ndarray:
-        k0 = max(k0, self._k - self.window)
-        idx = (np.arange(k0, k0 + n) % self.window)
-        return self._sb[run, j, idx]
-
-    def _step(self, v: np.ndarray) -> np.ndarray:
+    def _check(self, v: np.ndarray, k: int) -> None:
         if v.shape[0] != self._R:
             raise DataError(f"sample has {v.shape[0]} runs; the FaultTypeClassifier was reset for {self._R}")
         if not np.all(np.isfinite(v)):
-            run, c = np.argwhere(~np.isfinite(v))[0]
+            run, kk, c = np.argwhere(~np.isfinite(v))[0]
             raise DataError(f"FaultTypeClassifier input {self.input_names[c]!r} is not finite at sample "
-                            f"{self._k} (run {run})")
-        iso, stat, r, x = (v[:, self._ix[:, i]] for i in range(4))
-        p = self._k % self.window
-        self._rb[:, :, p], self._xb[:, :, p], self._sb[:, :, p] = r, x, stat
-        has = self._iraw >= 0
-        if has.any():
-            raw = v[:, np.where(has, self._iraw, 0)]
-            same = (raw == self._last) & has
-            self._zero = np.where(same, self._zero + 1, 0)
-            self._last = raw
-        self._k += 1
-        stuck = (self._stuck > 0) & (self._zero >= self._stuck)
-        start = ~self._active & ((iso >= 1.0) | stuck)
-        self._onset = np.where(start, np.maximum(self._k - 1 - self.lookback, 0), self._onset)
-        self._active |= start
-        self._below = np.where(self._active & (stat < self.release) & ~stuck, self._below + 1, 0)
-        self._active &= self._below < self.clear_after
-        for run, j in np.argwhere(self._active):
-            self._type[run, j], self._conf[run, j] = self._classify(run, j)
-        out = np.zeros((self._R, len(self.output_names)))
-        M, T = len(self.members), len(FAULT_TYPES)
-        for j in range(M):
-            out[:, j * T:(j + 1) * T] = (self._type[:, j, None] == np.arange(T)) & self._active[:, j, None]
-        out[:, M * T:M * T + M] = np.where(self._active, self._conf, 0.0)
-        out[:, M * T + M:] = self._active
-        return out
+                            f"{k + kk} (run {run})")
+
+    def _step(self, v: np.ndarray) -> np.ndarray:
+        v = np.ascontiguousarray(v, dtype=float)[:, None, :]
+        self._check(v, self._k)
+        return self._advance(v)[:, 0]
+
+    def run(self, signals: Signals) -> Signals:
+        """The outputs over a whole record (the same numbers as :meth:`step`, in one compiled loop)."""
+        v = np.ascontiguousarray(signals.values[:, :, signals.index(self.input_names)], dtype=float)
+        self.reset(signals.runs)
+        self._check(v, 0)
+        return Signals(signals.t, self._advance(v), self.output_names, check=False)
 
     def __repr__(self) -> str:
         return (f"FaultTypeClassifier(members={self.members}, window={self.window}, "
