@@ -10,18 +10,28 @@ of it, so that evidence grows until then):
 * **stuck** -- the sensor's raw signal has not changed (zero increments) for longer than the
   longest frozen run of the nominal data (``stuck_after``); checked on every sensor that has it,
   isolated or not;
-* **gain** first when its GLR (below) beats the bias one by ``prefer`` (a gain's residual comes and
-  goes with the signal, which would else look like bursts);
+* **gain** first, decided by regression on the signal (the residual's explained variance):
+  over the samples since the step's change point (below), averaged in blocks of ``block`` samples
+  (the residual's high-frequency noise averages out), the block means of the residual are
+  regressed on those of the signal with an intercept, ``r = a + theta x``. The drop of the sum of
+  squares against a constant, ``F_b = theta^2 S_xx / s^2`` (``s^2`` the block-mean noise variance,
+  the larger of the nominal ``sigma_block^2`` and the fit's own), is the evidence of a gain (a
+  residual that moves with the signal, offset or not: a gain scales the sensor's offset too); it
+  is a gain when ``F_b >= gain_crit`` and the signal explains the residual better than time does
+  (else it is a drift the signal happens to follow). At least 4 blocks are needed, and a signal
+  that does not move gives no evidence: with too little excitation the fault stays a bias (the
+  default explanation) with a confidence of at most 0.5 until the line through the origin, the
+  gain without an offset, is also ruled out (``F_g >= gain_crit``), and is revised to a gain as
+  the signal moves;
 * **intermittent** -- at least two episodes of the normalised residual above 1 in the window,
   separated by ``burst_gap`` samples below ``release``; **spike** -- one episode no longer than
   ``spike_max`` samples, followed by ``burst_gap`` samples below ``release``;
-* otherwise the one-parameter models with an unknown change point ``j`` compete by their GLR
-  (``sigma`` the nominal residual's standard deviation): a step ``r_i = b`` (**bias**),
+* otherwise a step and a ramp with an unknown change point ``j`` compete by their GLR (``sigma``
+  the nominal residual's standard deviation): a step ``r_i = b`` (**bias**),
   ``S_b = max_j (sum r)^2 / (sigma^2 n)``; a ramp ``r_i = s (i - j + 1)`` (**drift**),
-  ``S_d = max_j (sum tau r)^2 / (sigma^2 sum tau^2)``; a residual proportional to the signal
-  ``r_i = theta x_i`` (**gain**), ``S_g = max_j (sum x r)^2 / (sigma^2 sum x^2)``. Drift or gain
-  wins over bias only when its statistic exceeds the bias one by ``prefer`` (a step is the
-  default explanation); the confidence is the softmax of ``S / 2`` over the three.
+  ``S_d = max_j (sum tau r)^2 / (sigma^2 sum tau^2)``; and ``S_g = max_j (sum x r)^2 / (sigma^2 sum
+  x^2)``. Drift wins over bias only when its statistic exceeds the bias one by ``prefer`` (a step
+  is the default explanation); the confidence is the softmax of ``S / 2`` over the three.
 
 The fault stays active -- its episode does not clear -- while the normalised residual stays above
 ``release`` or the signal stays frozen; it ends after ``clear_after`` samples below. Outputs, per
@@ -49,7 +59,7 @@ _BIAS, _DRIFT, _GAIN, _STUCK, _INTER, _SPIKE = range(6)
 
 
 @njit(cache=True)
-def _classify(r, x, st, sigma, min_len, prefer, release, burst_gap, spike_max):
+def _classify(r, x, st, sigma, min_len, prefer, release, burst_gap, spike_max, block, sig_blk, gain_crit):
     """Type and confidence of one member's fault from its window since the onset, oldest first:
     residual r (n,), signal x (n,), normalised residual st (n,) (see the module docstring)."""
     n = r.size
@@ -57,6 +67,7 @@ def _classify(r, x, st, sigma, min_len, prefer, release, burst_gap, spike_max):
     # samples ending at the newest sample): sums over the last L samples, newest first
     sr = sar = sxr = sxx = 0.0
     sb = sd = sg = -np.inf
+    Lb = 0                                            # the step's change point: the last Lb samples
     for L in range(1, n + 1):
         i = n - L
         sr += r[i]
@@ -67,7 +78,8 @@ def _classify(r, x, st, sigma, min_len, prefer, release, burst_gap, spike_max):
             continue
         s_tr = L * sr - sar                           # sum tau r, tau = 1 (oldest) .. L (newest)
         stt = L * (L + 1) * (2 * L + 1) / 6.0
-        sb = max(sb, sr * sr / L)
+        if sr * sr / L > sb:
+            sb, Lb = sr * sr / L, L
         sd = max(sd, s_tr * s_tr / stt)
         sg = max(sg, sxr * sxr / sxx if sxx > 0 else 0.0)
     S = np.zeros(3)
@@ -77,8 +89,9 @@ def _classify(r, x, st, sigma, min_len, prefer, release, burst_gap, spike_max):
     smax = max(S[0], max(S[1], S[2]))
     e = np.exp(0.5 * (S - smax))
     esum = e[0] + e[1] + e[2]
-    if S[2] > S[0] + prefer and S[2] >= S[1]:
-        return _GAIN, e[_GAIN] / esum                 # bursts in step with the signal: a gain
+    fb, fg = _gain_test(r[n - Lb:], x[n - Lb:], block, sig_blk)
+    if fb >= gain_crit:                               # the residual follows the signal: a gain
+        return _GAIN, 1.0 / (1.0 + np.exp(-0.5 * (fb - gain_crit)))
     # episodes of the residual out, separated by at least burst_gap samples below release
     first = last = -1
     n_ep = 0
@@ -100,12 +113,57 @@ def _classify(r, x, st, sigma, min_len, prefer, release, burst_gap, spike_max):
         if last - first < spike_max and below >= burst_gap:
             return _SPIKE, min(1.0, below / (2.0 * burst_gap))
     best = _DRIFT if S[1] > S[0] + prefer else _BIAS
-    return best, e[best] / esum
+    c = e[best] / esum
+    if best == _BIAS and fg < gain_crit:
+        c = min(c, 0.5)                               # a gain is not ruled out yet (too little excitation)
+    return best, c
+
+
+@njit(cache=True)
+def _gain_test(r, x, block, sig_blk):
+    """``(F_b, F_g)``: the block means of r (n,) regressed on those of x with an intercept; F_b the
+    drop of the residual sum of squares against a constant (the slope: a gain, or a time trend that
+    x follows less well than time itself), F_g against a line through the origin (a gain without an
+    offset), each over the noise variance of a block mean (the larger of ``sig_blk^2`` and the fit's
+    own). ``(0, 0)`` with fewer than 4 blocks or no excitation."""
+    nb = r.size // block
+    if nb < 4:
+        return 0.0, 0.0
+    rm, xm = np.zeros(nb), np.zeros(nb)
+    off = r.size - nb * block                         # the newest nb * block samples
+    for b in range(nb):
+        for i in range(block):
+            rm[b] += r[off + b * block + i]
+            xm[b] += x[off + b * block + i]
+        rm[b] /= block
+        xm[b] /= block
+    mr, mx, mt = rm.mean(), xm.mean(), 0.5 * (nb - 1)
+    sxx = sxy = syy = stt = sty = sx0 = sxy0 = 0.0
+    for b in range(nb):
+        dx, dy, dt = xm[b] - mx, rm[b] - mr, b - mt
+        sxx += dx * dx
+        sxy += dx * dy
+        syy += dy * dy
+        stt += dt * dt
+        sty += dt * dy
+        sx0 += xm[b] * xm[b]
+        sxy0 += xm[b] * rm[b]
+    if sxx <= 0.0 or sx0 <= 0.0:
+        return 0.0, 0.0
+    rss = max(syy - sxy * sxy / sxx, 0.0)             # a + theta x
+    rss_t = max(syy - sty * sty / stt, 0.0)           # a + s t: a drift
+    s2 = max(sig_blk * sig_blk, rss / (nb - 2))
+    fb = (syy - rss) / s2
+    if rss_t < rss:
+        fb = 0.0                                      # time explains the residual better than x
+    fg = max(syy + nb * mr * mr - sxy0 * sxy0 / sx0 - rss, 0.0) / s2
+    return fb, fg
 
 
 @njit(cache=True)
 def _run_kernel(V, ix, iraw, stuck, sigma, window, lookback, min_len, spike_max, burst_gap, release,
-                clear_after, prefer, k, rb, xb, sb, active, onset, typ, conf, below, zero, last, out):
+                clear_after, prefer, block, sig_blk, gain_crit, k, rb, xb, sb, active, onset, typ, conf,
+                below, zero, last, out):
     """The classifier over samples V (R, T, inputs) from sample count k, state updated in place;
     outputs into out (R, T, outputs). Returns the new sample count."""
     R, T = V.shape[0], V.shape[1]
@@ -147,7 +205,8 @@ def _run_kernel(V, ix, iraw, stuck, sigma, window, lookback, min_len, spike_max,
                             q = (k0 + i) % W
                             r_seg[i], x_seg[i], s_seg[i] = rb[run, j, q], xb[run, j, q], sb[run, j, q]
                         typ[run, j], conf[run, j] = _classify(r_seg[:n], x_seg[:n], s_seg[:n], sigma[j],
-                                                              min_len, prefer, release, burst_gap, spike_max)
+                                                              min_len, prefer, release, burst_gap, spike_max,
+                                                              block, sig_blk[j], gain_crit)
                 for i in range(NT):
                     out[run, kk, j * NT + i] = 1.0 if (active[run, j] and typ[run, j] == i) else 0.0
                 out[run, kk, M * NT + j] = conf[run, j] if active[run, j] else 0.0
@@ -189,7 +248,16 @@ class FaultTypeClassifier(ResidualProcessor):
     clear_after : int
         Samples below ``release`` (and not frozen) that end the fault.
     prefer : float
-        GLR margin drift or gain must beat bias by.
+        GLR margin a drift must beat a bias by.
+    block : int
+        Samples averaged into one block mean for the gain test (longer than the residual's
+        high-frequency noise; at least 4 blocks since the change point before a gain is decided).
+    sigma_block : mapping str -> float, optional
+        Member -> standard deviation of a block mean of its nominal residual (default
+        ``sigma / sqrt(block)``, right for white noise).
+    gain_crit : float
+        Level of the gain test's F statistic (the slope of the residual on the signal, in units of
+        the block-mean noise variance) above which the fault is a gain.
 
     Examples
     --------
@@ -210,7 +278,8 @@ class FaultTypeClassifier(ResidualProcessor):
                  channels: Mapping[str, str] | None = None, raw: Mapping[str, str] | None = None,
                  stuck_after: Mapping[str, int] | None = None, lookback: int = 50, min_len: int = 10,
                  spike_max: int = 10, burst_gap: int = 25, release: float = 0.5, clear_after: int = 250,
-                 prefer: float = 6.0):
+                 prefer: float = 6.0, block: int = 10, sigma_block: Mapping[str, float] | None = None,
+                 gain_crit: float = 25.0):
         self.members = [str(m) for m in members]
         if not self.members:
             raise DataError("FaultTypeClassifier needs at least one member")
@@ -219,12 +288,19 @@ class FaultTypeClassifier(ResidualProcessor):
             raise DataError(f"sigma must be finite and > 0 per member, got {self.sigma}")
         for what, v, lo in (("window", window, 2), ("lookback", lookback, 0), ("min_len", min_len, 1),
                             ("spike_max", spike_max, 1), ("burst_gap", burst_gap, 1),
-                            ("clear_after", clear_after, 1)):
+                            ("clear_after", clear_after, 1), ("block", block, 1)):
             if isinstance(v, bool) or int(v) != v or v < lo:
                 raise DataError(f"{what} must be an integer >= {lo} (samples), got {v!r}")
         self.window, self.lookback, self.min_len = int(window), int(lookback), int(min_len)
         self.spike_max, self.burst_gap, self.clear_after = int(spike_max), int(burst_gap), int(clear_after)
         self.release, self.prefer = float(release), float(prefer)
+        self.block, self.gain_crit = int(block), float(gain_crit)
+        if not (np.isfinite(self.gain_crit) and self.gain_crit > 0):
+            raise DataError(f"gain_crit must be finite and > 0, got {gain_crit!r}")
+        sb = dict(sigma_block or {})
+        self.sigma_block = {m: float(sb.get(m, self.sigma[m] / np.sqrt(self.block))) for m in self.members}
+        if any(not (np.isfinite(v) and v > 0) for v in self.sigma_block.values()):
+            raise DataError(f"sigma_block must be finite and > 0 per member, got {self.sigma_block}")
         ch = {"isolated": "peer:{m}:isolated", "stat": "peer:{m}", "r": "peer:{m}:e", "x": "peer:{m}:ref"}
         ch.update(dict(channels or {}))
         self.channels = ch
@@ -246,6 +322,7 @@ class FaultTypeClassifier(ResidualProcessor):
         self._iraw = np.array([ix[self.raw[m]] if m in self.raw else -1 for m in self.members], np.int64)
         self._stuck = np.array([self.stuck_after.get(m, 0) for m in self.members], np.int64)
         self._sigma = np.array([self.sigma[m] for m in self.members])
+        self._sig_blk = np.array([self.sigma_block[m] for m in self.members])
         self.output_names = [f"{m}:{t}" for m in self.members for t in FAULT_TYPES]
         self.output_names += [f"{m}:confidence" for m in self.members] + [f"{m}:active" for m in self.members]
         self.reset(1)
@@ -274,7 +351,8 @@ class FaultTypeClassifier(ResidualProcessor):
         out = np.empty((v.shape[0], v.shape[1], len(self.output_names)))
         self._k = _run_kernel(v, self._ix, self._iraw, self._stuck, self._sigma, self.window, self.lookback,
                               self.min_len, self.spike_max, self.burst_gap, self.release, self.clear_after,
-                              self.prefer, self._k, self._rb, self._xb, self._sb, self._active, self._onset,
+                              self.prefer, self.block, self._sig_blk, self.gain_crit, self._k, self._rb,
+                              self._xb, self._sb, self._active, self._onset,
                               self._type, self._conf, self._below, self._zero, self._last, out)
         return out
 
@@ -307,7 +385,8 @@ class FaultTypeClassifier(ResidualProcessor):
                 "channels": self.channels, "raw": self.raw, "stuck_after": self.stuck_after,
                 "lookback": self.lookback, "min_len": self.min_len, "spike_max": self.spike_max,
                 "burst_gap": self.burst_gap, "release": self.release, "clear_after": self.clear_after,
-                "prefer": self.prefer}
+                "prefer": self.prefer, "block": self.block, "sigma_block": self.sigma_block,
+                "gain_crit": self.gain_crit}
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> FaultTypeClassifier:

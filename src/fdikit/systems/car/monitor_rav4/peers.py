@@ -129,7 +129,7 @@ class Rav4PeerSignals(ResidualGenerator):
 def design_peer_stages(sig: Signals, dt: float, *, skip: int, warmup: int, band_hz=None,
                        stuck_margin: float = 1.0, window_s: float = 30.0, lookback_s: float = 5.0,
                        clear_after_s: float = 5.0, pfa: float = 1.0, per=None, fit_skip=None,
-                       margin: float = 0.0):
+                       margin: float = 0.0, block_s: float = 0.5, gain_crit: float = 25.0):
     """The peer check and the fault-type classifier designed on nominal :class:`Rav4PeerSignals`
     outputs ``sig`` (the calibration half).
 
@@ -139,7 +139,9 @@ def design_peer_stages(sig: Signals, dt: float, *, skip: int, warmup: int, band_
     wheels, an hour for the yaw group) and ``fit_skip`` (samples left out of the fit and the
     thresholds; default 0 for the wheels, ``skip`` for the yaw group, whose members are low-passed)
     are per group; ``skip`` also bounds the classifier's nominal statistics, ``warmup`` the samples
-    during which nothing is isolated. The merged :class:`~fdikit.detect.PeerCheck` holds the groups
+    during which nothing is isolated; ``block_s`` and ``gain_crit`` are the classifier's gain test
+    (block length in seconds: 0.5 s averages the 12.5 Hz wheel-hop out; the block-mean noise
+    ``sigma_block`` from the nominal residual). The merged :class:`~fdikit.detect.PeerCheck` holds the groups
     in the order of :data:`PEER_GROUPS`.
 
     Returns
@@ -162,6 +164,11 @@ def design_peer_stages(sig: Signals, dt: float, *, skip: int, warmup: int, band_
                    announce=list(PEER_SENSORS), warmup=warmup)
     nom = pc.run(sig)
     sigma = {m: float(np.std(nom[f"peer:{m}:e"][0, skip:])) for m in PEER_SENSORS}
+    blk = max(1, round(block_s / dt))
+    sig_blk = {}
+    for m in PEER_SENSORS:
+        e = nom[f"peer:{m}:e"][0, skip:]
+        sig_blk[m] = float(np.std(e[:e.size // blk * blk].reshape(-1, blk).mean(axis=1)))
     stuck_after = {}
     for m, rawc in _RAW_OF.items():
         x = sig[rawc][0, skip:]
@@ -173,6 +180,7 @@ def design_peer_stages(sig: Signals, dt: float, *, skip: int, warmup: int, band_
     n = lambda s: max(1, round(s / dt))  # noqa: E731
     ftc = FaultTypeClassifier(list(PEER_SENSORS), sigma, n(window_s), raw=_RAW_OF, stuck_after=stuck_after,
                               lookback=n(lookback_s), min_len=n(0.2), spike_max=n(0.2), burst_gap=n(0.5),
-                              clear_after=n(clear_after_s))
+                              clear_after=n(clear_after_s), block=blk, sigma_block=sig_blk,
+                              gain_crit=gain_crit)
     names = {f"{m}:{t}": f"{s}:{t}" for m, s in PEER_SENSORS.items() for t in FAULT_TYPES}
     return pc, ftc, names
