@@ -56,3 +56,21 @@ def test_batch_equals_streaming_and_round_trip():
     st = np.stack([ftc.step(x[:, k]) for k in range(sig.n_samples)], axis=1)
     assert np.array_equal(out.values, st)
     assert np.array_equal(FaultTypeClassifier.from_dict(ftc.to_dict()).run(sig).values, out.values)
+
+
+def test_gain_of_a_sensor_with_an_offset_is_a_gain():
+    # the gain scales the sensor's offset too: r = (g - 1) (x + offset) is a step plus a part that
+    # follows x; the step's GLR beats the through-origin gain's, so before the regression test
+    # (issue 27) it was typed a bias
+    rng = np.random.default_rng(3)
+    T = 3000
+    k = np.arange(T)
+    ref = 0.05 * np.sin(k / 40.0)
+    on = k >= 1000
+    e = 0.002 * rng.standard_normal(T) + 0.5 * (ref + 0.1) * on
+    stat = np.abs(e) / 0.01
+    iso = (stat >= 1) & (k >= 1050)
+    sig = Signals(k * 0.02, np.column_stack([iso, stat, e, ref])[None],
+                  ["peer:s:isolated", "peer:s", "peer:s:e", "peer:s:ref"])
+    out = FaultTypeClassifier(["s"], {"s": 0.002}, 1500, lookback=100, block=10).run(sig)
+    assert out["s:gain"][0, -1] == 1.0, {n: out[n][0, -1] for n in out.names}

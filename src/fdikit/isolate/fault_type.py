@@ -22,7 +22,9 @@ of it, so that evidence grows until then):
   that does not move gives no evidence: with too little excitation the fault stays a bias (the
   default explanation) with a confidence of at most 0.5 until the line through the origin, the
   gain without an offset, is also ruled out (``F_g >= gain_crit``), and is revised to a gain as
-  the signal moves;
+  the signal moves. A gain without an offset is also typed when its sample-wise GLR ``S_g``
+  (below) beats the step's by ``prefer`` and the block test does not rule it out (faster on
+  white noise);
 * **intermittent** -- at least two episodes of the normalised residual above 1 in the window,
   separated by ``burst_gap`` samples below ``release``; **spike** -- one episode no longer than
   ``spike_max`` samples, followed by ``burst_gap`` samples below ``release``;
@@ -92,6 +94,8 @@ def _classify(r, x, st, sigma, min_len, prefer, release, burst_gap, spike_max, b
     fb, fg = _gain_test(r[n - Lb:], x[n - Lb:], block, sig_blk)
     if fb >= gain_crit:                               # the residual follows the signal: a gain
         return _GAIN, 1.0 / (1.0 + np.exp(-0.5 * (fb - gain_crit)))
+    if S[2] > S[0] + prefer and S[2] >= S[1] and fg < gain_crit:
+        return _GAIN, e[_GAIN] / esum                 # a gain without offset, not ruled out by the blocks
     # episodes of the residual out, separated by at least burst_gap samples below release
     first = last = -1
     n_ep = 0
