@@ -26,7 +26,9 @@ of it, so that evidence grows until then):
   (below) beats the step's by ``prefer`` and the block test does not rule it out (faster on
   white noise);
 * **intermittent** -- at least two episodes of the normalised residual above 1 in the window,
-  separated by ``burst_gap`` samples below ``release``; **spike** -- one episode no longer than
+  separated by ``burst_gap`` samples below ``release``, or of the residual's block means above 5
+  block-mean standard deviations, separated by blocks below 2 (short bursts that a low-passed
+  statistic smears into one); **spike** -- one episode no longer than
   ``spike_max`` samples, followed by ``burst_gap`` samples below ``release``;
 * otherwise a step and a ramp with an unknown change point ``j`` compete by their GLR (``sigma``
   the nominal residual's standard deviation): a step ``r_i = b`` (**bias**),
@@ -111,9 +113,13 @@ def _classify(r, x, st, sigma, min_len, prefer, release, burst_gap, spike_max, b
             below = 0
         elif st[i] < release:
             below += 1
+    if n_ep < 2:
+        # bursts shorter than the statistic's low-pass smear into one episode there: count them on
+        # the residual's block means too
+        n_ep = max(n_ep, _block_episodes(r, block, sig_blk, max(1, burst_gap // block)))
+    if n_ep >= 2:
+        return _INTER, 1.0 - 0.5 ** (n_ep - 1)
     if first >= 0:
-        if n_ep >= 2:
-            return _INTER, 1.0 - 0.5 ** (n_ep - 1)
         if last - first < spike_max and below >= burst_gap:
             return _SPIKE, min(1.0, below / (2.0 * burst_gap))
     best = _DRIFT if S[1] > S[0] + prefer else _BIAS
@@ -121,6 +127,31 @@ def _classify(r, x, st, sigma, min_len, prefer, release, burst_gap, spike_max, b
     if best == _BIAS and fg < gain_crit:
         c = min(c, 0.5)                               # a gain is not ruled out yet (too little excitation)
     return best, c
+
+
+#: block-mean levels (in block-mean noise standard deviations) of a burst and of the quiet between
+_BURST_ON, _BURST_OFF = 5.0, 2.0
+
+
+@njit(cache=True)
+def _block_episodes(r, block, sig_blk, gap):
+    """Episodes of the residual r (n,): runs of block means with ``|mean| >= 5 sig_blk``, separated
+    by at least ``gap`` blocks below ``2 sig_blk`` (blocks aligned to the newest sample)."""
+    nb = r.size // block
+    off = r.size - nb * block
+    n_ep, seen, below = 0, False, 0
+    for b in range(nb):
+        m = 0.0
+        for i in range(block):
+            m += r[off + b * block + i]
+        z = abs(m / block) / sig_blk
+        if z >= _BURST_ON:
+            if not seen or below >= gap:
+                n_ep += 1
+            seen, below = True, 0
+        elif z < _BURST_OFF:
+            below += 1
+    return n_ep
 
 
 @njit(cache=True)
@@ -165,9 +196,9 @@ def _gain_test(r, x, block, sig_blk):
 
 
 @njit(cache=True)
-def _run_kernel(V, ix, iraw, stuck, sigma, window, lookback, min_len, spike_max, burst_gap, release,
-                clear_after, prefer, block, sig_blk, gain_crit, k, rb, xb, sb, active, onset, typ, conf,
-                below, zero, last, out):
+def _run_kernel(V, ix, ixx, confirm, iraw, stuck, sigma, window, lookback, min_len, spike_max, burst_gap,
+                release, clear_after, prefer, block, sig_blk, gain_crit, k, rb, xb, sb, active, onset, typ,
+                conf, below, zero, last, out):
     """The classifier over samples V (R, T, inputs) from sample count k, state updated in place;
     outputs into out (R, T, outputs). Returns the new sample count."""
     R, T = V.shape[0], V.shape[1]
@@ -189,7 +220,11 @@ def _run_kernel(V, ix, iraw, stuck, sigma, window, lookback, min_len, spike_max,
             for j in range(M):
                 stat = V[run, kk, ix[j, 1]]
                 is_stuck = stuck[j] > 0 and zero[run, j] >= stuck[j]
-                if not active[run, j] and (V[run, kk, ix[j, 0]] >= 1.0 or is_stuck):
+                iso = V[run, kk, ix[j, 0]] >= 1.0
+                for c in range(ixx.shape[1]):
+                    if ixx[j, c] >= 0 and V[run, kk, ixx[j, c]] >= 1.0 and V[run, kk, ix[j, 1]] >= confirm:
+                        iso = True
+                if not active[run, j] and (iso or is_stuck):
                     onset[run, j] = max(k - 1 - lookback, 0)
                     active[run, j] = True
                 if active[run, j] and stat < release and not is_stuck:
@@ -235,6 +270,13 @@ class FaultTypeClassifier(ResidualProcessor):
         ``"peer:{m}"``), ``r`` (the residual, ``"peer:{m}:e"``), ``x`` (the signal a gain scales,
         ``"peer:{m}:ref"``: the fault-free value the peers give, so that a gain ``g`` makes
         ``r = (g - 1) x``).
+    isolated_by : mapping str -> sequence of str, optional
+        Member -> further isolation flags (channels, >= 1 isolates) that start its fault as the
+        ``isolated`` channel does: e.g. another isolation stage's alarm for that sensor, so that
+        what that stage isolates first is typed too; they count only while the member's own
+        normalised residual is at least ``confirm``.
+    confirm : float
+        Level of the member's normalised residual that the ``isolated_by`` flags need (0: none).
     raw : mapping str -> str, optional
         Member -> channel of its raw signal for the stuck check (members without one have none).
     stuck_after : mapping str -> int, optional
@@ -279,7 +321,9 @@ class FaultTypeClassifier(ResidualProcessor):
                     "_last")
 
     def __init__(self, members: Sequence[str], sigma: Mapping[str, float], window: int, *,
-                 channels: Mapping[str, str] | None = None, raw: Mapping[str, str] | None = None,
+                 channels: Mapping[str, str] | None = None,
+                 isolated_by: Mapping[str, Sequence[str]] | None = None, confirm: float = 0.0,
+                 raw: Mapping[str, str] | None = None,
                  stuck_after: Mapping[str, int] | None = None, lookback: int = 50, min_len: int = 10,
                  spike_max: int = 10, burst_gap: int = 25, release: float = 0.5, clear_after: int = 250,
                  prefer: float = 6.0, block: int = 10, sigma_block: Mapping[str, float] | None = None,
@@ -314,15 +358,25 @@ class FaultTypeClassifier(ResidualProcessor):
         if bad or set(self.stuck_after) - set(self.raw):
             raise DataError(f"raw and stuck_after must name members, and every stuck_after member needs a "
                             f"raw channel; got raw {self.raw}, stuck_after {self.stuck_after}")
+        self.isolated_by = {str(k): [str(c) for c in v] for k, v in (isolated_by or {}).items()}
+        if isinstance(isolated_by, str) or any(isinstance(v, str) for v in (isolated_by or {}).values()) \
+                or set(self.isolated_by) - set(self.members):
+            raise DataError(f"isolated_by must map members to lists of channels, got {isolated_by!r}")
         names = []
         for m in self.members:
             names += [ch[k].format(m=m) for k in ("isolated", "stat", "r", "x")]
+            names += self.isolated_by.get(m, [])
             if m in self.raw:
                 names.append(self.raw[m])
         self.input_names = list(dict.fromkeys(names))
         ix = {n: i for i, n in enumerate(self.input_names)}
         self._ix = np.array([[ix[ch[k].format(m=m)] for k in ("isolated", "stat", "r", "x")]
                              for m in self.members], np.int64)
+        self.confirm = float(confirm)
+        K = max([len(v) for v in self.isolated_by.values()] + [0])
+        self._ixx = np.array([[ix[c] for c in self.isolated_by.get(m, [])]
+                              + [-1] * (K - len(self.isolated_by.get(m, []))) for m in self.members],
+                             np.int64).reshape(len(self.members), K)
         self._iraw = np.array([ix[self.raw[m]] if m in self.raw else -1 for m in self.members], np.int64)
         self._stuck = np.array([self.stuck_after.get(m, 0) for m in self.members], np.int64)
         self._sigma = np.array([self.sigma[m] for m in self.members])
@@ -353,11 +407,11 @@ class FaultTypeClassifier(ResidualProcessor):
     def _advance(self, v: np.ndarray) -> np.ndarray:
         """Samples v (runs, T, inputs) through the kernel -> outputs (runs, T, outputs)."""
         out = np.empty((v.shape[0], v.shape[1], len(self.output_names)))
-        self._k = _run_kernel(v, self._ix, self._iraw, self._stuck, self._sigma, self.window, self.lookback,
-                              self.min_len, self.spike_max, self.burst_gap, self.release, self.clear_after,
-                              self.prefer, self.block, self._sig_blk, self.gain_crit, self._k, self._rb,
-                              self._xb, self._sb, self._active, self._onset,
-                              self._type, self._conf, self._below, self._zero, self._last, out)
+        self._k = _run_kernel(v, self._ix, self._ixx, self.confirm, self._iraw, self._stuck, self._sigma,
+                              self.window, self.lookback, self.min_len, self.spike_max, self.burst_gap,
+                              self.release, self.clear_after, self.prefer, self.block, self._sig_blk,
+                              self.gain_crit, self._k, self._rb, self._xb, self._sb, self._active,
+                              self._onset, self._type, self._conf, self._below, self._zero, self._last, out)
         return out
 
     def _check(self, v: np.ndarray, k: int) -> None:
@@ -386,7 +440,9 @@ class FaultTypeClassifier(ResidualProcessor):
 
     def to_dict(self) -> dict[str, Any]:
         return {"members": self.members, "sigma": self.sigma, "window": self.window,
-                "channels": self.channels, "raw": self.raw, "stuck_after": self.stuck_after,
+                "channels": self.channels, "isolated_by": self.isolated_by,
+                "confirm": self.confirm, "raw": self.raw,
+                "stuck_after": self.stuck_after,
                 "lookback": self.lookback, "min_len": self.min_len, "spike_max": self.spike_max,
                 "burst_gap": self.burst_gap, "release": self.release, "clear_after": self.clear_after,
                 "prefer": self.prefer, "block": self.block, "sigma_block": self.sigma_block,

@@ -86,6 +86,10 @@ def decision_for(faults, sensor: dict[str, str] | None = None) -> Decision:
     return Decision(list(names), level=0.5, names=names, clear_after=CLEAR_AFTER)
 
 
+#: MHSSPT hypotheses that name one sensor of the peer groups: their alarm also starts that sensor's
+#: fault-type classification (the MHSSPT often isolates first; issue 27, item 2)
+_TYPED_BY_MHSSPT = ("yaw_rate", "lateral_accelerometer", "steering")
+
 #: seconds an alarm must stay off before its episode clears (longer than the off-time of the
 #: intermittent faults the monitor is meant to see: bursts up to every 5 s)
 CLEAR_AFTER = 5.0
@@ -223,7 +227,8 @@ def rav4_monitor(path: str | None = None, *, rate: float = 50.0, q_weight: float
             sk = round(max(warmup, sensor_warmup) / dt)
             pc, ftc, type_names = design_peer_stages(
                 psig.run(Signals(raw.t[cal_t], raw.values[:, cal_t], raw.names, check=False)), dt, skip=sk,
-                warmup=sk)
+                warmup=sk,
+                isolated_by={f"sig:{f}": [f"P:{f}:alarm"] for f in _TYPED_BY_MHSSPT if f in faults})
             type_hold = Hold(list(type_names), 0.5, Z=max(1, int(hold)), absolute=False)
             gens["peer_signals"] = psig
             procs.update(peer_check=pc, fault_type=ftc, type_hold=type_hold)

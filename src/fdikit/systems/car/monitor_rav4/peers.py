@@ -129,19 +129,22 @@ class Rav4PeerSignals(ResidualGenerator):
 def design_peer_stages(sig: Signals, dt: float, *, skip: int, warmup: int, band_hz=None,
                        stuck_margin: float = 1.0, window_s: float = 30.0, lookback_s: float = 5.0,
                        clear_after_s: float = 5.0, pfa: float = 1.0, per=None, fit_skip=None,
-                       margin: float = 0.0, block_s: float = 0.5, gain_crit: float = 25.0):
+                       margin: float = 0.0, block_s: float = 0.5, gain_crit: float = 25.0,
+                       isolated_by=None, confirm: float = 0.5):
     """The peer check and the fault-type classifier designed on nominal :class:`Rav4PeerSignals`
     outputs ``sig`` (the calibration half).
 
     Each group of :data:`PEER_GROUPS` is fitted and thresholded on its own
     (:func:`~fdikit.detect.design_peer_check`, references :data:`PEER_REFERENCES`): ``band_hz``
-    (default 0.2 Hz each), ``per`` (the false-alarm period of ``pfa``; default 10 minutes for the
-    wheels, an hour for the yaw group) and ``fit_skip`` (samples left out of the fit and the
+    (default 0.2 Hz for the wheels, 0.1 Hz for the yaw group), ``per`` (the false-alarm period of
+    ``pfa``; default 10 minutes each) and ``fit_skip`` (samples left out of the fit and the
     thresholds; default 0 for the wheels, ``skip`` for the yaw group, whose members are low-passed)
     are per group; ``skip`` also bounds the classifier's nominal statistics, ``warmup`` the samples
     during which nothing is isolated; ``block_s`` and ``gain_crit`` are the classifier's gain test
     (block length in seconds: 0.5 s averages the 12.5 Hz wheel-hop out; the block-mean noise
-    ``sigma_block`` from the nominal residual). The merged :class:`~fdikit.detect.PeerCheck` holds the groups
+    ``sigma_block`` from the nominal residual); ``isolated_by`` the classifier's further isolation
+    flags per member (the MHSSPT's alarms), which count while the member's peer statistic is at
+    least ``confirm``. The merged :class:`~fdikit.detect.PeerCheck` holds the groups
     in the order of :data:`PEER_GROUPS`.
 
     Returns
@@ -151,8 +154,8 @@ def design_peer_stages(sig: Signals, dt: float, *, skip: int, warmup: int, band_
     from ....detect import PeerCheck, design_peer_check
     from ....isolate import FAULT_TYPES, FaultTypeClassifier
 
-    band = {"wheels": 0.2, "yaw": 0.2, **(band_hz or {})}
-    per = {"wheels": 600.0, "yaw": "hour", **(per or {})}
+    band = {"wheels": 0.2, "yaw": 0.1, **(band_hz or {})}
+    per = {"wheels": 600.0, "yaw": 600.0, **(per or {})}
     fit_skip = {"wheels": 0, "yaw": skip, **(fit_skip or {})}
     parts = [design_peer_check(sig, {g: ms}, references={g: PEER_REFERENCES[g]}, band_hz=band[g],
                                announce=[m for m in ms if m in PEER_SENSORS], skip=fit_skip[g], pfa=pfa,
@@ -180,7 +183,8 @@ def design_peer_stages(sig: Signals, dt: float, *, skip: int, warmup: int, band_
     n = lambda s: max(1, round(s / dt))  # noqa: E731
     ftc = FaultTypeClassifier(list(PEER_SENSORS), sigma, n(window_s), raw=_RAW_OF, stuck_after=stuck_after,
                               lookback=n(lookback_s), min_len=n(0.2), spike_max=n(0.2), burst_gap=n(0.5),
-                              clear_after=n(clear_after_s), block=blk, sigma_block=sig_blk,
+                              clear_after=n(clear_after_s), isolated_by=isolated_by, confirm=confirm,
+                              block=blk, sigma_block=sig_blk,
                               gain_crit=gain_crit)
     names = {f"{m}:{t}": f"{s}:{t}" for m, s in PEER_SENSORS.items() for t in FAULT_TYPES}
     return pc, ftc, names
