@@ -232,7 +232,6 @@ def main():
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--fraction", type=float, default=1.0)
     a = ap.parse_args()
-    from fdikit import Signals
     from fdikit.systems.car.monitor_rav4 import (
         RAW_SOURCES,
         inject,
@@ -240,7 +239,6 @@ def main():
         rav4_monitor,
         run_rav4_log,
     )
-
     from fdikit.systems.car.monitor_rav4.injection import injected_sensors
 
     t_start = time.time()
@@ -374,7 +372,6 @@ def main():
     for k, v in art.items():
         print(f"  {k:28} {v}")
     print(f"\ntotal {time.time() - t_start:.0f} s (pid {os.getpid()})")
-    del Signals
 
 
 if __name__ == "__main__":

@@ -22,9 +22,9 @@ of it, so that evidence grows until then):
   that does not move gives no evidence: with too little excitation the fault stays a bias (the
   default explanation) with a confidence of at most 0.5 until the line through the origin, the
   gain without an offset, is also ruled out (``F_g >= gain_crit``), and is revised to a gain as
-  the signal moves. A gain without an offset is also typed when its sample-wise GLR ``S_g``
-  (below) beats the step's by ``prefer`` and the block test does not rule it out (faster on
-  white noise);
+  the signal moves. (The sample-wise GLR ``S_g`` below is not used to decide a gain: on a
+  coloured residual a constant step beat by a few units of ``S_g`` out of thousands typed biases
+  as gains once the signal moved.)
 * **intermittent** -- at least two episodes of the normalised residual above 1 in the window,
   separated by ``burst_gap`` samples below ``release``, or of the residual's block means above 5
   block-mean standard deviations, separated by blocks below 2 (short bursts that a low-passed
@@ -96,8 +96,6 @@ def _classify(r, x, st, sigma, min_len, prefer, release, burst_gap, spike_max, b
     fb, fg = _gain_test(r[n - Lb:], x[n - Lb:], block, sig_blk)
     if fb >= gain_crit:                               # the residual follows the signal: a gain
         return _GAIN, 1.0 / (1.0 + np.exp(-0.5 * (fb - gain_crit)))
-    if S[2] > S[0] + prefer and S[2] >= S[1] and fg < gain_crit:
-        return _GAIN, e[_GAIN] / esum                 # a gain without offset, not ruled out by the blocks
     # episodes of the residual out, separated by at least burst_gap samples below release
     first = last = -1
     n_ep = 0
@@ -245,7 +243,7 @@ def _run_kernel(V, ix, ixx, confirm, iraw, stuck, sigma, window, lookback, min_l
                             r_seg[i], x_seg[i], s_seg[i] = rb[run, j, q], xb[run, j, q], sb[run, j, q]
                         typ[run, j], conf[run, j] = _classify(r_seg[:n], x_seg[:n], s_seg[:n], sigma[j],
                                                               min_len, prefer, release, burst_gap, spike_max,
-                                                              block, sig_blk[j], gain_crit)
+                                                              block, sig_blk[j], gain_crit[j])
                 for i in range(NT):
                     out[run, kk, j * NT + i] = 1.0 if (active[run, j] and typ[run, j] == i) else 0.0
                 out[run, kk, M * NT + j] = conf[run, j] if active[run, j] else 0.0
@@ -301,9 +299,9 @@ class FaultTypeClassifier(ResidualProcessor):
     sigma_block : mapping str -> float, optional
         Member -> standard deviation of a block mean of its nominal residual (default
         ``sigma / sqrt(block)``, right for white noise).
-    gain_crit : float
+    gain_crit : float or mapping str -> float
         Level of the gain test's F statistic (the slope of the residual on the signal, in units of
-        the block-mean noise variance) above which the fault is a gain.
+        the block-mean noise variance) above which the fault is a gain. Per member, or one for all.
 
     Examples
     --------
@@ -327,7 +325,7 @@ class FaultTypeClassifier(ResidualProcessor):
                  stuck_after: Mapping[str, int] | None = None, lookback: int = 50, min_len: int = 10,
                  spike_max: int = 10, burst_gap: int = 25, release: float = 0.5, clear_after: int = 250,
                  prefer: float = 6.0, block: int = 10, sigma_block: Mapping[str, float] | None = None,
-                 gain_crit: float = 25.0):
+                 gain_crit: float | Mapping[str, float] = 25.0):
         self.members = [str(m) for m in members]
         if not self.members:
             raise DataError("FaultTypeClassifier needs at least one member")
@@ -342,9 +340,11 @@ class FaultTypeClassifier(ResidualProcessor):
         self.window, self.lookback, self.min_len = int(window), int(lookback), int(min_len)
         self.spike_max, self.burst_gap, self.clear_after = int(spike_max), int(burst_gap), int(clear_after)
         self.release, self.prefer = float(release), float(prefer)
-        self.block, self.gain_crit = int(block), float(gain_crit)
-        if not (np.isfinite(self.gain_crit) and self.gain_crit > 0):
-            raise DataError(f"gain_crit must be finite and > 0, got {gain_crit!r}")
+        self.block = int(block)
+        gc = gain_crit if isinstance(gain_crit, Mapping) else {m: gain_crit for m in self.members}
+        self.gain_crit = {m: float(gc[m]) for m in self.members}
+        if any(not (np.isfinite(v) and v > 0) for v in self.gain_crit.values()):
+            raise DataError(f"gain_crit must be finite and > 0 per member, got {gain_crit!r}")
         sb = dict(sigma_block or {})
         self.sigma_block = {m: float(sb.get(m, self.sigma[m] / np.sqrt(self.block))) for m in self.members}
         if any(not (np.isfinite(v) and v > 0) for v in self.sigma_block.values()):
@@ -381,6 +381,7 @@ class FaultTypeClassifier(ResidualProcessor):
         self._stuck = np.array([self.stuck_after.get(m, 0) for m in self.members], np.int64)
         self._sigma = np.array([self.sigma[m] for m in self.members])
         self._sig_blk = np.array([self.sigma_block[m] for m in self.members])
+        self._gain_crit = np.array([self.gain_crit[m] for m in self.members])
         self.output_names = [f"{m}:{t}" for m in self.members for t in FAULT_TYPES]
         self.output_names += [f"{m}:confidence" for m in self.members] + [f"{m}:active" for m in self.members]
         self.reset(1)
@@ -410,7 +411,7 @@ class FaultTypeClassifier(ResidualProcessor):
         self._k = _run_kernel(v, self._ix, self._ixx, self.confirm, self._iraw, self._stuck, self._sigma,
                               self.window, self.lookback, self.min_len, self.spike_max, self.burst_gap,
                               self.release, self.clear_after, self.prefer, self.block, self._sig_blk,
-                              self.gain_crit, self._k, self._rb, self._xb, self._sb, self._active,
+                              self._gain_crit, self._k, self._rb, self._xb, self._sb, self._active,
                               self._onset, self._type, self._conf, self._below, self._zero, self._last, out)
         return out
 

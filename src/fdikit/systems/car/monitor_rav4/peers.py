@@ -130,7 +130,7 @@ def design_peer_stages(sig: Signals, dt: float, *, skip: int, warmup: int, band_
                        stuck_margin: float = 1.0, window_s: float = 30.0, lookback_s: float = 5.0,
                        clear_after_s: float = 5.0, pfa: float = 1.0, per=None, fit_skip=None,
                        margin: float = 0.0, block_s: float = 0.5, gain_crit: float = 25.0,
-                       isolated_by=None, confirm: float = 0.5):
+                       isolated_by=None, confirm: float = 0.5, gain_margin: float = 1.5):
     """The peer check and the fault-type classifier designed on nominal :class:`Rav4PeerSignals`
     outputs ``sig`` (the calibration half).
 
@@ -142,10 +142,11 @@ def design_peer_stages(sig: Signals, dt: float, *, skip: int, warmup: int, band_
     are per group; ``skip`` also bounds the classifier's nominal statistics, ``warmup`` the samples
     during which nothing is isolated; ``block_s`` and ``gain_crit`` are the classifier's gain test
     (block length in seconds: 0.5 s averages the 12.5 Hz wheel-hop out; the block-mean noise
-    ``sigma_block`` from the nominal residual); ``isolated_by`` the classifier's further isolation
-    flags per member (the MHSSPT's alarms), which count while the member's peer statistic is at
-    least ``confirm``. The merged :class:`~fdikit.detect.PeerCheck` holds the groups
-    in the order of :data:`PEER_GROUPS`.
+    ``sigma_block`` from the nominal residual; per member the level is at least ``gain_margin``
+    times the largest gain statistic of the nominal residual over a window); ``isolated_by`` the
+    classifier's further isolation flags per member (the MHSSPT's alarms), which count while the
+    member's peer statistic is at least ``confirm``. The merged :class:`~fdikit.detect.PeerCheck`
+    holds the groups in the order of :data:`PEER_GROUPS`.
 
     Returns
     -------
@@ -181,10 +182,21 @@ def design_peer_stages(sig: Signals, dt: float, *, skip: int, warmup: int, band_
             longest = max(longest, run)
         stuck_after[m] = max(int(np.ceil((longest + 1) * (1.0 + stuck_margin))), round(0.5 / dt))
     n = lambda s: max(1, round(s / dt))  # noqa: E731
+    # the gain test's level per member: above what the nominal residual's own (model-error) slope
+    # on the signal reaches over a classifier window of the calibration half, with a margin
+    from ....isolate.fault_type import _gain_test
+
+    crit = {}
+    for m in PEER_SENSORS:
+        e, x = nom[f"peer:{m}:e"][0, skip:], nom[f"peer:{m}:ref"][0, skip:]
+        w = min(n(window_s), e.size)
+        fb = [_gain_test(e[k:k + w], x[k:k + w], blk, sig_blk[m])[0]
+              for k in range(0, e.size - w + 1, n(1.0))]
+        crit[m] = max(gain_crit, gain_margin * max(fb, default=0.0))
     ftc = FaultTypeClassifier(list(PEER_SENSORS), sigma, n(window_s), raw=_RAW_OF, stuck_after=stuck_after,
                               lookback=n(lookback_s), min_len=n(0.2), spike_max=n(0.2), burst_gap=n(0.5),
                               clear_after=n(clear_after_s), isolated_by=isolated_by, confirm=confirm,
                               block=blk, sigma_block=sig_blk,
-                              gain_crit=gain_crit)
+                              gain_crit=crit)
     names = {f"{m}:{t}": f"{s}:{t}" for m, s in PEER_SENSORS.items() for t in FAULT_TYPES}
     return pc, ftc, names
