@@ -139,3 +139,19 @@ def test_records_and_report_show_the_change():
     rep = Report("t")
     add_events(rep, recs)
     assert rep.data["changes"][0]["previous"] == "x:bias"
+
+
+def test_the_components_own_name_never_replaces_a_specific_one():
+    # "x" (an unspecific detector of the component) opens the episode; "x:bias" revises it; "x"
+    # turning on again is no change back
+    T = 400
+    a = np.zeros((1, T, 2))
+    a[0, 10:60, 0] = 1
+    a[0, 100:150, 0] = 1
+    a[0, 30:200, 1] = 1
+    dec = Decision(["r:x", "r:b"], names={"r:x": "x", "r:b": "x:bias"}, groups={"x": ["x", "x:bias"]},
+                   clear_after=0.5)
+    batch, stream, _ = _both(dec, a, ["x", "b"])
+    assert batch == stream
+    assert [(e.kind, e.k, e.hypothesis) for e in batch] == [("onset", 10, "x"), ("change", 30, "x:bias"),
+                                                            ("cleared", 249, "x:bias")]

@@ -10,21 +10,21 @@ of it, so that evidence grows until then):
 * **stuck** -- the sensor's raw signal has not changed (zero increments) for longer than the
   longest frozen run of the nominal data (``stuck_after``); checked on every sensor that has it,
   isolated or not;
-* **gain** first, decided by regression on the signal (the residual's explained variance):
-  over the samples since the step's change point (below), averaged in blocks of ``block`` samples
-  (the residual's high-frequency noise averages out), the block means of the residual are
-  regressed on those of the signal with an intercept, ``r = a + theta x``. The drop of the sum of
-  squares against a constant, ``F_b = theta^2 S_xx / s^2`` (``s^2`` the block-mean noise variance,
-  the larger of the nominal ``sigma_block^2`` and the fit's own), is the evidence of a gain (a
+* **gain** first, decided by regression on the signal (the residual's explained variance): over
+  the samples since the step's change point (below), averaged in blocks of ``block`` samples (the
+  residual's high-frequency noise averages out), the block means of the residual are regressed on
+  those of the signal with an intercept, ``r = a + theta x``. The drop of the sum of squares
+  against a constant, ``F_b = theta^2 S_xx / s^2`` (``s^2`` the block-mean noise variance, the
+  larger of the nominal ``sigma_block^2`` and the fit's own), is the evidence of a gain (a
   residual that moves with the signal, offset or not: a gain scales the sensor's offset too); it
-  is a gain when ``F_b >= gain_crit`` and the signal explains the residual better than time does
-  (else it is a drift the signal happens to follow). At least 4 blocks are needed, and a signal
-  that does not move gives no evidence: with too little excitation the fault stays a bias (the
-  default explanation) with a confidence of at most 0.5 until the line through the origin, the
-  gain without an offset, is also ruled out (``F_g >= gain_crit``), and is revised to a gain as
-  the signal moves. (The sample-wise GLR ``S_g`` below is not used to decide a gain: on a
-  coloured residual a constant step beat by a few units of ``S_g`` out of thousands typed biases
-  as gains once the signal moved.)
+  is a gain when ``F_b >= gain_crit``, unless the ramp's GLR wins (below) and time explains the
+  residual better than the signal does (a drift the signal happens to follow). At least 4 blocks
+  are needed, and a signal that does not move gives no evidence: with too little excitation the
+  fault stays a bias (the default explanation) with a confidence of at most 0.5 until the line
+  through the origin, the gain without an offset, is also ruled out (``F_g >= gain_crit``), and is
+  revised to a gain as the signal moves. (The sample-wise GLR ``S_g`` below is not used to decide
+  a gain: on a coloured residual a constant step beat by a few units of ``S_g`` out of thousands
+  typed biases as gains once the signal moved.)
 * **intermittent** -- at least two episodes of the normalised residual above 1 in the window,
   separated by ``burst_gap`` samples below ``release``, or of the residual's block means above 5
   block-mean standard deviations, separated by blocks below 2 (short bursts that a low-passed
@@ -93,7 +93,9 @@ def _classify(r, x, st, sigma, min_len, prefer, release, burst_gap, spike_max, b
     smax = max(S[0], max(S[1], S[2]))
     e = np.exp(0.5 * (S - smax))
     esum = e[0] + e[1] + e[2]
-    fb, fg = _gain_test(r[n - Lb:], x[n - Lb:], block, sig_blk)
+    fb, fg, by_time = _gain_test(r[n - Lb:], x[n - Lb:], block, sig_blk)
+    if by_time and S[1] > S[0] + prefer:
+        fb = 0.0                                      # a drift, which the signal happens to follow
     if fb >= gain_crit:                               # the residual follows the signal: a gain
         return _GAIN, 1.0 / (1.0 + np.exp(-0.5 * (fb - gain_crit)))
     # episodes of the residual out, separated by at least burst_gap samples below release
@@ -154,14 +156,15 @@ def _block_episodes(r, block, sig_blk, gap):
 
 @njit(cache=True)
 def _gain_test(r, x, block, sig_blk):
-    """``(F_b, F_g)``: the block means of r (n,) regressed on those of x with an intercept; F_b the
+    """``(F_b, F_g, by_time)``: the block means of r (n,) regressed on those of x with an intercept; F_b the
     drop of the residual sum of squares against a constant (the slope: a gain, or a time trend that
-    x follows less well than time itself), F_g against a line through the origin (a gain without an
+    x follows), F_g against a line through the origin (a gain without an
     offset), each over the noise variance of a block mean (the larger of ``sig_blk^2`` and the fit's
-    own). ``(0, 0)`` with fewer than 4 blocks or no excitation."""
+    own); ``by_time`` where a line in time fits the block means better than the line in x.
+    ``(0, 0, False)`` with fewer than 4 blocks or no excitation."""
     nb = r.size // block
     if nb < 4:
-        return 0.0, 0.0
+        return 0.0, 0.0, False
     rm, xm = np.zeros(nb), np.zeros(nb)
     off = r.size - nb * block                         # the newest nb * block samples
     for b in range(nb):
@@ -182,15 +185,13 @@ def _gain_test(r, x, block, sig_blk):
         sx0 += xm[b] * xm[b]
         sxy0 += xm[b] * rm[b]
     if sxx <= 0.0 or sx0 <= 0.0:
-        return 0.0, 0.0
+        return 0.0, 0.0, False
     rss = max(syy - sxy * sxy / sxx, 0.0)             # a + theta x
     rss_t = max(syy - sty * sty / stt, 0.0)           # a + s t: a drift
     s2 = max(sig_blk * sig_blk, rss / (nb - 2))
     fb = (syy - rss) / s2
-    if rss_t < rss:
-        fb = 0.0                                      # time explains the residual better than x
     fg = max(syy + nb * mr * mr - sxy0 * sxy0 / sx0 - rss, 0.0) / s2
-    return fb, fg
+    return fb, fg, rss_t < rss
 
 
 @njit(cache=True)

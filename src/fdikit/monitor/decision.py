@@ -38,8 +38,10 @@ class Decision:
     ``clear_level`` for ``clear_after``. The onset names the hypothesis of the first channel on (in
     the order of ``alarm_channels``). While the episode is open, a *change* event
     (``kind="change"``, ``previous`` the name it replaces, the same ``episode``) is given when another
-    hypothesis of the group turns on (its channels were all off at the judged sample before); the
-    cleared event names the latest hypothesis.
+    hypothesis of the group turns on (its channels were all off at the judged sample before); a
+    hypothesis named as its group (the component's own, unspecific name, e.g. ``"yaw_rate"``) may
+    open an episode but never replaces a more specific name. The cleared event names the latest
+    hypothesis.
 
     A cleared event says the fault is *not seen any more* (the records label it so), not that it
     is gone: the rule sees only the alarm, and a fault that persists while its residual decays
@@ -137,6 +139,7 @@ class Decision:
                     seen[h] = g
                     unit_of[h] = g
         units = list(dict.fromkeys(unit_of[h] for h in hyps))
+        self._unit_names = units
         self._unit_chans = [[a for a, c in enumerate(self.alarm_channels) if unit_of[self.hypothesis(c)] == u]
                             for u in units]
         self._unit_hyps = [list(dict.fromkeys(self.hypothesis(self.alarm_channels[a]) for a in ch))
@@ -170,6 +173,8 @@ class Decision:
         hypothesis of unit u turns on (all its channels off at the judged sample before), in order."""
         out = []
         for hi, chans in enumerate(self._hyp_chans[u]):
+            if self._unit_hyps[u][hi] == self._unit_names[u]:
+                continue            # the component's own name never replaces a specific one
             on_h = on[:, chans].any(axis=1)
             for q in np.flatnonzero(on_h[1:] & ~on_h[:-1]) + 1:
                 out.append((int(q), hi, next(c for c in chans if on[q, c])))

@@ -220,7 +220,8 @@ class _StreamingPath:
             h0 = np.cumsum([0] + [len(h) for h in d._unit_hyps])
             for run, u in np.argwhere(act & ~done):
                 for hi in range(len(d._unit_hyps[u])):
-                    if rise[run, h0[u] + hi] and hi != self._cur[run, u]:
+                    if rise[run, h0[u] + hi] and hi != self._cur[run, u] \
+                            and d._unit_hyps[u][hi] != d._unit_names[u]:
                         a = next(c for c in d._hyp_chans[u][hi] if on[run, c])
                         si = self._size_idx[a]
                         h, prev = d._unit_hyps[u][hi], d._unit_hyps[u][self._cur[run, u]]
