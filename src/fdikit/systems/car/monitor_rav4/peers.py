@@ -12,7 +12,11 @@ real minute the front wheels read slower than the rear ones the more, the lower 
 residual of a front wheel against its peers, fitted as an affine map of their median on 16-20 m/s,
 falls to -0.17 m/s at 8 m/s), which an affine map on the peers' median alone does not follow. The
 wheels are fitted on the whole calibration half (8-20 m/s; wheel speeds need no warm-up) and their
-thresholds target one false alarm per 10 minutes (the yaw group: per hour). Measured on the minute
+thresholds target one false alarm per 10 minutes (the yaw group too, low-passed at 0.1 Hz: its
+yaw-rate threshold 0.0095 rad/s, before per hour at 0.2 Hz 0.0188 rad/s = 1.08 deg/s, above the
+0.5-1 deg/s biases the MHSSPT announces untyped). The MHSSPT's alarms of the yaw rate, the
+accelerometer and the steering also start the fault typing of that sensor (``isolated_by``,
+while its peer statistic is >= 0.5), so what the MHSSPT isolates first is typed too. Measured on the minute
 (:func:`run_rav4_log`, whole monitor): the nominal wheel statistic peaks at 0.67 of its threshold,
 no announcement; a 1 % gain of WHEEL_SPEED_FL from 20 s / 50 s is announced on that wheel after
 1.6 s / 2.3 s, of WHEEL_SPEED_RR after 1.0 s / 1.1 s (gain 0.99: FL 1.1 / 1.2 s, RR 1.5 / 2.3 s),
