@@ -333,11 +333,11 @@ def main():
                     pdel[p][(sensor, typ)].append(t[first[0]] - t0)
     print(f"\n{n} single-fault runs of the grid ({'quick' if a.quick else f'fraction {a.fraction:g}'}), "
           f"{time.time() - t_start:.0f} s")
-    cols = list(SENSORS) + ["axle", "(none)"]
+    cols = [*list(SENSORS), "axle", "(none)"]
     show("fdikit component (rows: injected; columns: first sensor named after the onset)", comp, cols)
     for p in pcomp:
-        show(f"{p} component (first signal to alarm)", pcomp[p], list(SENSORS) + ["(none)", "(before)"])
-    tcols = list(TYPES) + ["spike", "(untyped)"]
+        show(f"{p} component (first signal to alarm)", pcomp[p], [*list(SENSORS), "(none)", "(before)"])
+    tcols = [*list(TYPES), "spike", "(untyped)"]
     show("fdikit fault type 5 s after the first naming (right component only)", typ5, tcols)
     show("fdikit fault type at the end of the run (right component only)", typf, tcols)
     pc = lambda a, b: f"{a}/{b} ({100 * a / max(b, 1):.1f} %)"  # noqa: E731
