@@ -348,7 +348,8 @@ def main():
     acc = [(m, d) for m, d in floor[("lateral_accelerometer", "bias")].items()]
     print(f"lateral accelerometer bias detected per magnitude (m/s^2): "
           f"{ {m: f'{sum(d)}/{len(d)}' for m, d in sorted(acc)} }")
-    print("\nper sensor and type: detected / runs, median delay (s) of fdikit | PH raw | PH physics (detected "
+    print("\nper sensor and type: detected / runs, median delay (s) of fdikit | PH raw | PH physics ("
+          "detected "
           "by naming the sensor); floor = smallest magnitude detected in every run (any run); '<': a peer "
           "faster")
     wins = []
@@ -367,12 +368,14 @@ def main():
                 wins.append((s, typ, p, len(v), round(float(np.median(v)), 2), len(f),
                              round(float(np.median(f)), 2) if f else None))
         print(f"  {s:22}{typ:13}{det:3d}/{tot:<3d} {med(f)} ({len(f):2d}) | {med(pr)} ({len(pr):2d}) | "
-              f"{med(pp)} ({len(pp):2d})  floor {all_[0] if all_ else '-'} ({any_[0] if any_ else '-'}) {mark}")
+              f"{med(pp)} ({len(pp):2d})  floor {all_[0] if all_ else '-'} "
+              f"({any_[0] if any_ else '-'}) {mark}")
     print("\ndelay distribution per type (fdikit, s): n, 10 / 50 / 90 %")
     for typ in TYPES:
         v = [d for (s, ty), ds in delays.items() if ty == typ for d in ds]
         if v:
-            print(f"  {typ:13} {len(v):4d} " + " / ".join(f"{np.percentile(v, q):6.2f}" for q in (10, 50, 90)))
+            pct = " / ".join(f"{np.percentile(v, q):6.2f}" for q in (10, 50, 90))
+            print(f"  {typ:13} {len(v):4d} {pct}")
     print(f"peers' alarms before an onset: {dict(pbefore)}")
     print("\ncases where a peer wins (sensor, type, peer, n detected, median delay; fdikit n, median):")
     for w in wins:
