@@ -10,18 +10,32 @@ of it, so that evidence grows until then):
 * **stuck** -- the sensor's raw signal has not changed (zero increments) for longer than the
   longest frozen run of the nominal data (``stuck_after``); checked on every sensor that has it,
   isolated or not;
-* **gain** first when its GLR (below) beats the bias one by ``prefer`` (a gain's residual comes and
-  goes with the signal, which would else look like bursts);
+* **gain** first, decided by regression on the signal (the residual's explained variance): over
+  the samples since the step's change point (below), averaged in blocks of ``block`` samples (the
+  residual's high-frequency noise averages out), the block means of the residual are regressed on
+  those of the signal with an intercept, ``r = a + theta x``. The drop of the sum of squares
+  against a constant, ``F_b = theta^2 S_xx / s^2`` (``s^2`` the block-mean noise variance, the
+  larger of the nominal ``sigma_block^2`` and the fit's own), is the evidence of a gain (a
+  residual that moves with the signal, offset or not: a gain scales the sensor's offset too); it
+  is a gain when ``F_b >= gain_crit``, unless the ramp's GLR wins (below) and time explains the
+  residual better than the signal does (a drift the signal happens to follow). At least 4 blocks
+  are needed, and a signal that does not move gives no evidence: with too little excitation the
+  fault stays a bias (the default explanation) with a confidence of at most 0.5 until the line
+  through the origin, the gain without an offset, is also ruled out (``F_g >= gain_crit``), and is
+  revised to a gain as the signal moves. (The sample-wise GLR ``S_g`` below is not used to decide
+  a gain: on a coloured residual a constant step beat by a few units of ``S_g`` out of thousands
+  typed biases as gains once the signal moved.)
 * **intermittent** -- at least two episodes of the normalised residual above 1 in the window,
-  separated by ``burst_gap`` samples below ``release``; **spike** -- one episode no longer than
+  separated by ``burst_gap`` samples below ``release``, or of the residual's block means above 5
+  block-mean standard deviations, separated by blocks below 2 (short bursts that a low-passed
+  statistic smears into one); **spike** -- one episode no longer than
   ``spike_max`` samples, followed by ``burst_gap`` samples below ``release``;
-* otherwise the one-parameter models with an unknown change point ``j`` compete by their GLR
-  (``sigma`` the nominal residual's standard deviation): a step ``r_i = b`` (**bias**),
+* otherwise a step and a ramp with an unknown change point ``j`` compete by their GLR (``sigma``
+  the nominal residual's standard deviation): a step ``r_i = b`` (**bias**),
   ``S_b = max_j (sum r)^2 / (sigma^2 n)``; a ramp ``r_i = s (i - j + 1)`` (**drift**),
-  ``S_d = max_j (sum tau r)^2 / (sigma^2 sum tau^2)``; a residual proportional to the signal
-  ``r_i = theta x_i`` (**gain**), ``S_g = max_j (sum x r)^2 / (sigma^2 sum x^2)``. Drift or gain
-  wins over bias only when its statistic exceeds the bias one by ``prefer`` (a step is the
-  default explanation); the confidence is the softmax of ``S / 2`` over the three.
+  ``S_d = max_j (sum tau r)^2 / (sigma^2 sum tau^2)``; and ``S_g = max_j (sum x r)^2 / (sigma^2 sum
+  x^2)``. Drift wins over bias only when its statistic exceeds the bias one by ``prefer`` (a step
+  is the default explanation); the confidence is the softmax of ``S / 2`` over the three.
 
 The fault stays active -- its episode does not clear -- while the normalised residual stays above
 ``release`` or the signal stays frozen; it ends after ``clear_after`` samples below. Outputs, per
@@ -35,9 +49,11 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
+from numba import njit
 
 from ..base.stage import ResidualProcessor
 from ..errors import DataError
+from ..signals import Signals
 
 __all__ = ["FAULT_TYPES", "FaultTypeClassifier"]
 
@@ -46,28 +62,194 @@ FAULT_TYPES = ("bias", "drift", "gain", "stuck", "intermittent", "spike")
 _BIAS, _DRIFT, _GAIN, _STUCK, _INTER, _SPIKE = range(6)
 
 
-def _glr_scores(r: np.ndarray, x: np.ndarray, sigma: float, min_len: int) -> np.ndarray:
-    """``[S_b, S_d, S_g]`` of residual r (n,) and signal x (n,), each maximised over the change
-    point j (segments of at least ``min_len`` samples ending at the newest sample)."""
+@njit(cache=True)
+def _classify(r, x, st, sigma, min_len, prefer, release, burst_gap, spike_max, block, sig_blk, gain_crit):
+    """Type and confidence of one member's fault from its window since the onset, oldest first:
+    residual r (n,), signal x (n,), normalised residual st (n,) (see the module docstring)."""
     n = r.size
-    rr, xr = r[::-1], x[::-1]
-    L = np.arange(1, n + 1, dtype=float)              # samples since the candidate change point
-    sr = np.cumsum(rr)                                # sum r over the last L samples
-    # sum tau r with tau = L - (age) : tau of the newest sample is L, of the oldest 1
-    sar = np.cumsum(np.arange(n) * rr)                # sum age r (age 0 = newest)
-    str_ = L * sr - sar
-    stt = L * (L + 1) * (2 * L + 1) / 6.0
-    sxr = np.cumsum(xr * rr)
-    sxx = np.cumsum(xr * xr)
-    ok = L >= min_len
-    if not ok.any():
-        return np.zeros(3)
-    s2 = sigma * sigma
-    sb = np.max((sr * sr / L)[ok]) / s2
-    sd = np.max((str_ * str_ / stt)[ok]) / s2
-    g = np.where(sxx > 0, sxr * sxr / np.where(sxx > 0, sxx, 1.0), 0.0)
-    sg = np.max(g[ok]) / s2
-    return np.array([sb, sd, sg])
+    # the GLRs [S_b, S_d, S_g], each maximised over the change point (segments of at least min_len
+    # samples ending at the newest sample): sums over the last L samples, newest first
+    sr = sar = sxr = sxx = 0.0
+    sb = sd = sg = -np.inf
+    Lb = 0                                            # the step's change point: the last Lb samples
+    for L in range(1, n + 1):
+        i = n - L
+        sr += r[i]
+        sar += (L - 1) * r[i]                         # age (0 = newest) times r
+        sxr += x[i] * r[i]
+        sxx += x[i] * x[i]
+        if L < min_len:
+            continue
+        s_tr = L * sr - sar                           # sum tau r, tau = 1 (oldest) .. L (newest)
+        stt = L * (L + 1) * (2 * L + 1) / 6.0
+        if sr * sr / L > sb:
+            sb, Lb = sr * sr / L, L
+        sd = max(sd, s_tr * s_tr / stt)
+        sg = max(sg, sxr * sxr / sxx if sxx > 0 else 0.0)
+    S = np.zeros(3)
+    if n >= min_len:
+        s2 = sigma * sigma
+        S[0], S[1], S[2] = sb / s2, sd / s2, sg / s2
+    smax = max(S[0], max(S[1], S[2]))
+    e = np.exp(0.5 * (S - smax))
+    esum = e[0] + e[1] + e[2]
+    fb, fg, by_time = _gain_test(r[n - Lb:], x[n - Lb:], block, sig_blk)
+    if by_time and S[1] > S[0] + prefer:
+        fb = 0.0                                      # a drift, which the signal happens to follow
+    if fb >= gain_crit:                               # the residual follows the signal: a gain
+        return _GAIN, 1.0 / (1.0 + np.exp(-0.5 * (fb - gain_crit)))
+    # episodes of the residual out, separated by at least burst_gap samples below release
+    first = last = -1
+    n_ep = 0
+    below = 0                                         # samples below release since the last one out
+    for i in range(n):
+        if st[i] >= 1.0:
+            if first < 0:
+                first = i
+                n_ep = 1
+            elif below >= burst_gap:
+                n_ep += 1
+            last = i
+            below = 0
+        elif st[i] < release:
+            below += 1
+    if n_ep < 2:
+        # bursts shorter than the statistic's low-pass smear into one episode there: count them on
+        # the residual's block means too
+        n_ep = max(n_ep, _block_episodes(r, block, sig_blk, max(1, burst_gap // block)))
+    if n_ep >= 2:
+        return _INTER, 1.0 - 0.5 ** (n_ep - 1)
+    if first >= 0:
+        if last - first < spike_max and below >= burst_gap:
+            return _SPIKE, min(1.0, below / (2.0 * burst_gap))
+    best = _DRIFT if S[1] > S[0] + prefer else _BIAS
+    c = e[best] / esum
+    if best == _BIAS and fg < gain_crit:
+        c = min(c, 0.5)                               # a gain is not ruled out yet (too little excitation)
+    return best, c
+
+
+#: block-mean levels (in block-mean noise standard deviations) of a burst and of the quiet between
+_BURST_ON, _BURST_OFF = 5.0, 2.0
+
+
+@njit(cache=True)
+def _block_episodes(r, block, sig_blk, gap):
+    """Episodes of the residual r (n,): runs of block means with ``|mean| >= 5 sig_blk``, separated
+    by at least ``gap`` blocks below ``2 sig_blk`` (blocks aligned to the newest sample)."""
+    nb = r.size // block
+    off = r.size - nb * block
+    n_ep, seen, below = 0, False, 0
+    for b in range(nb):
+        m = 0.0
+        for i in range(block):
+            m += r[off + b * block + i]
+        z = abs(m / block) / sig_blk
+        if z >= _BURST_ON:
+            if not seen or below >= gap:
+                n_ep += 1
+            seen, below = True, 0
+        elif z < _BURST_OFF:
+            below += 1
+    return n_ep
+
+
+@njit(cache=True)
+def _gain_test(r, x, block, sig_blk):
+    """``(F_b, F_g, by_time)``: the block means of r (n,) regressed on those of x with an intercept; F_b the
+    drop of the residual sum of squares against a constant (the slope: a gain, or a time trend that
+    x follows), F_g against a line through the origin (a gain without an
+    offset), each over the noise variance of a block mean (the larger of ``sig_blk^2`` and the fit's
+    own); ``by_time`` where a line in time fits the block means better than the line in x.
+    ``(0, 0, False)`` with fewer than 4 blocks or no excitation."""
+    nb = r.size // block
+    if nb < 4:
+        return 0.0, 0.0, False
+    rm, xm = np.zeros(nb), np.zeros(nb)
+    off = r.size - nb * block                         # the newest nb * block samples
+    for b in range(nb):
+        for i in range(block):
+            rm[b] += r[off + b * block + i]
+            xm[b] += x[off + b * block + i]
+        rm[b] /= block
+        xm[b] /= block
+    mr, mx, mt = rm.mean(), xm.mean(), 0.5 * (nb - 1)
+    sxx = sxy = syy = stt = sty = sx0 = sxy0 = 0.0
+    for b in range(nb):
+        dx, dy, dt = xm[b] - mx, rm[b] - mr, b - mt
+        sxx += dx * dx
+        sxy += dx * dy
+        syy += dy * dy
+        stt += dt * dt
+        sty += dt * dy
+        sx0 += xm[b] * xm[b]
+        sxy0 += xm[b] * rm[b]
+    if sxx <= 0.0 or sx0 <= 0.0:
+        return 0.0, 0.0, False
+    rss = max(syy - sxy * sxy / sxx, 0.0)             # a + theta x
+    rss_t = max(syy - sty * sty / stt, 0.0)           # a + s t: a drift
+    s2 = max(sig_blk * sig_blk, rss / (nb - 2))
+    fb = (syy - rss) / s2
+    fg = max(syy + nb * mr * mr - sxy0 * sxy0 / sx0 - rss, 0.0) / s2
+    return fb, fg, rss_t < rss
+
+
+@njit(cache=True)
+def _run_kernel(V, ix, ixx, confirm, iraw, stuck, sigma, window, lookback, min_len, spike_max, burst_gap,
+                release, clear_after, prefer, block, sig_blk, gain_crit, k, rb, xb, sb, active, onset, typ,
+                conf, below, zero, last, out):
+    """The classifier over samples V (R, T, inputs) from sample count k, state updated in place;
+    outputs into out (R, T, outputs). Returns the new sample count."""
+    R, T = V.shape[0], V.shape[1]
+    M, W, NT = ix.shape[0], window, 6
+    r_seg, x_seg, s_seg = np.empty(W), np.empty(W), np.empty(W)
+    for kk in range(T):
+        p = k % W
+        for run in range(R):
+            for j in range(M):
+                rb[run, j, p] = V[run, kk, ix[j, 2]]
+                xb[run, j, p] = V[run, kk, ix[j, 3]]
+                sb[run, j, p] = V[run, kk, ix[j, 1]]
+                if iraw[j] >= 0:
+                    raw = V[run, kk, iraw[j]]
+                    zero[run, j] = zero[run, j] + 1 if raw == last[run, j] else 0
+                    last[run, j] = raw
+        k += 1
+        for run in range(R):
+            for j in range(M):
+                stat = V[run, kk, ix[j, 1]]
+                is_stuck = stuck[j] > 0 and zero[run, j] >= stuck[j]
+                iso = V[run, kk, ix[j, 0]] >= 1.0
+                for c in range(ixx.shape[1]):
+                    if ixx[j, c] >= 0 and V[run, kk, ixx[j, c]] >= 1.0 and V[run, kk, ix[j, 1]] >= confirm:
+                        iso = True
+                if not active[run, j] and (iso or is_stuck):
+                    onset[run, j] = max(k - 1 - lookback, 0)
+                    active[run, j] = True
+                if active[run, j] and stat < release and not is_stuck:
+                    below[run, j] += 1
+                else:
+                    below[run, j] = 0
+                if below[run, j] >= clear_after:
+                    active[run, j] = False
+                if active[run, j]:
+                    if is_stuck:
+                        z = float(zero[run, j])
+                        typ[run, j], conf[run, j] = _STUCK, z / (z + stuck[j])
+                    else:
+                        n = min(W, k - onset[run, j])
+                        k0 = max(onset[run, j], k - W)
+                        for i in range(n):
+                            q = (k0 + i) % W
+                            r_seg[i], x_seg[i], s_seg[i] = rb[run, j, q], xb[run, j, q], sb[run, j, q]
+                        typ[run, j], conf[run, j] = _classify(r_seg[:n], x_seg[:n], s_seg[:n], sigma[j],
+                                                              min_len, prefer, release, burst_gap, spike_max,
+                                                              block, sig_blk[j], gain_crit[j])
+                for i in range(NT):
+                    out[run, kk, j * NT + i] = 1.0 if (active[run, j] and typ[run, j] == i) else 0.0
+                out[run, kk, M * NT + j] = conf[run, j] if active[run, j] else 0.0
+                out[run, kk, M * NT + M + j] = 1.0 if active[run, j] else 0.0
+    return k
 
 
 class FaultTypeClassifier(ResidualProcessor):
@@ -87,6 +269,13 @@ class FaultTypeClassifier(ResidualProcessor):
         ``"peer:{m}"``), ``r`` (the residual, ``"peer:{m}:e"``), ``x`` (the signal a gain scales,
         ``"peer:{m}:ref"``: the fault-free value the peers give, so that a gain ``g`` makes
         ``r = (g - 1) x``).
+    isolated_by : mapping str -> sequence of str, optional
+        Member -> further isolation flags (channels, >= 1 isolates) that start its fault as the
+        ``isolated`` channel does: e.g. another isolation stage's alarm for that sensor, so that
+        what that stage isolates first is typed too; they count only while the member's own
+        normalised residual is at least ``confirm``.
+    confirm : float
+        Level of the member's normalised residual that the ``isolated_by`` flags need (0: none).
     raw : mapping str -> str, optional
         Member -> channel of its raw signal for the stuck check (members without one have none).
     stuck_after : mapping str -> int, optional
@@ -104,7 +293,16 @@ class FaultTypeClassifier(ResidualProcessor):
     clear_after : int
         Samples below ``release`` (and not frozen) that end the fault.
     prefer : float
-        GLR margin drift or gain must beat bias by.
+        GLR margin a drift must beat a bias by.
+    block : int
+        Samples averaged into one block mean for the gain test (longer than the residual's
+        high-frequency noise; at least 4 blocks since the change point before a gain is decided).
+    sigma_block : mapping str -> float, optional
+        Member -> standard deviation of a block mean of its nominal residual (default
+        ``sigma / sqrt(block)``, right for white noise).
+    gain_crit : float or mapping str -> float
+        Level of the gain test's F statistic (the slope of the residual on the signal, in units of
+        the block-mean noise variance) above which the fault is a gain. Per member, or one for all.
 
     Examples
     --------
@@ -122,10 +320,13 @@ class FaultTypeClassifier(ResidualProcessor):
                     "_last")
 
     def __init__(self, members: Sequence[str], sigma: Mapping[str, float], window: int, *,
-                 channels: Mapping[str, str] | None = None, raw: Mapping[str, str] | None = None,
+                 channels: Mapping[str, str] | None = None,
+                 isolated_by: Mapping[str, Sequence[str]] | None = None, confirm: float = 0.0,
+                 raw: Mapping[str, str] | None = None,
                  stuck_after: Mapping[str, int] | None = None, lookback: int = 50, min_len: int = 10,
                  spike_max: int = 10, burst_gap: int = 25, release: float = 0.5, clear_after: int = 250,
-                 prefer: float = 6.0):
+                 prefer: float = 6.0, block: int = 10, sigma_block: Mapping[str, float] | None = None,
+                 gain_crit: float | Mapping[str, float] = 25.0):
         self.members = [str(m) for m in members]
         if not self.members:
             raise DataError("FaultTypeClassifier needs at least one member")
@@ -134,12 +335,21 @@ class FaultTypeClassifier(ResidualProcessor):
             raise DataError(f"sigma must be finite and > 0 per member, got {self.sigma}")
         for what, v, lo in (("window", window, 2), ("lookback", lookback, 0), ("min_len", min_len, 1),
                             ("spike_max", spike_max, 1), ("burst_gap", burst_gap, 1),
-                            ("clear_after", clear_after, 1)):
+                            ("clear_after", clear_after, 1), ("block", block, 1)):
             if isinstance(v, bool) or int(v) != v or v < lo:
                 raise DataError(f"{what} must be an integer >= {lo} (samples), got {v!r}")
         self.window, self.lookback, self.min_len = int(window), int(lookback), int(min_len)
         self.spike_max, self.burst_gap, self.clear_after = int(spike_max), int(burst_gap), int(clear_after)
         self.release, self.prefer = float(release), float(prefer)
+        self.block = int(block)
+        gc = gain_crit if isinstance(gain_crit, Mapping) else {m: gain_crit for m in self.members}
+        self.gain_crit = {m: float(gc[m]) for m in self.members}
+        if any(not (np.isfinite(v) and v > 0) for v in self.gain_crit.values()):
+            raise DataError(f"gain_crit must be finite and > 0 per member, got {gain_crit!r}")
+        sb = dict(sigma_block or {})
+        self.sigma_block = {m: float(sb.get(m, self.sigma[m] / np.sqrt(self.block))) for m in self.members}
+        if any(not (np.isfinite(v) and v > 0) for v in self.sigma_block.values()):
+            raise DataError(f"sigma_block must be finite and > 0 per member, got {self.sigma_block}")
         ch = {"isolated": "peer:{m}:isolated", "stat": "peer:{m}", "r": "peer:{m}:e", "x": "peer:{m}:ref"}
         ch.update(dict(channels or {}))
         self.channels = ch
@@ -149,17 +359,30 @@ class FaultTypeClassifier(ResidualProcessor):
         if bad or set(self.stuck_after) - set(self.raw):
             raise DataError(f"raw and stuck_after must name members, and every stuck_after member needs a "
                             f"raw channel; got raw {self.raw}, stuck_after {self.stuck_after}")
+        self.isolated_by = {str(k): [str(c) for c in v] for k, v in (isolated_by or {}).items()}
+        if isinstance(isolated_by, str) or any(isinstance(v, str) for v in (isolated_by or {}).values()) \
+                or set(self.isolated_by) - set(self.members):
+            raise DataError(f"isolated_by must map members to lists of channels, got {isolated_by!r}")
         names = []
         for m in self.members:
             names += [ch[k].format(m=m) for k in ("isolated", "stat", "r", "x")]
+            names += self.isolated_by.get(m, [])
             if m in self.raw:
                 names.append(self.raw[m])
         self.input_names = list(dict.fromkeys(names))
         ix = {n: i for i, n in enumerate(self.input_names)}
         self._ix = np.array([[ix[ch[k].format(m=m)] for k in ("isolated", "stat", "r", "x")]
                              for m in self.members], np.int64)
+        self.confirm = float(confirm)
+        K = max([len(v) for v in self.isolated_by.values()] + [0])
+        self._ixx = np.array([[ix[c] for c in self.isolated_by.get(m, [])]
+                              + [-1] * (K - len(self.isolated_by.get(m, []))) for m in self.members],
+                             np.int64).reshape(len(self.members), K)
         self._iraw = np.array([ix[self.raw[m]] if m in self.raw else -1 for m in self.members], np.int64)
         self._stuck = np.array([self.stuck_after.get(m, 0) for m in self.members], np.int64)
+        self._sigma = np.array([self.sigma[m] for m in self.members])
+        self._sig_blk = np.array([self.sigma_block[m] for m in self.members])
+        self._gain_crit = np.array([self.gain_crit[m] for m in self.members])
         self.output_names = [f"{m}:{t}" for m in self.members for t in FAULT_TYPES]
         self.output_names += [f"{m}:confidence" for m in self.members] + [f"{m}:active" for m in self.members]
         self.reset(1)
@@ -183,76 +406,35 @@ class FaultTypeClassifier(ResidualProcessor):
         """After held samples: start again (the window would span the gap)."""
         self.reset(self._R)
 
-    def _segment(self, run: int, j: int, n: int, k0: int) -> tuple[np.ndarray, np.ndarray]:
-        """n samples of run's member j from sample k0 (still in the buffer), oldest first."""
-        W = self.window
-        k0 = max(k0, self._k - W)
-        idx = (np.arange(k0, k0 + n) % W)
-        return self._rb[run, j, idx], self._xb[run, j, idx]
+    def _advance(self, v: np.ndarray) -> np.ndarray:
+        """Samples v (runs, T, inputs) through the kernel -> outputs (runs, T, outputs)."""
+        out = np.empty((v.shape[0], v.shape[1], len(self.output_names)))
+        self._k = _run_kernel(v, self._ix, self._ixx, self.confirm, self._iraw, self._stuck, self._sigma,
+                              self.window, self.lookback, self.min_len, self.spike_max, self.burst_gap,
+                              self.release, self.clear_after, self.prefer, self.block, self._sig_blk,
+                              self._gain_crit, self._k, self._rb, self._xb, self._sb, self._active,
+                              self._onset, self._type, self._conf, self._below, self._zero, self._last, out)
+        return out
 
-    def _classify(self, run: int, j: int) -> tuple[int, float]:
-        m = self.members[j]
-        if self._stuck[j] > 0 and self._zero[run, j] >= self._stuck[j]:
-            z = float(self._zero[run, j])
-            return _STUCK, z / (z + self._stuck[j])
-        n = int(min(self.window, self._k - self._onset[run, j]))
-        r, x = self._segment(run, j, n, int(self._onset[run, j]))
-        S = _glr_scores(r, x, self.sigma[m], self.min_len)
-        e = np.exp(0.5 * (S - S.max()))
-        if S[2] > S[0] + self.prefer and S[2] >= S[1]:
-            return _GAIN, float(e[_GAIN] / e.sum())   # bursts in step with the signal: a gain
-        st = self._stat_seg(run, j, n, int(self._onset[run, j]))
-        on = np.flatnonzero(st >= 1.0)
-        if on.size:
-            # episodes of the residual out, separated by at least burst_gap samples below release
-            cq = np.concatenate([[0], np.cumsum(st < self.release)])
-            sep = (cq[on[1:]] - cq[on[:-1] + 1]) >= self.burst_gap
-            n_ep = 1 + int(sep.sum())
-            if n_ep >= 2:
-                return _INTER, 1.0 - 0.5 ** (n_ep - 1)
-            quiet_end = cq[-1] - cq[on[-1] + 1]
-            if on[-1] - on[0] < self.spike_max and quiet_end >= self.burst_gap:
-                return _SPIKE, min(1.0, quiet_end / (2.0 * self.burst_gap))
-        best = _DRIFT if S[1] > S[0] + self.prefer else _BIAS
-        return best, float(e[best] / e.sum())
-
-    def _stat_seg(self, run: int, j: int, n: int, k0: int) -> np.ndarray:
-        k0 = max(k0, self._k - self.window)
-        idx = (np.arange(k0, k0 + n) % self.window)
-        return self._sb[run, j, idx]
-
-    def _step(self, v: np.ndarray) -> np.ndarray:
+    def _check(self, v: np.ndarray, k: int) -> None:
         if v.shape[0] != self._R:
             raise DataError(f"sample has {v.shape[0]} runs; the FaultTypeClassifier was reset for {self._R}")
         if not np.all(np.isfinite(v)):
-            run, c = np.argwhere(~np.isfinite(v))[0]
+            run, kk, c = np.argwhere(~np.isfinite(v))[0]
             raise DataError(f"FaultTypeClassifier input {self.input_names[c]!r} is not finite at sample "
-                            f"{self._k} (run {run})")
-        iso, stat, r, x = (v[:, self._ix[:, i]] for i in range(4))
-        p = self._k % self.window
-        self._rb[:, :, p], self._xb[:, :, p], self._sb[:, :, p] = r, x, stat
-        has = self._iraw >= 0
-        if has.any():
-            raw = v[:, np.where(has, self._iraw, 0)]
-            same = (raw == self._last) & has
-            self._zero = np.where(same, self._zero + 1, 0)
-            self._last = raw
-        self._k += 1
-        stuck = (self._stuck > 0) & (self._zero >= self._stuck)
-        start = ~self._active & ((iso >= 1.0) | stuck)
-        self._onset = np.where(start, np.maximum(self._k - 1 - self.lookback, 0), self._onset)
-        self._active |= start
-        self._below = np.where(self._active & (stat < self.release) & ~stuck, self._below + 1, 0)
-        self._active &= self._below < self.clear_after
-        for run, j in np.argwhere(self._active):
-            self._type[run, j], self._conf[run, j] = self._classify(run, j)
-        out = np.zeros((self._R, len(self.output_names)))
-        M, T = len(self.members), len(FAULT_TYPES)
-        for j in range(M):
-            out[:, j * T:(j + 1) * T] = (self._type[:, j, None] == np.arange(T)) & self._active[:, j, None]
-        out[:, M * T:M * T + M] = np.where(self._active, self._conf, 0.0)
-        out[:, M * T + M:] = self._active
-        return out
+                            f"{k + kk} (run {run})")
+
+    def _step(self, v: np.ndarray) -> np.ndarray:
+        v = np.ascontiguousarray(v, dtype=float)[:, None, :]
+        self._check(v, self._k)
+        return self._advance(v)[:, 0]
+
+    def run(self, signals: Signals) -> Signals:
+        """The outputs over a whole record (the same numbers as :meth:`step`, in one compiled loop)."""
+        v = np.ascontiguousarray(signals.values[:, :, signals.index(self.input_names)], dtype=float)
+        self.reset(signals.runs)
+        self._check(v, 0)
+        return Signals(signals.t, self._advance(v), self.output_names, check=False)
 
     def __repr__(self) -> str:
         return (f"FaultTypeClassifier(members={self.members}, window={self.window}, "
@@ -260,10 +442,13 @@ class FaultTypeClassifier(ResidualProcessor):
 
     def to_dict(self) -> dict[str, Any]:
         return {"members": self.members, "sigma": self.sigma, "window": self.window,
-                "channels": self.channels, "raw": self.raw, "stuck_after": self.stuck_after,
+                "channels": self.channels, "isolated_by": self.isolated_by,
+                "confirm": self.confirm, "raw": self.raw,
+                "stuck_after": self.stuck_after,
                 "lookback": self.lookback, "min_len": self.min_len, "spike_max": self.spike_max,
                 "burst_gap": self.burst_gap, "release": self.release, "clear_after": self.clear_after,
-                "prefer": self.prefer}
+                "prefer": self.prefer, "block": self.block, "sigma_block": self.sigma_block,
+                "gain_crit": self.gain_crit}
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> FaultTypeClassifier:

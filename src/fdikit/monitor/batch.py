@@ -89,12 +89,14 @@ class _BatchPath:
             status[:, :n_w] = _WARM
             st_vals = self._processors(r).values
         st = Signals(t, st_vals, self.stat_names, check=False)
-        events, cleared = [], []
+        events, cleared, changes = [], [], []
         if self.decision is not None:
             pool = self._decision_pool(r, st)
             for e in self.decision.events(t, pool, status=status, dt=dt if dt else 1.0):
-                (cleared if e.kind == "cleared" else events).append(e)
-        return MonitorResult(r, st, events, np.ones((signals.runs, T), bool), [], status, [], cleared)
+                kind = e.kind
+                (cleared if kind == "cleared" else changes if kind == "change" else events).append(e)
+        return MonitorResult(r, st, events, np.ones((signals.runs, T), bool), [], status, [], cleared,
+                             changes)
 
     def _decision_pool(self, r: Signals, st: Signals) -> Signals:
         """The channels the decision reads, from the residuals and statistics (gathered, not the

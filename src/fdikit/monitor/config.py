@@ -55,6 +55,8 @@ Schema (every key is checked: an unknown key or a wrong type is an error naming 
     clear_level = 0.25            # the episode clears below this level ...
     clear_after = 0.5             # ... held this long (see fdikit.monitor.Decision)
     sizes = { "r:pos2:alarm" = "r:pos2" }   # channel whose value is the episode's size estimate
+    # groups = { pos2 = ["sensor:pos2:bias", "sensor:pos2:gain"] }   # alternatives of one component:
+    #                             # one episode, a revision announced as a "change" event
     # processor = "diagnosis"     # instead of channels: announce what this processor artifact
     #                             # decides (its `announce` and `size_channels`, e.g. a
     #                             # fdikit.isolate.DMatrixDecision: one diagnosis per episode)
@@ -89,7 +91,7 @@ from .core import Decision, Monitor
 from .logs import check_log_table
 
 __all__ = ["TIME_UNITS", "ChannelMap", "MonitorConfig", "build_monitor", "design_hash", "load_config",
-           "map_channels", "read_log", "run_design"]
+           "map_channels", "read_log", "run_design", "source_plausibility"]
 
 #: ``[log].time_unit`` -> seconds per unit (``"auto"``: by the magnitude of the first timestamp,
 #: see :mod:`fdikit.io.timebase`).
@@ -108,7 +110,7 @@ _SCHEMA: dict[str, dict[str, type | tuple[type, ...]]] = {
     "design": {"recipe": str, "params": dict, "sample_time": (int, float), "plant": dict, "faults": dict,
                "disturbances": dict, "noise": dict, "alarm": dict, "structure": dict},
     "decision": {"channels": list, "level": (int, float), "names": dict, "clear_level": (int, float),
-                 "clear_after": (int, float), "sizes": dict, "processor": str},
+                 "clear_after": (int, float), "sizes": dict, "processor": str, "groups": dict},
 }
 #: Plausibility keys of a channel (monitor units), passed to :class:`fdikit.monitor.Plausibility`.
 PLAUSIBILITY_KEYS = ("min", "max", "max_rate", "spike")
@@ -340,6 +342,10 @@ def _check_decision(dec: dict) -> None:
                                 f"[decision].channels {chans}")
             if not isinstance(v, str):
                 raise DataError(f"config: [decision].{key}.{ch} must be a name, got {v!r}")
+    for g, members in dec.get("groups", {}).items():
+        if not (isinstance(members, list) and all(isinstance(m, str) for m in members)):
+            raise DataError(f"config: [decision].groups.{g} must be a list of announced names, got "
+                            f"{members!r}")
     level = float(dec.get("level", 0.5))
     if not (np.isfinite(level) and 0 < level <= 1):
         raise DataError(f"config: [decision].level must be in (0, 1] (the alarm and probability channels "
@@ -388,7 +394,8 @@ def design_hash(cfg: MonitorConfig) -> str:
         if isinstance(f, str):
             refs.append((f"plant.identify.logs[{k}]", f))
     if any(r[0] != "plant.file" for r in refs):   # logs are read as [log] says
-        log = {k: cfg.log[k] for k in ("format", "time", "time_unit", "rate", "dbc", "resample") if k in cfg.log}
+        keys = ("format", "time", "time_unit", "rate", "dbc", "resample")
+        log = {k: cfg.log[k] for k in keys if k in cfg.log}
         if log:
             h.update(b"\0[log]\0" + json.dumps(log, sort_keys=True, separators=(",", ":")).encode())
         if isinstance(log.get("dbc"), str):
@@ -548,9 +555,14 @@ def build_monitor(cfg: MonitorConfig) -> Monitor:
             dkw["size_channels"] = dict(dec["sizes"])
             if "size_channels" not in inspect.signature(Decision).parameters and "processor" in dec:
                 dkw.pop("size_channels")   # sizes stay in the statistics until Decision reports them
+        if dec.get("groups"):
+            dkw["groups"] = {str(g): list(m) for g, m in dec["groups"].items()}
         _supported(Decision, list(dkw), "Decision")
-        decision = Decision(list(dec["channels"]), float(dec.get("level", 0.5)), dict(dec.get("names", {})),
-                            **dkw)
+        try:
+            decision = Decision(list(dec["channels"]), float(dec.get("level", 0.5)),
+                                dict(dec.get("names", {})), **dkw)
+        except DataError as exc:
+            raise DataError(f"{cfg.path}: [decision]: {exc}") from None
     kw: dict[str, Any] = dict(cfg.runtime)
     plaus = {c.name: c.plausibility for c in cfg.channels if c.plausibility}
     if plaus:
@@ -575,18 +587,68 @@ def read_log(cfg: MonitorConfig, path: str | Path) -> Signals:
     A ``.csv`` file (or ``format = "csv"``) is a table of signals with the time column
     ``[log].time``; anything else goes to :func:`fdikit.io.read_log` (BLF, ASC, candump, MDF4,
     Parquet, ...), with ``[log].dbc`` for raw CAN frames, ``[log].time`` for every table format and
-    the declared ``[log].format`` whatever the file is called (:mod:`fdikit.monitor.logs`).
+    the declared ``[log].format`` whatever the file is called (:mod:`fdikit.monitor.logs`). The
+    channels' ``min``, ``max`` and ``spike`` rules also go to the CAN frame readers (BLF, ASC,
+    candump), converted to the source's unit (:func:`source_plausibility`): a frame that breaks
+    them is refused before resampling, where one bad frame could otherwise spread over two grid
+    samples that are both in range.
     """
     from .. import io
-    from .logs import read_options
+    from .logs import FRAME_FORMATS, read_options
 
     sources = list(dict.fromkeys(c.source for c in cfg.channels))
     fmt, kw = read_options(cfg.log, path, cfg.path.parent, signals=sources, where=str(cfg.path))
     if fmt == "recording":
         _supported(io.read_csv, [k for k in kw if k == "time_unit"], "CSV reader (fdikit.io.read_csv)")
         return io.read_csv(path, **kw)
+    if fmt in FRAME_FORMATS:
+        rules = source_plausibility(cfg)
+        if rules:
+            kw["plausibility"] = rules
     _supported(io.read_log, [k for k in kw if k == "time_unit"], "log reader (fdikit.io.read_log)")
     return io.read_log(path, **kw)
+
+
+def source_plausibility(cfg: MonitorConfig) -> dict[str, dict[str, float]]:
+    """The channels' raw-frame plausibility rules in their sources' units: source -> ``min``,
+    ``max`` (``(value + offset) / scale``, swapped for a negative scale), ``spike`` and ``window``
+    (unit-free); where several channels read one source, the tightest of their rules.
+
+    Examples
+    --------
+    >>> cfg = MonitorConfig.__new__(MonitorConfig)
+    >>> cfg.channels = [ChannelMap("yaw", "K.YAW", 0.5, 1.0, "rad/s",
+    ...                            {"min": -2.0, "max": 3.0, "spike": 8.0})]
+    >>> source_plausibility(cfg)
+    {'K.YAW': {'min': -2.0, 'max': 8.0, 'spike': 8.0}}
+    """
+    out: dict[str, dict[str, float]] = {}
+    for c in cfg.channels:
+        p = c.plausibility
+        rule: dict[str, float] = {}
+        lo = None if p.get("min") is None else (p["min"] + c.offset) / c.scale
+        hi = None if p.get("max") is None else (p["max"] + c.offset) / c.scale
+        if c.scale < 0:
+            lo, hi = hi, lo
+        if lo is not None:
+            rule["min"] = lo
+        if hi is not None:
+            rule["max"] = hi
+        if p.get("spike") is not None:
+            rule["spike"] = float(p["spike"])
+            if "window" in p:
+                rule["window"] = int(p["window"])
+        if not rule:
+            continue
+        old = out.setdefault(c.source, {})
+        for k, v in rule.items():
+            if k not in old:
+                old[k] = v
+            elif k == "min":
+                old[k] = max(old[k], v)
+            else:       # max, spike (window: the first)
+                old[k] = old[k] if k == "window" else min(old[k], v)
+    return out
 
 
 def map_channels(cfg: MonitorConfig, log: Signals) -> Signals:

@@ -30,6 +30,19 @@ class Decision:
     ``clear_level`` neither grows nor restarts. ``clear_after = 0`` gives the rising-edge rule
     (a new onset at every crossing).
 
+    **One fault name, one episode.** The episode belongs to the announced name, not to the channel:
+    channels that announce the same hypothesis (``names``), and the hypotheses that ``groups``
+    declares alternatives of one component (e.g. ``{"yaw_rate": ["yaw_rate", "yaw_rate:bias",
+    "yaw_rate:gain"]}``: one sensor, its fault type revised as evidence grows), share one episode:
+    it opens when the first of their channels goes on and clears when all of them have stayed below
+    ``clear_level`` for ``clear_after``. The onset names the hypothesis of the first channel on (in
+    the order of ``alarm_channels``). While the episode is open, a *change* event
+    (``kind="change"``, ``previous`` the name it replaces, the same ``episode``) is given when another
+    hypothesis of the group turns on (its channels were all off at the judged sample before); a
+    hypothesis named as its group (the component's own, unspecific name, e.g. ``"yaw_rate"``) may
+    open an episode but never replaces a more specific name. The cleared event names the latest
+    hypothesis.
+
     A cleared event says the fault is *not seen any more* (the records label it so), not that it
     is gone: the rule sees only the alarm, and a fault that persists while its residual decays
     (a constant sensor bias that an observer's state absorbs) ends its episode the same way.
@@ -47,6 +60,9 @@ class Decision:
     size_channels : mapping, optional
         Hypothesis or alarm channel -> a channel holding the estimated fault size; its value at
         the onset sample becomes the onset event's ``size``.
+    groups : mapping str -> sequence of str, optional
+        Component -> the hypotheses that are alternatives of it (one episode, revisions announced
+        as changes); a hypothesis belongs to one group at most.
 
     Examples
     --------
@@ -56,6 +72,11 @@ class Decision:
     >>> s = Signals(np.arange(300) * 0.01, a[:, None], ["alarm"])
     >>> [(e.kind, e.k) for e in Decision(["alarm"], names={"alarm": "f"}).events(s.t, s)]
     [('onset', 10), ('cleared', 139)]
+    >>> b = np.zeros(300); b[50:] = 1                          # the type revised at sample 50
+    >>> s2 = Signals(s.t, np.column_stack([a, b]), ["x:bias", "x:gain"])
+    >>> d = Decision(["x:bias", "x:gain"], groups={"x": ["x:bias", "x:gain"]})
+    >>> [(e.kind, e.hypothesis, e.previous, e.k) for e in d.events(s2.t, s2)]
+    [('onset', 'x:bias', None, 10), ('change', 'x:gain', 'x:bias', 50)]
     """
 
     alarm_channels: Sequence[str]
@@ -65,6 +86,7 @@ class Decision:
     clear_level: float | None = None
     clear_after: float = 1.0
     size_channels: Mapping[str, str] | None = None
+    groups: Mapping[str, Sequence[str]] | None = None
 
     def __post_init__(self):
         if isinstance(self.alarm_channels, str):
@@ -93,6 +115,38 @@ class Decision:
             if bad:
                 raise DataError(f"decision size_channels name {bad}, which are neither alarm channels nor "
                                 f"hypotheses of this decision ({sorted(known)})")
+        self._build_units()
+
+    def _build_units(self) -> None:
+        """The episode units: per unit (a group, or a hypothesis outside every group) its alarm
+        channels, and per hypothesis of it the channels that announce it (alarm order)."""
+        hyps = list(dict.fromkeys(self.hypothesis(c) for c in self.alarm_channels))
+        unit_of = {h: h for h in hyps}
+        if self.groups is not None:
+            if isinstance(self.groups, str) or not isinstance(self.groups, Mapping):
+                raise DataError(f"decision groups must map a component to a list of hypotheses, got "
+                                f"{self.groups!r}")
+            self.groups = {str(g): [str(h) for h in ([m] if isinstance(m, str) else m)]
+                           for g, m in self.groups.items()}
+            seen: dict[str, str] = {}
+            for g, members in self.groups.items():
+                for h in members:
+                    if h not in unit_of:
+                        raise DataError(f"decision group {g!r} names {h!r}, which is not a hypothesis of "
+                                        f"this decision ({hyps})")
+                    if h in seen:
+                        raise DataError(f"hypothesis {h!r} is in two decision groups: {seen[h]!r} and {g!r}")
+                    seen[h] = g
+                    unit_of[h] = g
+        units = list(dict.fromkeys(unit_of[h] for h in hyps))
+        self._unit_names = units
+        self._unit_chans = [[a for a, c in enumerate(self.alarm_channels) if unit_of[self.hypothesis(c)] == u]
+                            for u in units]
+        self._unit_hyps = [list(dict.fromkeys(self.hypothesis(self.alarm_channels[a]) for a in ch))
+                           for ch in self._unit_chans]
+        self._hyp_chans = [[[a for a in ch if self.hypothesis(self.alarm_channels[a]) == h] for h in hs]
+                           for ch, hs in zip(self._unit_chans, self._unit_hyps)]
+        self._simple = all(len(ch) == 1 for ch in self._unit_chans)
 
     @property
     def low_level(self) -> float:
@@ -113,6 +167,19 @@ class Decision:
         """Every channel :meth:`events` reads: the alarm channels, then the size channels."""
         sizes = [self.size_channel(c) for c in self.alarm_channels]
         return list(dict.fromkeys([*self.alarm_channels, *(c for c in sizes if c is not None)]))
+
+    def _rises(self, on: np.ndarray, u: int) -> list[tuple[int, int, int]]:
+        """``(position, hypothesis index, its first channel on)`` of every judged sample at which a
+        hypothesis of unit u turns on (all its channels off at the judged sample before), in order."""
+        out = []
+        for hi, chans in enumerate(self._hyp_chans[u]):
+            if self._unit_hyps[u][hi] == self._unit_names[u]:
+                continue            # the component's own name never replaces a specific one
+            on_h = on[:, chans].any(axis=1)
+            for q in np.flatnonzero(on_h[1:] & ~on_h[:-1]) + 1:
+                out.append((int(q), hi, next(c for c in chans if on[q, c])))
+        out.sort()
+        return out
 
     def clear_samples(self, dt: float) -> int:
         """``clear_after`` in samples of period ``dt``."""
@@ -140,7 +207,7 @@ class Decision:
             dt = float(np.median(np.diff(t))) if t.size > 1 else 1.0
         n_clear = self.clear_samples(dt)
         runs = stats.values.shape[0]
-        onsets, cleared = [], []  # (run, k, hypothesis, a, value, size) / (..., onset index)
+        onsets, cleared, changes = [], [], []  # (run, k, hypothesis, a, value, size) / (..., onset index)
         for run in range(runs):
             # the judged samples J (None: all of them, no copy through an index)
             J = None
@@ -157,28 +224,45 @@ class Decision:
                 on = V >= self.level
                 low = V < self.low_level
             pos = np.arange(V.shape[0])
-            for a, ch in enumerate(self.alarm_channels):
-                on_pos = np.flatnonzero(on[:, a])
+            for u, chans in enumerate(self._unit_chans):
+                if len(chans) == 1:
+                    on_u, low_u = on[:, chans[0]], low[:, chans[0]]
+                else:
+                    on_u, low_u = on[:, chans].any(axis=1), low[:, chans].all(axis=1)
+                on_pos = np.flatnonzero(on_u)
                 if on_pos.size == 0:
                     continue
                 # consecutive judged samples below the clear level, ending at each position
-                last_not_low = np.maximum.accumulate(np.where(low[:, a], -1, pos))
+                last_not_low = np.maximum.accumulate(np.where(low_u, -1, pos))
                 hits = np.flatnonzero(pos - last_not_low == n_clear)
+                rises = self._rises(on, u) if len(self._unit_hyps[u]) > 1 else None
                 p = -1
                 while True:
                     i = np.searchsorted(on_pos, p, "right")
                     if i == on_pos.size:
                         break
                     o = on_pos[i]
+                    a = next(c for c in chans if on[o, c])
                     k = int(o if J is None else J[o])
+                    h = self.hypothesis(self.alarm_channels[a])
                     size = None if sidx[a] is None else float(stats.values[run, k, sidx[a]])
-                    onsets.append((run, k, self.hypothesis(ch), a, float(V[o, a]), size))
+                    onsets.append((run, k, h, a, float(V[o, a]), size))
                     j = np.searchsorted(hits, o, "right")
+                    end = hits[j] if j < hits.size else V.shape[0]
+                    if rises is not None:
+                        for q, hi, ac in rises:
+                            if o < q < end and self._unit_hyps[u][hi] != h:
+                                kq = int(q if J is None else J[q])
+                                sz = None if sidx[ac] is None else float(stats.values[run, kq, sidx[ac]])
+                                changes.append((run, kq, self._unit_hyps[u][hi], ac, float(V[q, ac]), sz, h,
+                                                len(onsets) - 1))
+                                h = self._unit_hyps[u][hi]
                     if j == hits.size:
                         break
                     c = hits[j]
                     kc = int(c if J is None else J[c])
-                    cleared.append((run, kc, self.hypothesis(ch), a, float(V[c, a]), len(onsets) - 1))
+                    ac = self._hyp_chans[u][self._unit_hyps[u].index(h)][0]
+                    cleared.append((run, kc, h, ac, float(V[c, ac]), len(onsets) - 1))
                     p = c
         order = sorted(range(len(onsets)), key=lambda i: onsets[i][:4])
         episode = {}
@@ -191,6 +275,9 @@ class Decision:
             out.append(((run, k, 1, h, a), Event(run, k, float(t[k]), h, v, "onset", size, episode[i])))
         for run, k, h, a, v, i in cleared:
             out.append(((run, k, 0, h, a), Event(run, k, float(t[k]), h, v, "cleared", None, episode[i])))
+        for run, k, h, a, v, size, prev, i in changes:
+            ev = Event(run, k, float(t[k]), h, v, "change", size, episode[i], prev)
+            out.append(((run, k, 2, h, a), ev))
         out.sort(key=lambda x: x[0])
         return [e for _, e in out]
 

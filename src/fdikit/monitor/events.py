@@ -26,8 +26,10 @@ class Event:
     ``kind == "onset"``: at time ``t`` (sample ``k``, the row of the record) of run ``run``,
     ``hypothesis`` was announced, with the alarm channel's ``value`` and, where the decision has
     a size channel for it, the estimated fault ``size``. ``kind == "cleared"``: the episode
-    ``episode`` (numbered from 0 per run, in order of onset) is over. The first five fields keep
-    their positions.
+    ``episode`` (numbered from 0 per run, in order of onset) is over. ``kind == "change"``: the
+    open episode ``episode`` is now announced as ``hypothesis`` (a revised fault type of the same
+    component, see :class:`~fdikit.monitor.Decision` ``groups``), which replaces ``previous``.
+    The first five fields keep their positions.
 
     Examples
     --------
@@ -44,6 +46,7 @@ class Event:
     kind: str = "onset"
     size: float | None = None
     episode: int = 0
+    previous: str | None = None
 
 
 class Gap(NamedTuple):
@@ -87,6 +90,8 @@ class MonitorResult:
     gaps: list[Gap] = field(default_factory=list)
     #: cleared events (the end of each closed episode)
     cleared: list[Event] = field(default_factory=list)
+    #: change events (an open episode announced under a revised name, e.g. its fault type)
+    changes: list[Event] = field(default_factory=list)
 
     STATUS_NAMES: ClassVar[tuple[str, ...]] = STATUS_NAMES
 

@@ -4,12 +4,14 @@
 
 A record has ``t``, ``run`` and ``sample``, and one of:
 
-* an event: ``kind`` (``"onset"`` or ``"cleared"``), ``hypothesis``, ``value``, ``size`` (``None``
-  where not estimated), ``episode`` and ``announcement`` (``True`` for an onset); a cleared event
-  also has ``label: "not seen any more"`` -- the alarm stayed below its clear level for the
-  decision's ``clear_after``, which is all the monitor knows: a persistent fault whose residual
-  decays (a sensor bias an observer absorbs) ends its episode the same way, so a cleared episode
-  says the fault is no longer seen, not that it is gone;
+* an event: ``kind`` (``"onset"``, ``"change"`` or ``"cleared"``), ``hypothesis``, ``value``,
+  ``size`` (``None`` where not estimated), ``episode`` and ``announcement`` (``True`` for an
+  onset); a cleared event also has ``label: "not seen any more"`` -- the alarm stayed below its
+  clear level for the decision's ``clear_after``, which is all the monitor knows: a persistent
+  fault whose residual decays (a sensor bias an observer absorbs) ends its episode the same way,
+  so a cleared episode says the fault is no longer seen, not that it is gone; a change event (an
+  open episode now announced under a revised name, e.g. its fault type, see
+  :class:`~fdikit.monitor.Decision` ``groups``) also has ``previous``, the name it replaces;
 * a gap: ``gap: True``, ``t_start`` and ``n_missing`` (at the first sample after the gap);
 * a held sample: ``invalid`` (the reason).
 
@@ -58,6 +60,8 @@ def event_record(e) -> dict:
            "episode": int(getattr(e, "episode", 0)), "announcement": kind == "onset"}
     if kind == "cleared":
         rec["label"] = NOT_SEEN
+    elif kind == "change":
+        rec["previous"] = getattr(e, "previous", None)
     return rec
 
 
@@ -96,7 +100,7 @@ def invalid_record(t: float, run: int, k: int, why: str) -> dict:
 
 def record_order(d: dict) -> tuple:
     """Sort key of records: by sample; at one sample the gap that ended at it, its held reason,
-    cleared events, then onsets.
+    cleared events, onsets, then changes.
 
     Examples
     --------
@@ -104,7 +108,9 @@ def record_order(d: dict) -> tuple:
     >>> [r["sample"] for r in sorted(recs, key=record_order)], sorted(recs, key=record_order)[1]["gap"]
     ([2, 3, 3], True)
     """
-    rank = 0 if d.get("gap") else 1 if "invalid" in d else 2 if d.get("kind") == "cleared" else 3
+    kind = d.get("kind")
+    rank = (0 if d.get("gap") else 1 if "invalid" in d else 2 if kind == "cleared"
+            else 4 if kind == "change" else 3)
     return (d["sample"], rank, d.get("run", 0), d.get("hypothesis", ""))
 
 
@@ -153,7 +159,8 @@ def batch_records(sig, res) -> list[dict]:
     >>> sig = map_channels(cfg, read_log(cfg, "log.csv"))  # doctest: +SKIP
     >>> records = batch_records(sig, build_monitor(cfg).run(sig))  # doctest: +SKIP
     """
-    records = [event_record(e) for e in (*res.events, *getattr(res, "cleared", []))]
+    records = [event_record(e)
+               for e in (*res.events, *getattr(res, "cleared", []), *getattr(res, "changes", []))]
     records += [invalid_record(sig.t[k], r, k, why) for r, k, why in res.invalid]
     records += [gap_record(g) for g in getattr(res, "gaps", [])]
     records.sort(key=record_order)
@@ -299,6 +306,8 @@ def batch_summary(cfg, log: Any, sig, res, *, t_start: float) -> dict:
         "status": status_counts(res),
         "n_cleared": len(getattr(res, "cleared", [])),
         "cleared": [event_record(e) for e in getattr(res, "cleared", [])[:100]],
+        "n_changes": len(getattr(res, "changes", [])),
+        "changes": [event_record(e) for e in getattr(res, "changes", [])[:100]],
         "n_gaps": len(getattr(res, "gaps", [])),
         "gaps": [gap_record(g) for g in getattr(res, "gaps", [])[:100]],
         "max_statistics": {n: float(np.max(res.statistics.values[..., i]))
@@ -346,5 +355,7 @@ def summary_lines(summary: dict, records: list[dict]) -> list[str]:
         elif "kind" in rec:
             size = "" if rec["size"] is None else f", size {rec['size']:.4g}"
             what = NOT_SEEN if rec["kind"] == "cleared" else f"({rec['value']:.4g}{size})"
+            if rec["kind"] == "change":
+                what = f"(revised from {rec.get('previous')}) {what}"
             out.append(f"  t = {rec['t']:.3f} s  {rec['hypothesis']}  {what}  [episode {rec['episode']}]")
     return out

@@ -36,10 +36,14 @@ class _StreamingPath:
         self.last_gap = None
         self.last_status = None
         self._set_dt(self.expected_dt())
-        A = len(self.decision.alarm_channels) if self.decision is not None else 0
-        self._active = np.zeros((self._runs, A), bool)
-        self._below = np.zeros((self._runs, A), np.int64)
-        self._ep_id = np.zeros((self._runs, A), np.int64)
+        d = self.decision
+        U = len(d._unit_chans) if d is not None else 0
+        self._active = np.zeros((self._runs, U), bool)
+        self._below = np.zeros((self._runs, U), np.int64)
+        self._ep_id = np.zeros((self._runs, U), np.int64)
+        self._cur = np.zeros((self._runs, U), np.int64)      # the hypothesis an episode names now
+        H = sum(len(h) for h in d._unit_hyps) if d is not None else 0
+        self._prev_on = np.zeros((self._runs, H), bool)      # per hypothesis, at the last judged sample
         self._n_ep = np.zeros(self._runs, np.int64)
         self._abs_checker.reset(self._runs, self._dt)
         if self._checker is not None:
@@ -194,27 +198,58 @@ class _StreamingPath:
         v = pool[:, self._dec_idx]
         on = v >= d.level  # (NaN compares False: neither on nor below the clear level)
         act = self._active
-        if not (on.any() or act.any()):
-            return []
-        low = v < d.low_level
-        self._below = np.where(act & low, self._below + 1, 0)
+        if d._simple:
+            on_u = on
+            if not (on.any() or act.any()):
+                return []
+            low_u = v < d.low_level
+        else:
+            on_h = np.stack([on[:, chans].any(axis=1) for hc in d._hyp_chans for chans in hc], axis=1)
+            rise = on_h & ~self._prev_on
+            self._prev_on = on_h
+            on_u = np.stack([on[:, chans].any(axis=1) for chans in d._unit_chans], axis=1)
+            if not (on_u.any() or act.any()):
+                return []
+            low = v < d.low_level
+            low_u = np.stack([low[:, chans].all(axis=1) for chans in d._unit_chans], axis=1)
+        self._below = np.where(act & low_u, self._below + 1, 0)
         done = act & (self._below >= self._n_clear)
-        new = on & ~act
-        if not (done.any() or new.any()):
-            return []
+        new = on_u & ~act
         out = []
-        for run, a in np.argwhere(done):
-            ch = d.alarm_channels[a]
-            out.append(((int(run), 0, d.hypothesis(ch), int(a)),
-                        Event(int(run), self._k, t, d.hypothesis(ch), float(v[run, a]), "cleared", None,
-                              int(self._ep_id[run, a]))))
+        if not d._simple:
+            h0 = np.cumsum([0] + [len(h) for h in d._unit_hyps])
+            for run, u in np.argwhere(act & ~done):
+                for hi in range(len(d._unit_hyps[u])):
+                    if rise[run, h0[u] + hi] and hi != self._cur[run, u] \
+                            and d._unit_hyps[u][hi] != d._unit_names[u]:
+                        a = next(c for c in d._hyp_chans[u][hi] if on[run, c])
+                        si = self._size_idx[a]
+                        h, prev = d._unit_hyps[u][hi], d._unit_hyps[u][self._cur[run, u]]
+                        out.append(((int(run), 2, h, int(a)),
+                                    Event(int(run), self._k, t, h, float(v[run, a]), "change",
+                                          None if si is None else float(pool[run, si]),
+                                          int(self._ep_id[run, u]), prev)))
+                        self._cur[run, u] = hi
+        if not (done.any() or new.any() or out):
+            return []
+        for run, u in np.argwhere(done):
+            h = d._unit_hyps[u][self._cur[run, u]]
+            a = d._hyp_chans[u][self._cur[run, u]][0]
+            out.append(((int(run), 0, h, int(a)),
+                        Event(int(run), self._k, t, h, float(v[run, a]), "cleared", None,
+                              int(self._ep_id[run, u]))))
         act &= ~done
         self._below[done] = 0
-        onsets = sorted((int(run), d.hypothesis(d.alarm_channels[a]), int(a)) for run, a in np.argwhere(new))
-        for run, h, a in onsets:
+        onsets = []
+        for run, u in np.argwhere(new):
+            a = next(c for c in d._unit_chans[u] if on[run, c])
+            onsets.append((int(run), d.hypothesis(d.alarm_channels[a]), int(a), int(u)))
+        onsets.sort()
+        for run, h, a, u in onsets:
             ep = int(self._n_ep[run])
             self._n_ep[run] += 1
-            self._ep_id[run, a] = ep
+            self._ep_id[run, u] = ep
+            self._cur[run, u] = d._unit_hyps[u].index(h)
             si = self._size_idx[a]
             size = None if si is None else float(pool[run, si])
             out.append(((run, 1, h, a), Event(run, self._k, t, h, float(v[run, a]), "onset", size, ep)))
@@ -270,6 +305,7 @@ class _StreamingPath:
         S = np.empty((signals.runs, signals.n_samples, len(self.stat_names)))
         events: list[Event] = []
         cleared: list[Event] = []
+        changes: list[Event] = []
         valid = np.ones((signals.runs, signals.n_samples), bool)
         status = np.zeros((signals.runs, signals.n_samples), np.int8)
         invalid: list[tuple[int, int, str]] = []
@@ -278,7 +314,7 @@ class _StreamingPath:
             r, s, ev = self.step(float(t), signals.values[:, k], signals.names)
             R[:, k], S[:, k] = r, s
             for e in ev:
-                (cleared if e.kind == "cleared" else events).append(e)
+                (cleared if e.kind == "cleared" else changes if e.kind == "change" else events).append(e)
             status[:, k] = STATUS_NAMES.index(self.last_status)
             if self.last_invalid is not None:
                 valid[:, k] = False
@@ -289,4 +325,4 @@ class _StreamingPath:
         cleared.sort(key=_event_key)
         return MonitorResult(Signals(signals.t, R, self.residual_names, check=False),
                              Signals(signals.t, S, self.stat_names, check=False), events, valid, invalid,
-                             status, gaps, cleared)
+                             status, gaps, cleared, changes)

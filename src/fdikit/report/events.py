@@ -18,8 +18,9 @@ __all__ = ["add_events", "episode_spans", "event_records", "read_events_jsonl"]
 def event_records(events: Sequence[Any]) -> list[dict]:
     """Events as dicts ``{t, run, sample, hypothesis, value, kind, episode, size}`` (from
     :class:`fdikit.monitor.Event` objects, or dicts as ``fdikit monitor --events`` writes them;
-    held-sample and gap records dropped). ``kind`` is ``"onset"`` (an announcement) or
-    ``"cleared"``; records of an older fdikit, which had no kind, are onsets."""
+    held-sample and gap records dropped). ``kind`` is ``"onset"`` (an announcement),
+    ``"change"`` (the open episode announced under a revised name; ``previous`` the name it
+    replaces) or ``"cleared"``; records of an older fdikit, which had no kind, are onsets."""
     out = []
     for e in events:
         if isinstance(e, Mapping):
@@ -36,6 +37,7 @@ def event_records(events: Sequence[Any]) -> list[dict]:
                     "kind": str(e.get("kind", "onset")),
                     "episode": e.get("episode"),
                     "size": None if size is None else float(size),
+                    "previous": e.get("previous"),
                 }
             )
         else:
@@ -50,6 +52,7 @@ def event_records(events: Sequence[Any]) -> list[dict]:
                     "kind": str(getattr(e, "kind", "onset")),
                     "episode": getattr(e, "episode", None),
                     "size": None if size is None else float(size),
+                    "previous": getattr(e, "previous", None),
                 }
             )
     out.sort(key=lambda d: (d["t"], d["run"], d["hypothesis"], d["kind"] != "onset"))
@@ -57,7 +60,9 @@ def event_records(events: Sequence[Any]) -> list[dict]:
 
 
 def episode_spans(events: Sequence[Mapping[str, Any]], t_end: float | None = None) -> list[dict]:
-    """Pair each onset with its cleared event: ``{hypothesis, run, t_onset, t_cleared, open}``.
+    """Pair each onset with its cleared event: ``{hypothesis, run, t_onset, t_cleared, open}``,
+    by episode number where the records have one (else by hypothesis); ``revised`` lists the
+    ``(t, hypothesis)`` of the episode's change events (its fault type revised).
 
     An episode with no cleared event is still open at the end of the record (``t_end``, or its
     onset time when ``t_end`` is not given).
@@ -73,12 +78,17 @@ def episode_spans(events: Sequence[Mapping[str, Any]], t_end: float | None = Non
     open_: dict[tuple, dict] = {}
     out: list[dict] = []
     for e in sorted(events, key=lambda d: (d["t"], d.get("kind", "onset") != "onset")):
-        key = (e.get("run", 0), e["hypothesis"])
-        if e.get("kind", "onset") == "onset":
+        ep = e.get("episode")
+        key = (e.get("run", 0), e["hypothesis"]) if ep is None else (e.get("run", 0), "#", ep)
+        kind = e.get("kind", "onset")
+        if kind == "onset":
             if key in open_:  # an onset without a cleared event before it: close the old one here
                 out.append({**open_.pop(key), "t_cleared": float(e["t"]), "open": False})
             open_[key] = {"hypothesis": e["hypothesis"], "run": key[0], "t_onset": float(e["t"]),
-                          "size": e.get("size")}
+                          "size": e.get("size"), "revised": []}
+        elif kind == "change":
+            if key in open_:
+                open_[key]["revised"].append((float(e["t"]), e["hypothesis"]))
         elif key in open_:
             out.append({**open_.pop(key), "t_cleared": float(e["t"]), "open": False})
     for ep in open_.values():
@@ -140,10 +150,12 @@ def add_events(
     ev = event_records(events)
     onsets = [e for e in ev if e["kind"] == "onset"]
     cleared = [e for e in ev if e["kind"] == "cleared"]
+    changes = [e for e in ev if e["kind"] == "change"]
     spans = episode_spans(ev, t_range[1] if t_range is not None else None)
     rep.section(
         title,
         f"{len(onsets)} announcement(s) (fault episodes), {len(cleared)} cleared"
+        + (f", {len(changes)} revised (a change of the announced name within its episode)" if changes else "")
         + (f", {len(held)} held stretch(es) of samples" if held else "")
         + ". Each episode is a bar from its announcement (diamond) to its cleared event (circle).",
     )
@@ -195,6 +207,20 @@ def add_events(
                 "hoverinfo": "text",
             }
         )
+        rs = [e for e in changes if e["hypothesis"] == h]
+        if rs:
+            data.append(
+                {
+                    "type": "scatter",
+                    "mode": "markers",
+                    "name": f"{h} (revised to)",
+                    "x": [e["t"] for e in rs],
+                    "y": [h] * len(rs),
+                    "marker": {"size": 10, "symbol": "triangle-right"},
+                    "text": [f"{e['previous']} revised to {h} at t = {e['t']:.3f} s" for e in rs],
+                    "hoverinfo": "text",
+                }
+            )
         cs = [e for e in cleared if e["hypothesis"] == h]
         if cs:
             data.append(
@@ -229,7 +255,8 @@ def add_events(
                     "onset t (s)": round(e["t_onset"], 4),
                     "cleared t (s)": "open" if e["open"] else round(e["t_cleared"], 4),
                     "run": e["run"],
-                    "hypothesis (fault)": e["hypothesis"],
+                    "hypothesis (fault)": " → ".join([e["hypothesis"],
+                                                      *(h for _t, h in e.get("revised", []))]),
                     "size": None if e.get("size") is None else round(float(e["size"]), 6),
                 }
                 for e in spans
@@ -239,4 +266,6 @@ def add_events(
         )
     rep.data.setdefault("events", []).extend(onsets)
     rep.data.setdefault("cleared", []).extend(cleared)
+    if changes:
+        rep.data.setdefault("changes", []).extend(changes)
     return ev

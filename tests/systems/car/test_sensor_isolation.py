@@ -106,9 +106,10 @@ _SENSORS = set(WHEELS) | {"yaw_rate", "lateral_accelerometer", "steering"}
 
 
 def _named(res):
-    """(t, sensor, type) of the announcements that name one sensor and a fault type."""
+    """(t, sensor, type) of the announcements and changes (a revised type of an open episode) that
+    name one sensor and a fault type."""
     out = []
-    for a in res["announcements"]:
+    for a in sorted(res["announcements"] + res.get("changes", []), key=lambda a: a["t"]):
         s, _, typ = a["fault"].partition(":")
         if typ and s in _SENSORS:
             out.append((a["t"], s, typ))

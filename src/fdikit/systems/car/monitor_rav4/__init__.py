@@ -100,6 +100,11 @@ the accelerometer and the steering against each other and the wheels (:mod:`.pee
 as a bias, then revised to a gain; the peer check's 0.2 Hz low-pass costs the second); see
 :mod:`.peers` for the wheel group's design and its numbers.
 
+The names of one sensor -- its MHSSPT hypothesis (``"yaw_rate"``) and its ``"<sensor>:<type>"``
+names -- are one component of the decision (:func:`decision_for`, ``groups``): one episode per
+sensor, a revised type a ``"change"`` event of it (``run_rav4_log(...)["changes"]``), never a new
+onset. benchmarks/bench_sensor_faults.py measures the whole grid (see its docstring).
+
 Runtime form (issue 9)
 ----------------------
 The whole monitor is a chain of saveable artifacts (:func:`design`, the recipe of

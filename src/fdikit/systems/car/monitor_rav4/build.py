@@ -80,11 +80,33 @@ def decision_for(faults, sensor: dict[str, str] | None = None) -> Decision:
 
     An episode clears after :data:`CLEAR_AFTER` seconds below the level: an intermittent fault
     (bursts every few seconds, e.g. a loose wheel-speed connector) is then one episode, not one
-    announcement per burst."""
+    announcement per burst. The names of one sensor -- ``"<sensor>:<type>"`` and the MHSSPT's
+    hypothesis of that sensor (``"yaw_rate"``) -- are alternatives of one component
+    (:class:`~fdikit.monitor.Decision` ``groups``): one episode, a revised type announced as a
+    change of it (issue 27)."""
     names = {f"P:{f}:alarm": f for f in faults}
     names.update({f"{s}:alarm": n for s, n in (sensor or {}).items()})
-    return Decision(list(names), level=0.5, names=names, clear_after=CLEAR_AFTER)
+    return Decision(list(names), level=0.5, names=names, clear_after=CLEAR_AFTER, groups=sensor_groups(names))
 
+
+def sensor_groups(names: dict[str, str]) -> dict[str, list[str]]:
+    """Sensor -> the announced names of it (``"<sensor>:<type>"`` and a hypothesis named as the
+    sensor), for every sensor with more than one.
+
+    Examples
+    --------
+    >>> sensor_groups({"a": "yaw_rate", "b": "yaw_rate:bias", "c": "front_wheel_diff", "d": "steering:stuck"})
+    {'yaw_rate': ['yaw_rate', 'yaw_rate:bias']}
+    """
+    by: dict[str, list[str]] = {}
+    for h in dict.fromkeys(names.values()):
+        by.setdefault(h.split(":", 1)[0], []).append(h)
+    return {s: hs for s, hs in by.items() if len(hs) > 1}
+
+
+#: MHSSPT hypotheses that name one sensor of the peer groups: their alarm also starts that sensor's
+#: fault-type classification (the MHSSPT often isolates first; issue 27, item 2)
+_TYPED_BY_MHSSPT = ("yaw_rate", "lateral_accelerometer", "steering")
 
 #: seconds an alarm must stay off before its episode clears (longer than the off-time of the
 #: intermittent faults the monitor is meant to see: bursts up to every 5 s)
@@ -223,7 +245,8 @@ def rav4_monitor(path: str | None = None, *, rate: float = 50.0, q_weight: float
             sk = round(max(warmup, sensor_warmup) / dt)
             pc, ftc, type_names = design_peer_stages(
                 psig.run(Signals(raw.t[cal_t], raw.values[:, cal_t], raw.names, check=False)), dt, skip=sk,
-                warmup=sk)
+                warmup=sk,
+                isolated_by={f"sig:{f}": [f"P:{f}:alarm"] for f in _TYPED_BY_MHSSPT if f in faults})
             type_hold = Hold(list(type_names), 0.5, Z=max(1, int(hold)), absolute=False)
             gens["peer_signals"] = psig
             procs.update(peer_check=pc, fault_type=ftc, type_hold=type_hold)

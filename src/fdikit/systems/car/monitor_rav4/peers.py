@@ -12,7 +12,11 @@ real minute the front wheels read slower than the rear ones the more, the lower 
 residual of a front wheel against its peers, fitted as an affine map of their median on 16-20 m/s,
 falls to -0.17 m/s at 8 m/s), which an affine map on the peers' median alone does not follow. The
 wheels are fitted on the whole calibration half (8-20 m/s; wheel speeds need no warm-up) and their
-thresholds target one false alarm per 10 minutes (the yaw group: per hour). Measured on the minute
+thresholds target one false alarm per 10 minutes (the yaw group too, low-passed at 0.1 Hz: its
+yaw-rate threshold 0.0095 rad/s, before per hour at 0.2 Hz 0.0188 rad/s = 1.08 deg/s, above the
+0.5-1 deg/s biases the MHSSPT announces untyped). The MHSSPT's alarms of the yaw rate, the
+accelerometer and the steering also start the fault typing of that sensor (``isolated_by``,
+while its peer statistic is >= 0.5), so what the MHSSPT isolates first is typed too. Measured on the minute
 (:func:`run_rav4_log`, whole monitor): the nominal wheel statistic peaks at 0.67 of its threshold,
 no announcement; a 1 % gain of WHEEL_SPEED_FL from 20 s / 50 s is announced on that wheel after
 1.6 s / 2.3 s, of WHEEL_SPEED_RR after 1.0 s / 1.1 s (gain 0.99: FL 1.1 / 1.2 s, RR 1.5 / 2.3 s),
@@ -129,18 +133,24 @@ class Rav4PeerSignals(ResidualGenerator):
 def design_peer_stages(sig: Signals, dt: float, *, skip: int, warmup: int, band_hz=None,
                        stuck_margin: float = 1.0, window_s: float = 30.0, lookback_s: float = 5.0,
                        clear_after_s: float = 5.0, pfa: float = 1.0, per=None, fit_skip=None,
-                       margin: float = 0.0):
+                       margin: float = 0.0, block_s: float = 0.5, gain_crit: float = 25.0,
+                       isolated_by=None, confirm: float = 0.5, gain_margin: float = 1.5):
     """The peer check and the fault-type classifier designed on nominal :class:`Rav4PeerSignals`
     outputs ``sig`` (the calibration half).
 
     Each group of :data:`PEER_GROUPS` is fitted and thresholded on its own
     (:func:`~fdikit.detect.design_peer_check`, references :data:`PEER_REFERENCES`): ``band_hz``
-    (default 0.2 Hz each), ``per`` (the false-alarm period of ``pfa``; default 10 minutes for the
-    wheels, an hour for the yaw group) and ``fit_skip`` (samples left out of the fit and the
+    (default 0.2 Hz for the wheels, 0.1 Hz for the yaw group), ``per`` (the false-alarm period of
+    ``pfa``; default 10 minutes each) and ``fit_skip`` (samples left out of the fit and the
     thresholds; default 0 for the wheels, ``skip`` for the yaw group, whose members are low-passed)
     are per group; ``skip`` also bounds the classifier's nominal statistics, ``warmup`` the samples
-    during which nothing is isolated. The merged :class:`~fdikit.detect.PeerCheck` holds the groups
-    in the order of :data:`PEER_GROUPS`.
+    during which nothing is isolated; ``block_s`` and ``gain_crit`` are the classifier's gain test
+    (block length in seconds: 0.5 s averages the 12.5 Hz wheel-hop out; the block-mean noise
+    ``sigma_block`` from the nominal residual; per member the level is at least ``gain_margin``
+    times the largest gain statistic of the nominal residual over a window); ``isolated_by`` the
+    classifier's further isolation flags per member (the MHSSPT's alarms), which count while the
+    member's peer statistic is at least ``confirm``. The merged :class:`~fdikit.detect.PeerCheck`
+    holds the groups in the order of :data:`PEER_GROUPS`.
 
     Returns
     -------
@@ -149,8 +159,8 @@ def design_peer_stages(sig: Signals, dt: float, *, skip: int, warmup: int, band_
     from ....detect import PeerCheck, design_peer_check
     from ....isolate import FAULT_TYPES, FaultTypeClassifier
 
-    band = {"wheels": 0.2, "yaw": 0.2, **(band_hz or {})}
-    per = {"wheels": 600.0, "yaw": "hour", **(per or {})}
+    band = {"wheels": 0.2, "yaw": 0.1, **(band_hz or {})}
+    per = {"wheels": 600.0, "yaw": 600.0, **(per or {})}
     fit_skip = {"wheels": 0, "yaw": skip, **(fit_skip or {})}
     parts = [design_peer_check(sig, {g: ms}, references={g: PEER_REFERENCES[g]}, band_hz=band[g],
                                announce=[m for m in ms if m in PEER_SENSORS], skip=fit_skip[g], pfa=pfa,
@@ -162,6 +172,11 @@ def design_peer_stages(sig: Signals, dt: float, *, skip: int, warmup: int, band_
                    announce=list(PEER_SENSORS), warmup=warmup)
     nom = pc.run(sig)
     sigma = {m: float(np.std(nom[f"peer:{m}:e"][0, skip:])) for m in PEER_SENSORS}
+    blk = max(1, round(block_s / dt))
+    sig_blk = {}
+    for m in PEER_SENSORS:
+        e = nom[f"peer:{m}:e"][0, skip:]
+        sig_blk[m] = float(np.std(e[:e.size // blk * blk].reshape(-1, blk).mean(axis=1)))
     stuck_after = {}
     for m, rawc in _RAW_OF.items():
         x = sig[rawc][0, skip:]
@@ -171,8 +186,21 @@ def design_peer_stages(sig: Signals, dt: float, *, skip: int, warmup: int, band_
             longest = max(longest, run)
         stuck_after[m] = max(int(np.ceil((longest + 1) * (1.0 + stuck_margin))), round(0.5 / dt))
     n = lambda s: max(1, round(s / dt))  # noqa: E731
+    # the gain test's level per member: above what the nominal residual's own (model-error) slope
+    # on the signal reaches over a classifier window of the calibration half, with a margin
+    from ....isolate.fault_type import _gain_test
+
+    crit = {}
+    for m in PEER_SENSORS:
+        e, x = nom[f"peer:{m}:e"][0, skip:], nom[f"peer:{m}:ref"][0, skip:]
+        w = min(n(window_s), e.size)
+        fb = [_gain_test(e[k:k + w], x[k:k + w], blk, sig_blk[m])[0]
+              for k in range(0, e.size - w + 1, n(1.0))]
+        crit[m] = max(gain_crit, gain_margin * max(fb, default=0.0))
     ftc = FaultTypeClassifier(list(PEER_SENSORS), sigma, n(window_s), raw=_RAW_OF, stuck_after=stuck_after,
                               lookback=n(lookback_s), min_len=n(0.2), spike_max=n(0.2), burst_gap=n(0.5),
-                              clear_after=n(clear_after_s))
+                              clear_after=n(clear_after_s), isolated_by=isolated_by, confirm=confirm,
+                              block=blk, sigma_block=sig_blk,
+                              gain_crit=crit)
     names = {f"{m}:{t}": f"{s}:{t}" for m, s in PEER_SENSORS.items() for t in FAULT_TYPES}
     return pc, ftc, names

@@ -47,18 +47,19 @@ def run_rav4_log(path: str | None = None, inject_spec: str = "none", **design_kw
     Returns
     -------
     dict
-        ``announcements`` (time, fault); ``injected`` (what each fault applies, per CAN signal
-        in its DBC unit); the sensors of all injected faults (``expected_sensors``; a run is judged
-        against all of them, from the earliest onset), the first fault's sensor
-        (``expected_sensor``) and its MHSSPT hypothesis (``expected``), the first announcement
-        after the onset (``isolated``) and whether it names an injected sensor (``isolated_ok``),
-        ``detection_delay_s`` (first sample from the onset at which a test of an injected sensor is
-        on: an MHSSPT probability >= 0.95 or a sensor detector's statistic >= 1),
+        ``announcements`` (time, fault: the onset of each episode); ``changes`` (time, fault,
+        previous: an open episode's name revised, e.g. its fault type); ``injected`` (what each
+        fault applies, per CAN signal in its DBC unit); the sensors of all injected faults
+        (``expected_sensors``; a run is judged against all of them, from the earliest onset), the
+        first fault's sensor (``expected_sensor``) and its MHSSPT hypothesis (``expected``), the
+        first announcement after the onset (``isolated``) and whether it names an injected sensor
+        (``isolated_ok``), ``detection_delay_s`` (first sample from the onset at which a test of an
+        injected sensor is on: an MHSSPT probability >= 0.95 or a sensor detector's statistic >= 1),
         ``announcement_delay_s`` (first announcement naming the sensor), ``false_announcements``
         (before the onset, or naming no injected sensor); ``peak_probability`` of every fault and
         ``max_wrong_probability`` (a wrong hypothesis: any fault before the onset, any other
-        sensor's after it) over the whole log, and the same statistics for each half
-        separately: ``calibration`` (what the design saw) and ``held_out``.
+        sensor's after it) over the whole log, and the same statistics for each half separately:
+        ``calibration`` (what the design saw) and ``held_out``.
 
     Examples
     --------
@@ -87,6 +88,8 @@ def run_rav4_log(path: str | None = None, inject_spec: str = "none", **design_kw
         "faults": [repr(f) for f in faults],
         "injected": injection_summary(faults, pre) if faults else [],
         "announcements": [{"t": round(e.t, 3), "fault": e.hypothesis} for e in out.events],
+        "changes": [{"t": round(e.t, 3), "fault": e.hypothesis, "previous": e.previous}
+                    for e in getattr(out, "changes", [])],
         "peak_probability": {f: round(float(p.max()), 5) for f, p in probs.items()},
         "speed_mean_m_s": round(mon.record["U_mean"], 2), "filters": mon.record["filter_methods"],
         "band_hz": mon.record["band_hz"],
