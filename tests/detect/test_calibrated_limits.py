@@ -9,7 +9,13 @@ import pytest
 from scipy.signal import lfilter
 
 from fdikit import DataError
-from fdikit.detect import CalibratedLimits, calibrate_limits, fit_calibrated, held_out_limit, predictive_interval
+from fdikit.detect import (
+    CalibratedLimits,
+    calibrate_limits,
+    fit_calibrated,
+    held_out_limit,
+    predictive_interval,
+)
 from fdikit.residuals import CVAResidual, DPCAResidual, PCAResidual
 
 TEP = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "tep"
@@ -86,7 +92,8 @@ def test_bad_input_is_named():
     with pytest.raises(DataError, match="ONE record"):
         fit_calibrated(PCAResidual, np.zeros((2, 100, 3)))
     with pytest.raises(DataError, match="columns"):
-        CalibratedLimits(["T2", "Q"], np.ones(2), 0.99, np.zeros((2, 2)), 10, np.ones(2)).exceed(np.ones((4, 3)))
+        lim = CalibratedLimits(["T2", "Q"], np.ones(2), 0.99, np.zeros((2, 2)), 10, np.ones(2))
+        lim.exceed(np.ones((4, 3)))
 
 
 @pytest.mark.slow

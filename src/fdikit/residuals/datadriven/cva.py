@@ -69,9 +69,10 @@ def heldout_order(z: np.ndarray, past: int, future: int, holdout: float = 0.3) -
     The canonical variates are fitted on the first ``1 - holdout`` of every run of ``z``; the
     future vector of each held-out window is predicted from the first ``n`` states,
     ``f_hat = S_fp J_n' J_n p`` (the least-squares prediction, since ``J S_pp J' = I``), and the
-    order with the smallest mean squared error over the held-out windows is returned. More
-    states fit the training future better but, beyond the dynamics that the data can identify,
-    predict held-out data worse.
+    fewest states whose mean squared error over the held-out windows is within one standard error
+    of the smallest is returned (the standard error of the paired difference of its per-window
+    errors and those of the best order). More states fit the training future better
+    but, beyond the dynamics that the data can identify, predict held-out data worse.
 
     Parameters
     ----------
@@ -125,11 +126,17 @@ def heldout_order(z: np.ndarray, past: int, future: int, holdout: float = 0.3) -
     X = Pt @ J.T                        # every held-out state
     C = Sfp @ J.T                       # the future's coefficient on each state
     resid = Ft.copy()
-    err = np.empty(q - 1)
+    err = np.empty((q - 1, Ft.shape[0]))
     for i in range(q - 1):
         resid -= np.outer(X[:, i], C[:, i])
-        err[i] = float(np.mean(resid * resid))
-    return int(np.argmin(err)) + 1
+        err[i] = np.mean(resid * resid, axis=1)
+    mse = err.mean(axis=1)
+    best = int(np.argmin(mse))
+    # one-standard-error rule: the fewest states whose held-out error is within one standard error
+    # of the best (the error curve is flat near its minimum; its noise should not add states)
+    diff = err - err[best]
+    se = diff.std(axis=1, ddof=1) / np.sqrt(Ft.shape[0])
+    return int(np.flatnonzero(diff.mean(axis=1) <= se)[0]) + 1
 
 
 class CVAResidual(LaggedStatistic):
