@@ -132,6 +132,9 @@ class ForestIsolator:
         Time-blocked cross-validation folds (classifier choice and the held-out nominal scores).
     n_estimators : int
         Trees of the forests.
+    class_weight : None, "balanced" or dict
+        Of the built-in candidates (scikit-learn's meaning): ``"balanced"`` weighs a class by the
+        inverse of its frequency (a nominal class much smaller than the faults' counts as much).
     confidence : float
         Of the interval of the rejection's false-alarm rate.
     random_state : int
@@ -166,7 +169,8 @@ class ForestIsolator:
     def __init__(self, window: int = 20, pfa: float | None = 0.01, classifier: Any = "auto", *,
                  candidates: tuple[str, ...] = ("forest", "extra_trees"), features: str = "mean",
                  nominal: str = "nominal", unknown: str = "unknown", unknown_below: float | None = None,
-                 folds: int = 3, n_estimators: int = 300, confidence: float = 0.95, random_state: int = 0):
+                 folds: int = 3, n_estimators: int = 100, class_weight: Any = None, confidence: float = 0.95,
+                 random_state: int = 0):
         if int(window) != window or window < 1:
             raise DataError(f"window must be an integer >= 1 sample, got {window}")
         if pfa is not None and not 0 < pfa < 1:
@@ -188,6 +192,7 @@ class ForestIsolator:
         self.nominal, self.unknown, self.unknown_below = str(nominal), str(unknown), unknown_below
         self.folds, self.n_estimators = int(folds), int(n_estimators)
         self.confidence, self.random_state = float(confidence), int(random_state)
+        self.class_weight = class_weight
 
     # ---- the classifiers -------------------------------------------------------------------
 
@@ -201,14 +206,14 @@ class ForestIsolator:
         from sklearn.pipeline import make_pipeline
         from sklearn.preprocessing import StandardScaler
 
-        rs = self.random_state
+        rs, cw = self.random_state, self.class_weight
         if name == "forest":
-            return RandomForestClassifier(n_estimators=self.n_estimators, random_state=rs)
+            return RandomForestClassifier(n_estimators=self.n_estimators, class_weight=cw, random_state=rs)
         if name == "extra_trees":
-            return ExtraTreesClassifier(n_estimators=self.n_estimators, random_state=rs)
+            return ExtraTreesClassifier(n_estimators=self.n_estimators, class_weight=cw, random_state=rs)
         if name == "hgb":
-            return HistGradientBoostingClassifier(random_state=rs)
-        return make_pipeline(StandardScaler(), LogisticRegression(max_iter=2000))
+            return HistGradientBoostingClassifier(class_weight=cw, random_state=rs)
+        return make_pipeline(StandardScaler(), LogisticRegression(class_weight=cw, max_iter=2000))
 
     def _oof(self, est: Any, X: np.ndarray, y: np.ndarray, cv: Any) -> np.ndarray:
         """Out-of-fold class probabilities (n, classes) in the order of ``np.unique(y)``."""
