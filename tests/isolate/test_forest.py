@@ -105,3 +105,24 @@ def test_bad_input_is_named():
         iso.false_alarm_rate(r)
     with pytest.raises(DataError, match="groups"):
         iso.predict(r, groups=grp[:10])
+
+
+def test_calibrate_on_more_nominal_records():
+    """More held-out nominal records: more effective samples behind the threshold, the classifier
+    unchanged; scores given directly pool the same way."""
+    r, lab, grp = _records(5, n_nominal=2)
+    iso = ForestIsolator(window=10, pfa=0.05, candidates=("linear",)).fit(r, lab, grp)
+    n0 = iso.design_report_["effective_samples"]
+    model = iso.model_
+    rn, _, gn = _records(6, n_nominal=8, n_fault=0)
+    iso.calibrate(rn, gn)
+    assert iso.design_report_["effective_samples"] > 2 * n0 and iso.model_ is model
+    t1 = iso.threshold_
+    scores = [iso.fault_score(rn[gn == g])[9:] for g in np.unique(gn)]
+    assert iso.calibrate(scores=scores).threshold_ == t1
+    only = iso.calibrate(scores=scores, include_training=False)
+    assert only.design_report_["samples"] == sum(len(v) for v in scores)
+    with pytest.raises(DataError, match="needs nominal records"):
+        iso.calibrate(include_training=False)
+    with pytest.raises(DataError, match="no rejection"):
+        ForestIsolator(window=10, pfa=None, candidates=("linear",)).fit(r, lab, grp).calibrate(rn)

@@ -149,7 +149,8 @@ class ForestIsolator:
         Of the fault score ``1 - P(nominal)`` (None with ``pfa=None``: no rejection).
     design_report_ : dict
         ``target``, ``threshold``, ``interval``, ``samples``, ``effective_samples``, ``supported``,
-        ``held_out_rate`` (of the cross-validated nominal scores), ``classifier``, ``cv_scores``.
+        ``held_out_rate`` (of the cross-validated nominal scores), ``classifier``, ``cv_scores``;
+        :meth:`calibrate` sets the threshold again on more nominal records.
     classes_ : list of str
 
     Examples
@@ -248,7 +249,6 @@ class ForestIsolator:
         """
         from sklearn.base import clone
 
-        from ..detect.calibrated_limits import held_out_limit
         from .svm import BlockedStratifiedKFold
 
         r = np.asarray(r, dtype=float)
@@ -301,19 +301,68 @@ class ForestIsolator:
         rep: dict[str, Any] = {"target": self.pfa, "classifier": name, "cv_scores": dict(self.cv_scores_),
                                "nominal_windows": int(nom.sum()), "features": self.features,
                                "window": self.window}
-        if self.pfa is None:
-            self.threshold_ = None
-        else:
-            d = held_out_limit(recs, 1.0 - self.pfa, confidence=self.confidence)
-            self.threshold_ = d["limit"]
-            rep.update({"threshold": d["limit"], "interval": d["interval"], "samples": d["samples"],
-                        "effective_samples": d["effective_samples"], "tau": d["tau"],
-                        "supported": d["supported"], "confidence": self.confidence,
-                        "held_out_rate": float(np.mean(score[nom] > d["limit"])),
-                        "method": f"{self.folds} time-blocked folds: out-of-fold P(nominal) of the nominal "
-                                  "windows, split-conformal quantile"})
         self.design_report_ = rep
+        self.oof_scores_ = recs
+        self.threshold_ = None
+        if self.pfa is not None:
+            self._set_threshold(recs, f"{self.folds} time-blocked folds: out-of-fold P(nominal) of the "
+                                      "nominal windows, split-conformal quantile")
         self.n_features_ = X.shape[1] // (2 if self.features == "mean_std" else 1)
+        return self
+
+    def _set_threshold(self, recs: list, method: str) -> None:
+        from ..detect.calibrated_limits import held_out_limit
+
+        d = held_out_limit(recs, 1.0 - self.pfa, confidence=self.confidence)
+        self.threshold_ = d["limit"]
+        allv = np.concatenate(recs)
+        self.design_report_.update({
+            "threshold": d["limit"], "interval": d["interval"], "samples": d["samples"],
+            "effective_samples": d["effective_samples"], "tau": d["tau"], "supported": d["supported"],
+            "confidence": self.confidence, "held_out_rate": float(np.mean(allv > d["limit"])),
+            "method": method})
+
+    def calibrate(self, r: Any = None, groups: Any = None, *, scores: Any = None,
+                  include_training: bool = True) -> ForestIsolator:
+        """Set the rejection threshold again, on more nominal records the classifier never saw.
+
+        The fault scores of the given records (by the fitted model) are pooled with the
+        out-of-fold scores of the training's nominal windows (``include_training``) and the
+        threshold is their split-conformal quantile at ``1 - pfa``, as in :meth:`fit`; the
+        classifier is unchanged. More nominal records (other runs of the process) give more
+        effective samples and a threshold that covers their run-to-run variation.
+
+        Parameters
+        ----------
+        r : array_like (T, C), optional
+            Nominal residuals (records laid end to end; ``groups`` tells them apart). Their first
+            ``window - 1`` samples per record (partial windows) are left out.
+        groups : array_like (T,), optional
+        scores : list of arrays, optional
+            Fault scores (:meth:`fault_score`) of nominal records, instead of ``r``.
+        include_training : bool
+            Pool the training's out-of-fold nominal scores as well.
+
+        Returns
+        -------
+        ForestIsolator
+        """
+        self._fitted()
+        if self.pfa is None:
+            raise DataError("pfa=None: the isolator has no rejection to calibrate")
+        recs = list(self.oof_scores_) if include_training else []
+        if r is not None:
+            s = self.fault_score(r, groups)
+            g = _groups(groups, s.size)
+            recs += [s[a + self.window - 1:b] for a, b in _segments(g) if b - a >= self.window]
+        if scores is not None:
+            recs += [np.asarray(v, dtype=float).ravel() for v in scores]
+        if not recs:
+            raise DataError("calibrate needs nominal records (r or scores) or include_training=True")
+        more = len(recs) - (len(self.oof_scores_) if include_training else 0)
+        self._set_threshold(recs, "split-conformal quantile of the fault scores of held-out nominal windows ("
+                            + ("training out-of-fold + " if include_training else "")
+                            + f"{more} more records)")
         return self
 
     # ---- running ---------------------------------------------------------------------------
