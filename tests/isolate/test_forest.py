@@ -126,3 +126,16 @@ def test_calibrate_on_more_nominal_records():
         iso.calibrate(include_training=False)
     with pytest.raises(DataError, match="no rejection"):
         ForestIsolator(window=10, pfa=None, candidates=("linear",)).fit(r, lab, grp).calibrate(rn)
+
+
+def test_another_detectors_alarms_replace_the_rejection():
+    r, lab, grp = _records(7)
+    iso = ForestIsolator(window=10, pfa=0.05, candidates=("linear",)).fit(r, lab, grp)
+    rt, _, gt = _records(8)
+    mask = np.zeros(len(rt), bool)
+    mask[::3] = True
+    pred = iso.predict(rt, gt, detected=mask)
+    np.testing.assert_array_equal(pred == "nominal", ~mask)
+    assert set(pred[mask]) <= {"f0", "f1", "f2"}
+    with pytest.raises(DataError, match="detected must be"):
+        iso.predict(rt, gt, detected=mask[:5])

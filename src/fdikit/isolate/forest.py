@@ -388,15 +388,37 @@ class ForestIsolator:
         """``1 - P(nominal)`` of every sample (T,): the statistic the rejection thresholds."""
         return 1.0 - self.predict_proba(r, groups)[:, self._inom]
 
-    def predict(self, r: Any, groups: Any = None, *, reject: bool = True) -> np.ndarray:
-        """The diagnosis of every sample (T,): ``nominal`` below the threshold, else the most
-        probable fault (or ``unknown``); ``reject=False`` (or ``pfa=None``): the most probable class."""
+    def predict(self, r: Any, groups: Any = None, *, reject: bool = True, detected: Any = None) -> np.ndarray:
+        """The diagnosis of every sample (T,).
+
+        Parameters
+        ----------
+        r : array_like (T, C)
+        groups : array_like (T,), optional
+        reject : bool
+            ``nominal`` below the rejection threshold, else the most probable fault (or
+            ``unknown``); False (or ``pfa=None``): the most probable class.
+        detected : array_like (T,) of bool, optional
+            Alarms of another detector with its own calibrated false-alarm rate (e.g. a CVA
+            index at a held-out limit, :func:`fdikit.detect.held_out_limit`): they replace the
+            rejection (``nominal`` where False, the most probable fault where True).
+
+        Returns
+        -------
+        ndarray (T,) of str
+        """
         P = self.predict_proba(r, groups)
         cls = np.asarray(self.classes_, dtype=object)
-        if not reject or self.threshold_ is None:
+        if detected is not None:
+            hit = np.asarray(detected, dtype=bool)
+            if hit.shape != (P.shape[0],):
+                raise DataError(f"detected must be (T,) booleans with T = {P.shape[0]}, got shape "
+                                f"{hit.shape}")
+        elif not reject or self.threshold_ is None:
             return cls[np.argmax(P, axis=1)].astype(str)
+        else:
+            hit = (1.0 - P[:, self._inom]) > self.threshold_
         out = np.full(P.shape[0], self.nominal, dtype=object)
-        hit = (1.0 - P[:, self._inom]) > self.threshold_
         Pf = P.copy()
         Pf[:, self._inom] = -1.0
         top = np.argmax(Pf, axis=1)
