@@ -451,6 +451,13 @@ def main(argv=None) -> dict:
         except Exception as exc:     # a refusal of identify or of the observer design: printed
             print(f"  model-based detector refused: {type(exc).__name__}: {exc}")
             result["model_based"] = {"refused": f"{type(exc).__name__}: {exc}"}
+    if "N4SID-Kalman T2" in index:
+        # data-driven and model-based together: each index over its 99 % quantile on d00[N_FIT:]
+        # (held out: no test set involved), the larger of the two
+        (ic, c00), (im, m00) = index["CVA"], index["N4SID-Kalman T2"]
+        qc, qm = float(np.quantile(c00[N_FIT:], 0.99)), float(np.quantile(m00[N_FIT:], 0.99))
+        index["CVA|N4SID"] = ({k: np.maximum(ic[k] / qc, im[k] / qm) for k in test},
+                              np.maximum(c00 / qc, m00 / qm))
     from fdikit.detect import predictive_interval
     claims, designs, alarms = [], {}, {}
     warm = {"PCA": fk_fit["PCA"].lags, "DPCA": fk_fit["DPCA"].lags, "CVA": fk_fit["CVA"].lags}
