@@ -378,7 +378,8 @@ def mhsspt(train: dict, test: dict, faults) -> dict:
 
 def print_table(title: str, cols: list, tables: dict, faults) -> None:
     """Per fault: missed-detection rate of every column; then the mean and the false-alarm rates."""
-    short = {c: c.replace("peer ", "p").replace(" @1%", "@1%").replace("N4SID-Kalman T2", "N4SID")
+    short = {c: c.replace("peer ", "p").replace(" @1%", "@1%").replace("CVA|N4SID", "C|N")
+             .replace("N4SID-Kalman T2", "N4SID")
              .replace(" cal", "c").replace(" ", "") for c in cols}
     w = 9
     print("\n" + title)
