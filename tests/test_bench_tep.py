@@ -59,3 +59,31 @@ def test_dpca_and_cva_match_their_numpy_peers(setup):
         X = test[1]
         S, P = mon.run_array(X)[0], peer.statistics(X)
         np.testing.assert_allclose(S, P, rtol=1e-5, atol=1e-6 * np.abs(P).max())
+
+
+def test_published_values_are_only_what_the_readme_gives():
+    """The README names the sources but prints no numbers: the bench prints none (the values once
+    recalled from memory are gone) and cites both sources."""
+    bench = _bench()
+    assert not hasattr(bench, "PUBLISHED_PCA_RECALLED")
+    readme = (TEP / "README.md").read_text() if (TEP / "README.md").exists() else None
+    for src in bench.PUBLISHED_SOURCES:
+        assert ("Russell" in src or "Chiang" in src) and ("2000" in src or "2001" in src)
+        if readme is not None:
+            assert src.split(",")[0].split()[0] in readme
+
+
+def test_held_out_design_leaves_each_record_out():
+    """The 1 %/sample limit of the '+pre' pool judges each test set by a limit set without it."""
+    bench = _bench()
+    rng = np.random.default_rng(0)
+    faults = [1, 2, 3]
+    idx = {k: rng.standard_normal(960) for k in [0, *faults]}
+    idx[2][:bench.ONSET] += 100.0                    # record 2's pre-onset part is far off
+    i00 = rng.standard_normal(500)
+    out = bench.held_out_design(idx, i00, faults, warm=2)
+    d, loro = out["d00+pre"]
+    assert loro[2] < 10.0 < d["limit"]               # record 2 is not in its own limit
+    assert loro[1] > 10.0 and loro[3] > 10.0
+    d0, same = out["d00"]
+    assert set(same.values()) == {d0["limit"]}

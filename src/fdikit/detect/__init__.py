@@ -2,9 +2,17 @@
 pre-whitened), feature norms, peer checks of redundant sensors (:mod:`.redundancy`),
 sensor-fault detectors (stuck, drift, gain, intermittent:
 :mod:`.sensor`), banks of tests designed together, and threshold design for a target per
-sample, per run or per hour (:mod:`.tail`: block bootstrap and GPD tails)."""
+sample, per run or per hour (:mod:`.tail`: block bootstrap and GPD tails), and control limits of
+data-driven statistics calibrated on held-out nominal records (:mod:`.calibrated_limits`)."""
 
 from .bank import TestBank, TestSpec
+from .calibrated_limits import (
+    CalibratedLimits,
+    calibrate_limits,
+    fit_calibrated,
+    held_out_limit,
+    predictive_interval,
+)
 from .directional import DirectionalGLRT, directional_statistic
 from .features import FeatureNorms
 from .glrt import GLRT, ThresholdDesign, TimeGated, design_threshold, glrt_statistic
@@ -45,6 +53,7 @@ __all__ = [
     "ABSOLUTE_DEFAULT",
     "GLRT",
     "MHSSPT",
+    "CalibratedLimits",
     "DirectionalGLRT",
     "DriftDetector",
     "FeatureNorms",
@@ -64,6 +73,7 @@ __all__ = [
     "WarmupMHSSPT",
     "WhitenedMHSSPT",
     "calibrate_densities",
+    "calibrate_limits",
     "calibrate_segments",
     "consecutive_count",
     "design_calibrated_mhsspt",
@@ -78,9 +88,12 @@ __all__ = [
     "directional_statistic",
     "extend_ranges",
     "final_diagnosis",
+    "fit_calibrated",
     "fit_temperature",
     "floor_std",
     "glrt_statistic",
+    "held_out_limit",
+    "predictive_interval",
     "reliability",
     "shrunk_covariance",
 ]

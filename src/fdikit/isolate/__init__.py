@@ -10,7 +10,9 @@ as in luo-et-al, Section VII; decide from binary outcomes by maximum likelihood
 (:class:`SignatureIsolator`); announce one diagnosis per fault episode from streaming test alarms
 (:class:`DMatrixDecision`). AO* takes a node and time budget and then falls back to a greedy
 completion with its optimality gap reported. :class:`SVMIsolator` (scikit-learn)
-separates faults that the residual tests cannot (luo-et-al, Section VI).
+separates faults that the residual tests cannot (luo-et-al, Section VI); :class:`ForestIsolator`
+wraps a scikit-learn ensemble over window features with a rejection calibrated at a false-alarm
+target on held-out nominal windows.
 """
 
 from .classify import WindowedIsolator, moving_average
@@ -18,6 +20,7 @@ from .codegen import compile_python, to_c, to_listing, to_python
 from .decide import Diagnosis, diagnose_likelihood, diagnose_ml, diagnose_tree
 from .dmatrix import DMatrix, wilson_interval
 from .fault_type import FAULT_TYPES, FaultTypeClassifier
+from .forest import ForestIsolator, window_features
 from .online import DMatrixDecision
 from .sequencing import DiagnosticTree, TreeNode, ao_star, exhaustive, huffman_cost
 from .signature import SignatureDecision, SignatureIsolator
@@ -42,6 +45,7 @@ __all__ = [
     "Diagnosis",
     "DiagnosticTree",
     "FaultTypeClassifier",
+    "ForestIsolator",
     "SVMDecision",
     "SVMIsolator",
     "SignatureDecision",
@@ -64,4 +68,5 @@ __all__ = [
     "to_listing",
     "to_python",
     "wilson_interval",
+    "window_features",
 ]

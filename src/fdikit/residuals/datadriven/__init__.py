@@ -10,10 +10,11 @@ streaming ``reset``/``step`` alike, saved as artifacts through ``to_dict``/``fro
 * :mod:`.lags` -- lagged windows, the number of lags by AIC, the shared streaming window;
 * :mod:`.pca` -- :class:`PCAResidual` (T², Q, per-channel contributions);
 * :mod:`.dpca` -- :class:`DPCAResidual` (PCA on lagged windows);
-* :mod:`.cva` -- :class:`CVAResidual` (T² of states and of residual variates, Q).
+* :mod:`.cva` -- :class:`CVAResidual` (T² of states and of residual variates, Q), its order by
+  held-out prediction (:func:`heldout_order`).
 """
 
-from .cva import CVAResidual
+from .cva import CVAResidual, heldout_order
 from .data import fit_scaling, training_data
 from .dpca import DPCAResidual
 from .lags import LaggedStatistic, lagged, select_lags
@@ -27,6 +28,7 @@ __all__ = [
     "PCAResidual",
     "empirical_limit",
     "fit_scaling",
+    "heldout_order",
     "lagged",
     "n_components_parallel",
     "q_limit",
