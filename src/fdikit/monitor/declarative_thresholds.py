@@ -271,12 +271,13 @@ def logged_thresholds(raw, groups: dict[str, list[str]], alarm, dt: float, nomin
         lines = "; ".join(f"{c['name']}: claimed {c['interval'][0]:.3g}..{c['interval'][1]:.3g}, measured "
                           f"{c['measured']['rate']:.3g} ({c['measured']['interval'][0]:.3g}.."
                           f"{c['measured']['interval'][1]:.3g}) per {c['per']}, {c['verdict']}" for c in bad)
-        msg = (f"design: the held-out half of the nominal logs contradicts {len(bad)} claim(s): {lines}. "
-               "The nominal logs are not stationary enough for these thresholds (or too short)")
+        msg = (f"the held-out half of the nominal logs contradicts {len(bad)} claim(s): {lines}. The "
+               "nominal logs are not stationary enough for these thresholds (or too short)")
         if not accept_miscalibrated:
-            raise DataError(f"config: {msg}. Refused; set [design].accept_miscalibrated = true to keep it "
-                            "anyway (with a warning)")
-        warnings.warn(f"{msg}. Kept because [design].accept_miscalibrated = true", UserWarning, stacklevel=3)
+            raise DataError(f"config: [design].nominal_log: {msg}. Refused; set "
+                            "[design].accept_miscalibrated = true to keep it anyway (with a warning)")
+        warnings.warn(f"design: {msg}. Kept because [design].accept_miscalibrated = true", UserWarning,
+                      stacklevel=3)
     return {"white": white, "features": feats, "thr": thr, "td": td, "claims": claims, "records": len(parts),
             "fit_hours": sum(f.n_samples for f in f_fit) * dt / 3600.0,
             "measure_hours": sum(f.n_samples for f in f_meas) * dt / 3600.0}
