@@ -69,7 +69,8 @@ def _write_log(path, seed: int, minutes: float = 3.0, grow: float = 1.0):
     m = LinearFaultModel(Ar, [[2.0], [0.0], [0.0]], np.eye(3), states=["i", "w", "temp"], inputs=["V"],
                          outputs=["i_meas", "w_meas", "temp_meas"])
     R = 3.0 * R_DECLARED
-    sc = Scenario(duration=60.0 * minutes, dt=0.01, inputs=lambda t: 2.0 * np.sin(0.3 * t) + 0.5 * np.sin(1.7 * t),
+    sc = Scenario(duration=60.0 * minutes, dt=0.01,
+                  inputs=lambda t: 2.0 * np.sin(0.3 * t) + 0.5 * np.sin(1.7 * t),
                   noise=Noise(measurement=R, process=np.full(3, 1e-6)))
     res = simulate(m, sc, runs=1, seed=seed, keep=("y", "u"))
     y = res.y.values[0].copy()
@@ -131,8 +132,8 @@ def test_a_drifting_log_is_refused_unless_accepted(logs):
     with pytest.raises(DataError, match=r"held-out half .* contradicts .*accept_miscalibrated = true"):
         run_design(cfg)
     assert not (cfg.artifacts / "hold.json").exists()
-    cfg = load_config(_config(d, "drift_ok", extra='nominal_log = "drifting.csv"\naccept_miscalibrated = true',
-                              pfa=0.4))
+    extra = 'nominal_log = "drifting.csv"\naccept_miscalibrated = true'
+    cfg = load_config(_config(d, "drift_ok", extra=extra, pfa=0.4))
     with pytest.warns(UserWarning, match="Kept because"):
         paths = run_design(cfg)
     rep = json.loads(paths["design_report"].read_text())
