@@ -41,10 +41,11 @@ def _runs(cfg, logs) -> list[tuple[str, Signals]]:
             if not Path(lg).is_file():
                 raise DataError(f"{lg}: no such log file")
             raw = read_log(cfg, lg)
-        missing = [f"{c.name} (source {c.source!r})" for c in cfg.channels if c.source not in raw.names]
+        missing = [f"{c.name} (source column {c.source!r})" for c in cfg.channels
+                   if c.source not in raw.names]
         if missing:
-            raise DataError(f"{name}: the log lacks the channels {missing} of {cfg.path}; it has "
-                            f"{list(raw.names)}")
+            raise DataError(f"{name}: the log lacks the channel(s) {', '.join(missing)} of {cfg.path}; it "
+                            f"has {list(raw.names)}")
         out.append((name, map_channels(cfg, raw)))
     return out
 
