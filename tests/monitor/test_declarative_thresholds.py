@@ -15,6 +15,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from fdikit.cli import main
 from fdikit.errors import DataError
 from fdikit.evaluate import validate
 from fdikit.faults import Noise, Scenario
@@ -97,7 +98,7 @@ def logs(tmp_path_factory):
             "drifting": _write_log(d / "drifting.csv", 7, minutes=4.0, grow=4.0)}
 
 
-def test_thresholds_on_real_nominal_logs_hold_on_a_further_log(logs):
+def test_thresholds_on_real_nominal_logs_hold_on_a_further_log(logs, capsys):
     """The design given real nominal logs (a glob) states rates that a log it never saw confirms;
     the same config on simulated noise only is contradicted by that log (fails on main, which has
     no [design].nominal_log and sets thresholds on the model's noise only)."""
@@ -116,10 +117,13 @@ def test_thresholds_on_real_nominal_logs_hold_on_a_further_log(logs):
         if c["kind"] == "threshold":   # each threshold measures near its per-channel target 0.025
             assert c["interval"][0] <= c["measured"]["rate"] * 1.5 and c["measured"]["rate"] < 0.04
 
-    with warnings.catch_warnings():
+    with warnings.catch_warnings():   # `fdikit design` says that the rates are model-based
         warnings.simplefilter("ignore")
-        sim = load_config(_config(d, "simulated"))
-        assert json.loads(run_design(sim)["design_report"].read_text())["rates"] == "model-based"
+        assert main(["design", str(_config(d, "simulated")), "--json"]) == 0
+    printed = capsys.readouterr()
+    assert json.loads(printed.out)["rates"] == "model-based"
+    assert "the false-alarm rates are model-based" in printed.err and "nominal_log" in printed.err
+    sim = load_config(d / "simulated.toml")
     out = validate(sim, [logs["held_out"]])
     fam = next(c for c in out["claims"] if c["kind"] == "family")
     assert fam["verdict"] == "above" and fam["measured"]["interval"][0] > 0.1   # the model is wrong
