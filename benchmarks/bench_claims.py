@@ -28,7 +28,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 #: Fresh nominal logs per example (count, simulated seconds or None for the system's default).
-LOGS = {"two-mass": (20, None), "abs": (8, None), "abs-extended": (8, None), "aircraft-smo": (2, None),
+LOGS = {"two-mass": (60, None), "abs": (30, None), "abs-extended": (30, None), "aircraft-smo": (2, None),
         "passenger-car": (4, None), "own-system": (3, 300.0)}
 SEED0 = 1000     # the designs use seeds 0 and 11: the logs here use 1000, 1001, ...
 
