@@ -15,9 +15,8 @@ __all__ = ["register"]
 
 #: What ``fdikit design`` prints (standard error) for rates set on simulated noise only.
 MODEL_BASED = ("fdikit design: the false-alarm rates are model-based: the thresholds are set on simulated "
-               "noise of the declared model, and hold only if the plant and its noise are as declared. Give "
-               "[design].nominal_log = [...] (real nominal logs) to set and check them on data, and check a "
-               "saved design with 'fdikit validate CONFIG LOGS...'")
+               "noise of the {what} model, and hold only if the plant and its noise are as modelled. {how}"
+               "Check a saved design with 'fdikit validate CONFIG LOGS...'")
 
 
 def _design(args) -> int:
@@ -39,7 +38,11 @@ def _design(args) -> int:
         if rates:
             out["rates"] = rates
         if rates == "model-based":
-            print(MODEL_BASED, file=sys.stderr)
+            declarative = not cfg.design.get("recipe")
+            how = ("Give [design].nominal_log = [...] (real nominal logs) to set and check them on data. "
+                   if declarative else "")
+            what = "declared" if declarative else "recipe's"
+            print(MODEL_BASED.format(what=what, how=how), file=sys.stderr)
     if args.json:
         print_json(out)
     else:
