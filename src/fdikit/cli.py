@@ -41,6 +41,7 @@ def __getattr__(name: str):
 #: Modules under fdikit.commands that register subcommands, in help order.
 COMMAND_MODULES = ("demo", "reconstruct", "abs", "car", "monitor", "report", "fleet")
 COMMAND_MODULES += ("codegen",)  # issue 29
+COMMAND_MODULES += ("validate",)  # issue 26
 
 
 def build_parser() -> argparse.ArgumentParser:

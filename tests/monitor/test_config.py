@@ -30,7 +30,7 @@ def workdir(tmp_path_factory):
     out = cli("design", d / "monitor.toml", "--json")
     assert out.returncode == 0, out.stderr
     arts = json.loads(out.stdout)["artifacts"]
-    assert set(arts) == {"observer", "hold"} and all(Path(p).exists() for p in arts.values())
+    assert set(arts) == {"observer", "hold", "design_report"} and all(Path(p).exists() for p in arts.values())
     s = two_mass.record([Bias("sensor:pos2", 0.012, start=4.0)], 1, 5)
     df = pd.DataFrame({"time": s.t, "F": s["force"][0], "P1": 1000 * s["pos1"][0], "P2": 1000 * s["pos2"][0]})
     df.loc[150, "P1"] = np.nan           # a dropout: flagged and held, not fatal

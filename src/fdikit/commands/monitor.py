@@ -1,6 +1,7 @@
 """``fdikit design CONFIG`` and ``fdikit monitor LOG --config CONFIG``: config-driven monitors.
 
-* ``fdikit design CONFIG [--json]`` writes the design artifacts of the config's recipe.
+* ``fdikit design CONFIG [--json]`` writes the design artifacts of the config's recipe
+  (:mod:`fdikit.commands.design`).
 * ``fdikit monitor LOG --config CONFIG [--events F.jsonl] [--stats F.parquet] [--json]`` runs the
   monitor built from the artifacts over a recorded log, writes its records (episodes' onsets and
   cleared events, gaps, held samples; :mod:`fdikit.monitor.records`) and every sample's
@@ -26,28 +27,6 @@ from ..errors import DataError
 from ._output import print_json
 
 __all__ = ["register"]
-
-
-def _design(args) -> int:
-    from ..monitor.config import load_config, run_design
-    from ..report.progress import progress_steps, progress_wanted
-
-    t0 = time.perf_counter()
-    cfg = load_config(args.config)
-    with progress_steps(progress_wanted(args.json), 1, "fdikit design") as steps:
-        steps.step(f"recipe {cfg.design.get('recipe') or 'declarative [design]'}")
-        try:
-            paths = run_design(cfg)
-        except OSError as exc:  # a full disk: one message naming the artifacts' folder
-            raise io_error(exc.filename or cfg.artifacts, exc) from None
-    out = {"config": str(cfg.path), "artifacts": {k: str(v) for k, v in paths.items()},
-           "wall_seconds": round(time.perf_counter() - t0, 3)}
-    if args.json:
-        print_json(out)
-    else:
-        for k, v in paths.items():
-            print(f"{k}: {v}")
-    return 0
 
 
 def _batch(args, cfg) -> int:
@@ -134,15 +113,9 @@ def _monitor(args) -> int:
 
 
 def register(sub) -> None:
-    p = sub.add_parser("design", help="make the design artifacts of a monitor config",
-                       description="Run the design recipe of a monitor configuration (a TOML file) and "
-                                   "save every design it returns as a versioned artifact (a JSON file and "
-                                   "an NPZ file) in the configuration's artifact directory, ready for "
-                                   "'fdikit monitor'. Prints the path of each artifact; --json prints one "
-                                   "JSON object with the paths and the wall time.")
-    p.add_argument("config", help="monitor configuration file (TOML) with a [design] recipe")
-    p.add_argument("--json", action="store_true", help="print one JSON object instead of the paths")
-    p.set_defaults(func=_design)
+    from .design import register as register_design
+
+    register_design(sub)
     p = sub.add_parser(
         "monitor", help="run a config-driven monitor over a log",
         description=(

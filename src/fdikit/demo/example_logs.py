@@ -127,10 +127,16 @@ def _car(fault: str | None, seed: int, duration: float | None, params: dict):
         target, mag, start = _parse_bias(fault, 8.0)
         faults = [Bias(target, mag, start=start)]
         info = {"fault": target, "kind": "bias", "magnitude": mag, "onset_s": start}
+    from ..signals import Signals
+    from ..systems.car.recipe import operating_point
+
     res = simulate_drive(
         "straight", speed, duration=dur, faults=faults, seed=seed, dt=2.5e-3, noise=sensor_noise()
     )
-    return car_signals(res), info
+    sig = car_signals(res)   # absolute values; the monitor channels are deviations from the trim
+    op = operating_point(speed)
+    trim = np.array([op.get(n, 0.0) for n in sig.names])
+    return Signals(sig.t, sig.values - trim, sig.names, sig.units, check=False), info
 
 
 #: recipe -> (simulator, default fault, description). A simulator returns monitor-channel Signals.

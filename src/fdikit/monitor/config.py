@@ -91,7 +91,8 @@ from .core import Decision, Monitor
 from .logs import check_log_table
 
 __all__ = ["TIME_UNITS", "ChannelMap", "MonitorConfig", "build_monitor", "design_hash", "load_config",
-           "map_channels", "read_log", "run_design", "source_plausibility"]
+           "map_channels", "nominal_log_paths", "nominal_logs", "read_log", "run_design",
+           "source_plausibility"]
 
 #: ``[log].time_unit`` -> seconds per unit (``"auto"``: by the magnitude of the first timestamp,
 #: see :mod:`fdikit.io.timebase`).
@@ -108,7 +109,8 @@ _SCHEMA: dict[str, dict[str, type | tuple[type, ...]]] = {
                 "warmup": (int, float), "max_abs": (int, float)},
     "log": {"format": str, "time": str, "dbc": str, "rate": (int, float), "time_unit": str, "resample": str},
     "design": {"recipe": str, "params": dict, "sample_time": (int, float), "plant": dict, "faults": dict,
-               "disturbances": dict, "noise": dict, "alarm": dict, "structure": dict},
+               "disturbances": dict, "noise": dict, "alarm": dict, "structure": dict,
+               "nominal_log": (str, list), "accept_miscalibrated": bool},
     "decision": {"channels": list, "level": (int, float), "names": dict, "clear_level": (int, float),
                  "clear_after": (int, float), "sizes": dict, "processor": str, "groups": dict},
 }
@@ -382,6 +384,14 @@ def design_hash(cfg: MonitorConfig) -> str:
     """
     text = json.dumps(cfg.design, sort_keys=True, default=str, separators=(",", ":"))
     h = hashlib.sha256(text.encode())
+    if cfg.design.get("nominal_log"):
+        try:
+            nominal = nominal_log_paths(cfg)
+        except DataError:
+            nominal = []
+        for f in nominal:
+            h.update(f"\0nominal_log\0{f.name}\0".encode())
+            h.update(hashlib.sha256(f.read_bytes()).digest())
     refs: list[tuple[str, Any]] = []
     for sec, key in (("plant", "file"), ("noise", "nominal_log")):
         tab = cfg.design.get(sec)
@@ -436,21 +446,65 @@ def _import_recipe(cfg: MonitorConfig, recipe: str):
     return func
 
 
+def nominal_log_paths(cfg: MonitorConfig) -> list[Path]:
+    """The files of ``[design].nominal_log`` (a path or a list; globs; relative to the config),
+    sorted per entry.
+
+    Raises
+    ------
+    DataError
+        An entry that matches no file (naming it and the folder looked in).
+    """
+    import glob
+
+    spec = cfg.design.get("nominal_log")
+    entries = [spec] if isinstance(spec, str) else list(spec or [])
+    out: list[Path] = []
+    for k, e in enumerate(entries):
+        if not isinstance(e, str):
+            raise DataError(f"{cfg.path}: [design].nominal_log[{k}] must be a path, got {e!r}")
+        p = config_path(cfg.path.parent, e, where=f"{cfg.path}: [design].nominal_log[{k}]")
+        hits = sorted(Path(h) for h in glob.glob(str(p))) if glob.has_magic(str(p)) else \
+            ([p] if p.exists() else [])
+        if not hits:
+            raise DataError(f"{cfg.path}: [design].nominal_log[{k}] = {e!r} matches no file (looked for "
+                            f"{p})")
+        out.extend(hits)
+    return out
+
+
+def nominal_logs(cfg: MonitorConfig) -> dict[str, Signals]:
+    """The ``[design].nominal_log`` logs, read as ``[log]`` says and mapped to monitor channels:
+    ``{path: Signals}``."""
+    return {str(p): map_channels(cfg, read_log(cfg, p)) for p in nominal_log_paths(cfg)}
+
+
 def run_design(cfg: MonitorConfig) -> dict[str, Path]:
-    """Run the config's design recipe and save every design it returns as an artifact."""
+    """Run the config's design recipe and save every design it returns as an artifact.
+
+    A declarative design and a recipe that returns a ``"_report"`` entry (a plain dict, e.g. with
+    ``claims``: the false-alarm rates the design states) also write ``design_report.json``.
+    """
     recipe = cfg.design.get("recipe")
     report = None
     if not recipe and "plant" in cfg.design:
         from .declarative import design_monitor
 
-        designs = design_monitor(cfg.design, cfg.path.parent, log=cfg.log)
+        nominal = nominal_logs(cfg) if cfg.design.get("nominal_log") else None
+        designs = design_monitor(cfg.design, cfg.path.parent, log=cfg.log, nominal=nominal)
         report = designs.pop("_report")
     else:
         if not recipe:
             raise DataError(f"{cfg.path}: [design].recipe is not set (e.g. 'package.module:function'), "
                             "and there is no declarative [design.plant]")
+        if cfg.design.get("nominal_log"):
+            raise DataError(f"{cfg.path}: [design].nominal_log sets the thresholds of a declarative "
+                            "[design.plant]; a recipe reads its own data ([design.params])")
         func = _import_recipe(cfg, recipe)
         designs = func(dict(cfg.design.get("params", {})))
+        if isinstance(designs, dict) and isinstance(designs.get("_report"), dict):
+            designs = dict(designs)
+            report = designs.pop("_report")
     if not isinstance(designs, dict) or not designs:
         raise DataError(f"design recipe {recipe!r} must return a non-empty dict name -> design")
     cfg.artifacts.mkdir(parents=True, exist_ok=True)

@@ -45,6 +45,11 @@ The ``[design]`` table of a monitor config (:mod:`fdikit.monitor.config`) may de
     process = 1e-8                     # state noise variance (scalar or one per state)
     # nominal_log = "nominal.csv"      # ... or estimated from a nominal log (see estimate_noise)
 
+    nominal_log = ["nominal/*.csv"]    # real nominal logs (one, many, globs; read as [log] says):
+                                       # the thresholds are set on their residuals, time-blocked,
+                                       # and every claimed rate is measured on held-out data
+    # accept_miscalibrated = true      # keep a design whose held-out rate misses its interval
+
     [design.alarm]                     # the false-alarm target
     pfa = 1e-3                         # per "hour": expected false alarms (onsets) per hour;
     per = "hour"                       # per "sample" or "run": a probability in (0, 1)
@@ -565,7 +570,8 @@ def sample_time(design: Mapping[str, Any], model: LinearFaultModel, *, where: st
 
 def design_monitor(design: Mapping[str, Any], base_dir: str | Path = ".", *, where: str = "design",
                    nominal_hours: float | None = None, seed: int = 0,
-                   log: Mapping[str, Any] | None = None) -> dict[str, Any]:
+                   log: Mapping[str, Any] | None = None,
+                   nominal: Sequence[Signals] | Mapping[str, Signals] | None = None) -> dict[str, Any]:
     """Design the whole monitor of a declarative ``[design]`` table: residual bank, features,
     thresholds for the false-alarm target, and isolation by the fault signature.
 
@@ -586,7 +592,13 @@ def design_monitor(design: Mapping[str, Any], base_dir: str | Path = ".", *, whe
        dimension ``k``, chi-distributed, and its ``1 - p`` quantile (``p`` the per-sample target,
        Bonferroni over the residuals) bounds the samples over the threshold, hence the alarms.
        That fallback is announced with a :class:`UserWarning` naming the target, the data and
-       why, and the report says which method set each threshold and why.
+       why, and the report says which method set each threshold and why. These rates are
+       model-based (``report["rates"]``): they hold if the plant and its noise are as declared.
+       Given ``nominal`` logs (``[design].nominal_log``), the whitening and the thresholds are set
+       on the residuals of those real logs instead, time-blocked: each log's first half fits them,
+       its second half measures every claimed rate, and a design whose measured interval misses
+       its claimed one is refused unless ``[design].accept_miscalibrated = true``
+       (:func:`fdikit.monitor.declarative_thresholds.logged_thresholds`).
     5. Isolation: :class:`fdikit.isolate.SignatureDecision` on the alarms with the bank's signature.
 
     Returns
@@ -594,15 +606,33 @@ def design_monitor(design: Mapping[str, Any], base_dir: str | Path = ".", *, whe
     dict
         The artifacts ``bank`` (FilterDesign), ``features`` (FeatureNorms), ``hold`` (Hold) and
         ``isolate`` (SignatureDecision), and ``report`` (a plain dict: signature, isolability,
-        weak pairs, threshold design) under the key ``"_report"``.
+        weak pairs, threshold design, ``claims``: every stated false-alarm rate with its interval,
+        and measured on held-out data with real logs; see
+        :mod:`fdikit.monitor.declarative_thresholds`) under the key ``"_report"``.
+
+    Parameters
+    ----------
+    design : mapping
+        The ``[design]`` table.
+    base_dir : path
+        The config's folder (relative paths).
+    where : str
+        The table's name in error messages.
+    nominal_hours : float, optional
+        Simulated nominal operation for the model-based thresholds (default 0.05 h).
+    seed : int
+        Seed of that simulation.
+    log : mapping, optional
+        The config's ``[log]`` table: how the identification and noise logs are read.
+    nominal : sequence of Signals or dict name -> Signals, optional
+        Real nominal logs in monitor channels: the thresholds are set and checked on them.
     """
     import warnings
 
-    from ..detect import FeatureNorms, Hold, design_threshold
-    from ..faults import Noise, Scenario
+    from ..detect import Hold
     from ..isolate import SignatureDecision
-    from ..residuals import FaultDetectionFilter, FilterDesign, design_residual_bank
-    from ..sim import simulate
+    from ..residuals import design_residual_bank
+    from .declarative_thresholds import logged_thresholds, simulated_thresholds
 
     model, ident = _plant(design, base_dir, where, log)
     noise = noise_from_config(design, model, base_dir, where=where, identification=ident, log=log)
@@ -623,74 +653,36 @@ def design_monitor(design: Mapping[str, Any], base_dir: str | Path = ".", *, whe
     chans_of = {name: bank.channels(name) for name in bank.residual_names}
     taken = set(bank.design.residual_names)
     groups = {(f"{name}:norm" if name in taken else name): ch for name, ch in chans_of.items()}
-    # nominal operation: noise only (the residuals are decoupled from the known inputs)
     md = model.discretize(dt) if model.dt is None else model
-    hours = 0.05 if nominal_hours is None else float(nominal_hours)
-    runs = 20
-    duration = hours * 3600.0 / runs
-    sc = Scenario(duration=duration, dt=dt, noise=Noise(measurement=R, process=Q))
-    sim = simulate(md.without_faults(), sc, runs=runs, seed=seed, keep=("y", "u"))
-    data = sim.u.concat_channels(sim.y) if sim.u.n_channels else sim.y
-    gen = FaultDetectionFilter(raw)
-    r = gen.run(data)
-    warm = min(r.n_samples // 2, round(10.0 / dt) if dt < 1 else 10)
-    vals = r.values[:, warm:]
-    # whiten each residual's channels by their nominal covariance
-    W = np.zeros((len(raw.residual_names), len(raw.residual_names)))
-    for name, chans in groups.items():
-        idx = [raw.residual_names.index(c) for c in chans]
-        S = np.atleast_2d(np.cov(vals[:, :, idx].reshape(-1, len(idx)).T))
-        w, V = np.linalg.eigh(0.5 * (S + S.T))
-        if w.max() <= 0:
-            raise DataError(f"residual {name!r} carries no noise in the nominal simulation")
-        keep = w > 1e-9 * w.max()
-        W[np.ix_(idx, idx)] = (V[:, keep] / np.sqrt(w[keep])) @ V[:, keep].T
-    white = FilterDesign(raw.A, raw.Bu, raw.By, W @ raw.C, W @ raw.Du, W @ raw.Dy, raw.dt, list(raw.u_names),
-                         list(raw.y_names), list(raw.residual_names),
-                         {**raw.info, "whitening": W, "groups": groups})
-    feats = FeatureNorms(groups, dt, 0.0)
-    # the whitened filter's output is W times the raw one (C, Du, Dy premultiplied): no second run
-    f_nom = feats.run(Signals(r.t, r.values @ W.T, r.names, check=False))
-    f_nom = Signals(f_nom.t[warm:], f_nom.values[:, warm:], f_nom.names, check=False)
-    per = {"sample": "sample", "run": float(alarm.run_length or 0.0), "hour": "hour"}[alarm.per]
-    try:
-        td = dict(design_threshold(f_nom, alarm.pfa, per=per, Z=alarm.hold, dt=dt, family_wise=True))
-        thr = np.atleast_1d(np.asarray(td["threshold"], float))
-    except DataError as exc:
-        # The nominal data cannot show a rate that small (the residuals of slow filters are strongly
-        # autocorrelated: few effective samples). The features are norms of whitened Gaussian
-        # residuals, so each is chi-distributed with the residual's dimension k: a threshold at the
-        # chi quantile of the per-sample probability bounds the fraction of samples over it, and
-        # an alarm needs ``hold`` of them, so the alarm onsets per unit time are bounded too
-        # (conservative; Bonferroni over the residuals).
-        from scipy.stats import chi2
-
-        p_each = alarm.per_sample(dt) / len(groups)
-        dims = []
-        for g in feats.output_names:
-            ix = [raw.residual_names.index(c) for c in groups[g]]
-            dims.append(int(np.linalg.matrix_rank(W[np.ix_(ix, ix)])))
-        thr = np.array([np.sqrt(chi2.isf(p_each, k)) for k in dims])
-        td = {"method": "gaussian chi bound", "reason": str(exc), "per_sample_each": p_each, "dims": dims}
-        unit = {"hour": "expected false alarms per hour", "sample": "per sample"}.get(
-            alarm.per, f"per run of {alarm.run_length} s")
-        warnings.warn(f"design: the false-alarm target pfa = {alarm.pfa:g} {unit} (hold {alarm.hold}) "
-                      f"cannot be shown by the simulated nominal data ({runs} runs, "
-                      f"{runs * duration / 3600:.3g} h at dt = {dt:g} s): {exc}. Falling back to the "
-                      f"Gaussian chi bound: thresholds {np.round(thr, 4).tolist()} at a per-sample "
-                      f"probability {p_each:.3g} per residual (conservative; nominal_hours sets the "
-                      "simulated data)", UserWarning, stacklevel=2)
+    if nominal:   # real nominal logs: thresholds set and measured on them, time-blocked
+        th = logged_thresholds(raw, groups, alarm, dt, nominal,
+                               accept_miscalibrated=bool(design.get("accept_miscalibrated", False)))
+    else:         # simulated noise of the declared model: the rates are model-based
+        th = simulated_thresholds(md, raw, groups, R, Q, alarm, dt, nominal_hours=nominal_hours, seed=seed)
+    white, feats, thr, td = th["white"], th["features"], th["thr"], th["td"]
     hold = Hold(feats.output_names, thr if thr.size > 1 else float(thr[0]), Z=alarm.hold, absolute=True)
     sig = bank.signature
     iso = SignatureDecision(np.asarray(sig.matrix, int), list(sig.faults), hold.output_names)
     report = {"faults": list(sig.faults), "residuals": list(bank.residual_names),
               "signature": np.asarray(sig.matrix, int).tolist(), "isolability": str(bank.isolability()),
-              "weak": weak, "sample_time": dt, "nominal_hours_simulated": runs * duration / 3600.0,
+              "weak": weak, "sample_time": dt,
               "alarm": {"pfa": alarm.pfa, "per": alarm.per, "hold": alarm.hold},
               "thresholds": dict(zip(feats.output_names, thr.tolist() if thr.size > 1 else
                                      [float(thr[0])] * len(feats.output_names))),
               "threshold_design": {k: v for k, v in td.items() if k != "threshold"
-                                   and not isinstance(v, np.ndarray)}}
+                                   and not isinstance(v, np.ndarray)},
+              "claims": th["claims"]}
+    if nominal:
+        report.update(rates="measured on held-out nominal logs", threshold_source="nominal logs",
+                      nominal_records=th["records"], nominal_hours_fit=th["fit_hours"],
+                      nominal_hours_measured=th["measure_hours"],
+                      split="each log's first half (after the filter's warm-up) fits the whitening and the "
+                            "thresholds; its second half measures them",
+                      accepted_miscalibrated=any(c.get("verdict", "inside") != "inside"
+                                                 for c in th["claims"]))
+    else:
+        report.update(rates="model-based", threshold_source="simulated noise of the declared model",
+                      nominal_hours_simulated=th["runs"] * th["duration"] / 3600.0)
     if ident is not None:
         i = ident.info
         report["identification"] = {k: i[k] for k in ("method", "order", "criterion", "order_scores", "fit",

@@ -54,7 +54,9 @@ def record(faults=(), runs: int = 1, seed: int = 0, duration: float = 10.0):
 
 
 def design(params: dict | None = None) -> dict[str, Any]:
-    """Design recipe: ``{"observer": ObserverDesign, "hold": Hold}``.
+    """Design recipe: ``{"observer": ObserverDesign, "hold": Hold}``, and under ``"_report"`` the
+    false-alarm claims (``fdikit validate``): per threshold, per family (either sensor) and per
+    announcement, the per-run probability with its interval from the nominal runs.
 
     ``params``: ``pfa`` (per-run false-alarm probability, default 1e-3), ``Z`` (hold, default
     5), ``runs`` (nominal runs for the thresholds, default 300), ``seed`` (default 0).
@@ -65,7 +67,28 @@ def design(params: dict | None = None) -> dict[str, Any]:
                                                    R=np.eye(2) * NOISE_STD**2)
     gen = ObserverResidual(obs)
     r_nom = gen.run(record((), int(p["runs"]), int(p["seed"])))
-    thr = [design_threshold(r_nom[name][:, 100:], float(p["pfa"]), Z=int(p["Z"]), absolute=True,
-                            margin=0.05, min_events=0.0).threshold
+    tds = [design_threshold(r_nom[name][:, 100:], float(p["pfa"]), Z=int(p["Z"]), absolute=True,
+                            margin=0.05, min_events=0.0)
            for name in gen.output_names]
-    return {"observer": obs, "hold": Hold(gen.output_names, thr, Z=int(p["Z"]))}
+    thr = [td.threshold for td in tds]
+    hold = Hold(gen.output_names, thr, Z=int(p["Z"]))
+    return {"observer": obs, "hold": hold, "_report": {"rates": "model-based", "claims": _claims(hold.output_names, tds, p)}}
+
+
+def _claims(alarms: list[str], tds: list, p: dict) -> list[dict]:
+    """Per-run claims of the thresholds ``tds`` (one per alarm channel), their family (Bonferroni:
+    between the largest lower and the sum of the upper bounds) and the announcements (at most the
+    family's)."""
+    ci = [[float(v) for v in td.ci] for td in tds]
+    base = {"per": "run", "basis": f"{int(p['runs'])} simulated nominal runs", "hold": int(p["Z"])}
+    out = [{"name": f"threshold {a.removesuffix(':alarm')}", "kind": "threshold", "channels": [a],
+            "target": float(p["pfa"]), "interval": c, "method": td.method, **base}
+           for a, c, td in zip(alarms, ci, tds)]
+    fam = [max(c[0] for c in ci), min(1.0, sum(c[1] for c in ci))]
+    out.append({"name": "family (any threshold)", "kind": "family", "channels": list(alarms),
+                "target": float(p["pfa"]), "interval": fam, "method": "Bonferroni over the thresholds",
+                **base})
+    out.append({"name": "decision (announcements)", "kind": "decision", "channels": [],
+                "target": float(p["pfa"]), "interval": [0.0, fam[1]], "method": "at most the family's",
+                **base})
+    return out

@@ -130,12 +130,40 @@ def design(params: dict[str, Any] | None = None) -> dict[str, Any]:
                 raise DataError(f"gated test {s.name} must share residual, window, hold and threshold "
                                 f"with an ungated test on {r}")
             out[f"gate_{s.name}"] = TimeGated([f"{r}:glrt:alarm"], 0.5, s.gate)
+    out["_report"] = {"rates": "model-based", "claims": _claims(bank, p)}
     runs = int(p["dmatrix_runs"])
     if runs < 0:
         raise DataError(f"ABS recipe: dmatrix_runs must be >= 0, got {runs}")
     if runs:
         out["diagnosis"] = diagnosis(bank, runs=runs, settle=float(p["settle"]), dt=dt,
                                      snr_db=float(p["snr_db"]), seed=int(p["seed"]) + 1)
+    return out
+
+
+def _claims(bank, p: dict) -> list[dict]:
+    """Per-run false-alarm claims of the designed tests (``fdikit validate``): each test's alarm
+    channel with the Clopper-Pearson interval of the nominal design runs that alarmed at its
+    threshold, their family (Bonferroni) and the announcements (at most the family's)."""
+    from ...detect.rates import proportion_interval
+
+    base = {"per": "run", "target": float(p["pfa"]), "basis": f"{int(p['design_runs'])} simulated nominal "
+            "stops"}
+    out, his, los = [], [], []
+    for s in bank.specs:
+        d = bank.design[s.name]
+        k = round(float(d["achieved_pfa"]) * int(d["runs"]))
+        lo, hi = proportion_interval(k, int(d["runs"]))
+        if "shared_with" in d:   # a gate only removes alarms of the test it shares its threshold with
+            lo = 0.0
+        out.append({"name": f"test {s.name}", "kind": "threshold", "channels": [alarm_channel(s)],
+                    "interval": [lo, hi], "method": f"{k} of {d['runs']} design runs alarmed", **base})
+        his.append(hi)
+        los.append(lo)
+    fam = [max(los), min(1.0, sum(his))]
+    out.append({"name": "family (any test)", "kind": "family", "channels": [c["channels"][0] for c in out],
+                "interval": fam, "method": "Bonferroni over the tests", **base})
+    out.append({"name": "decision (announcements)", "kind": "decision", "channels": [],
+                "interval": [0.0, fam[1]], "method": "at most the family's", **base})
     return out
 
 

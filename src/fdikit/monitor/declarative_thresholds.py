@@ -1,0 +1,283 @@
+"""The thresholds of a declarative design and the false-alarm claims they state: set on simulated
+noise of the declared model (model-based rates), or on real nominal logs, time-blocked (each log's
+first half fits the whitening and the thresholds, its second half measures them).
+
+Each design returns its *claims*: plain dicts that :func:`fdikit.evaluate.validate` re-measures on
+new nominal logs and the design report lists::
+
+    {"name": "threshold r1", "kind": "threshold" | "family" | "decision",
+     "channels": ["r1:alarm"],            # monitor statistics whose alarm the claim is about
+     "per": "hour" | "sample" | "run" | seconds,  "target": 0.025,
+     "interval": [lo, hi],                # the claimed rate's interval (upper bound: lo = 0)
+     "basis": "model" | "nominal logs", "method": "empirical" | "gpd" | "gaussian chi bound", ...}
+
+On real logs, every claim is measured on the held-out halves (:func:`fdikit.detect.rates.
+measure_alarm_rate`) and a design whose measured interval misses its claimed one is refused
+unless ``accept_miscalibrated``.
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from ..errors import DataError
+from ..signals import Signals
+
+__all__ = ["logged_thresholds", "simulated_thresholds"]
+
+
+def _whitening(raw, groups: dict[str, list[str]], vals: np.ndarray) -> np.ndarray:
+    """Whitening of each residual's channels by their nominal covariance (``vals`` (runs, T, C))."""
+    W = np.zeros((len(raw.residual_names), len(raw.residual_names)))
+    for name, chans in groups.items():
+        idx = [raw.residual_names.index(c) for c in chans]
+        S = np.atleast_2d(np.cov(vals[:, :, idx].reshape(-1, len(idx)).T))
+        w, V = np.linalg.eigh(0.5 * (S + S.T))
+        if w.max() <= 0:
+            raise DataError(f"residual {name!r} carries no noise in the nominal simulation")
+        keep = w > 1e-9 * w.max()
+        W[np.ix_(idx, idx)] = (V[:, keep] / np.sqrt(w[keep])) @ V[:, keep].T
+    return W
+
+
+def _white_design(raw, W: np.ndarray, groups: dict[str, list[str]]):
+    from ..residuals import FilterDesign
+
+    return FilterDesign(raw.A, raw.Bu, raw.By, W @ raw.C, W @ raw.Du, W @ raw.Dy, raw.dt, list(raw.u_names),
+                        list(raw.y_names), list(raw.residual_names),
+                        {**raw.info, "whitening": W, "groups": groups})
+
+
+def _per(alarm) -> str | float:
+    return {"sample": "sample", "run": float(alarm.run_length or 0.0), "hour": "hour"}[alarm.per]
+
+
+def _claims(names: list[str], td: dict, alarm, basis: str) -> list[dict]:
+    """Per-threshold, family and decision claims of a threshold design ``td``."""
+    per = _per(alarm)
+    ci = np.atleast_2d(np.asarray(td["ci"], float))
+    target = np.broadcast_to(np.asarray(td.get("target", alarm.pfa / len(names)), float), (len(names),))
+    method = td.get("method")
+    methods = method if isinstance(method, list) else [method] * len(names)
+    out = [{"name": f"threshold {n}", "kind": "threshold", "channels": [f"{n}:alarm"], "per": per,
+            "target": float(target[i]), "interval": [float(ci[i, 0]), float(ci[i, 1])], "basis": basis,
+            "method": methods[i], "hold": alarm.hold} for i, n in enumerate(names)]
+    fam = [float(np.max(ci[:, 0])), float(np.sum(ci[:, 1]))]   # Bonferroni: max lo <= family <= sum hi
+    out.append({"name": "family (any threshold)", "kind": "family", "channels": [f"{n}:alarm" for n in names],
+                "per": per, "target": float(alarm.pfa), "interval": fam, "basis": basis,
+                "method": "Bonferroni over the thresholds", "hold": alarm.hold})
+    if per != "sample":
+        out.append({"name": "decision (announcements)", "kind": "decision", "channels": [], "per": per,
+                    "target": float(alarm.pfa), "interval": [0.0, fam[1]], "basis": basis,
+                    "method": "at most the family's alarm onsets", "hold": alarm.hold})
+    return out
+
+
+def simulated_thresholds(md, raw, groups: dict[str, list[str]], R: np.ndarray, Q: np.ndarray, alarm,
+                         dt: float, *, nominal_hours: float | None, seed: int) -> dict[str, Any]:
+    """Whitening and thresholds from simulated nominal operation of the discrete plant ``md``
+    (noise only: the residuals are decoupled from the known inputs); see
+    :func:`fdikit.monitor.declarative.design_monitor`, step 4.
+
+    Returns
+    -------
+    dict
+        ``white`` (the whitened FilterDesign), ``features`` (FeatureNorms), ``thr`` (thresholds),
+        ``td`` (the threshold design's record), ``runs``, ``duration`` (s per run), ``claims``.
+    """
+    from ..detect import FeatureNorms, design_threshold
+    from ..faults import Noise, Scenario
+    from ..residuals import FaultDetectionFilter
+    from ..sim import simulate
+
+    hours = 0.05 if nominal_hours is None else float(nominal_hours)
+    runs = 20
+    duration = hours * 3600.0 / runs
+    sc = Scenario(duration=duration, dt=dt, noise=Noise(measurement=R, process=Q))
+    sim = simulate(md.without_faults(), sc, runs=runs, seed=seed, keep=("y", "u"))
+    data = sim.u.concat_channels(sim.y) if sim.u.n_channels else sim.y
+    gen = FaultDetectionFilter(raw)
+    r = gen.run(data)
+    warm = min(r.n_samples // 2, round(10.0 / dt) if dt < 1 else 10)
+    vals = r.values[:, warm:]
+    W = _whitening(raw, groups, vals)
+    white = _white_design(raw, W, groups)
+    feats = FeatureNorms(groups, dt, 0.0)
+    # the whitened filter's output is W times the raw one (C, Du, Dy premultiplied): no second run
+    f_nom = feats.run(Signals(r.t, r.values @ W.T, r.names, check=False))
+    f_nom = Signals(f_nom.t[warm:], f_nom.values[:, warm:], f_nom.names, check=False)
+    per = _per(alarm)
+    try:
+        td = dict(design_threshold(f_nom, alarm.pfa, per=per, Z=alarm.hold, dt=dt, family_wise=True))
+        thr = np.atleast_1d(np.asarray(td["threshold"], float))
+        claims = _claims(feats.output_names, td, alarm, "model")
+    except DataError as exc:
+        # The nominal data cannot show a rate that small (the residuals of slow filters are strongly
+        # autocorrelated: few effective samples). The features are norms of whitened Gaussian
+        # residuals, so each is chi-distributed with the residual's dimension k: a threshold at the
+        # chi quantile of the per-sample probability bounds the fraction of samples over it, and
+        # an alarm needs ``hold`` of them, so the alarm onsets per unit time are bounded too
+        # (conservative; Bonferroni over the residuals).
+        from scipy.stats import chi2
+
+        p_each = alarm.per_sample(dt) / len(groups)
+        dims = []
+        for g in feats.output_names:
+            ix = [raw.residual_names.index(c) for c in groups[g]]
+            dims.append(int(np.linalg.matrix_rank(W[np.ix_(ix, ix)])))
+        thr = np.array([np.sqrt(chi2.isf(p_each, k)) for k in dims])
+        td = {"method": "gaussian chi bound", "reason": str(exc), "per_sample_each": p_each, "dims": dims}
+        unit = {"hour": "expected false alarms per hour", "sample": "per sample"}.get(
+            alarm.per, f"per run of {alarm.run_length} s")
+        warnings.warn(f"design: the false-alarm target pfa = {alarm.pfa:g} {unit} (hold {alarm.hold}) "
+                      f"cannot be shown by the simulated nominal data ({runs} runs, "
+                      f"{runs * duration / 3600:.3g} h at dt = {dt:g} s): {exc}. Falling back to the "
+                      f"Gaussian chi bound: thresholds {np.round(thr, 4).tolist()} at a per-sample "
+                      f"probability {p_each:.3g} per residual (conservative; nominal_hours sets the "
+                      "simulated data)", UserWarning, stacklevel=3)
+        each = alarm.pfa / len(groups)
+        bound = {"ci": [[0.0, each]] * len(groups), "target": [each] * len(groups), "method": td["method"]}
+        claims = _claims(feats.output_names, bound, alarm, "model")
+    return {"white": white, "features": feats, "thr": thr, "td": td, "runs": runs, "duration": duration,
+            "claims": claims}
+
+
+def _halves(x: np.ndarray, warm: int) -> tuple[slice, slice]:
+    """Fit and measure parts of a record of ``x.shape[0]`` samples after ``warm`` samples."""
+    n = x.shape[0]
+    mid = warm + (n - warm) // 2
+    return slice(warm, mid), slice(mid, n)
+
+
+def logged_thresholds(raw, groups: dict[str, list[str]], alarm, dt: float, nominal: list,
+                      *, accept_miscalibrated: bool = False, level: float = 0.95) -> dict[str, Any]:
+    """Whitening and thresholds set on real nominal logs, time-blocked, with claims measured on
+    held-out data.
+
+    Every record (each run of each log) is run through the raw filter; after the filter's warm-up
+    its first half fits the whitening and the thresholds (pooled over the records,
+    :func:`~fdikit.detect.design_threshold`, family-wise), its second half measures them. The
+    thresholds are the fit part's: what was measured is what is saved.
+
+    Parameters
+    ----------
+    raw : FilterDesign
+        The residual bank's filter, before whitening.
+    groups : dict
+        Feature name -> the residual channels it takes the norm of.
+    alarm : AlarmTarget
+        The false-alarm target.
+    dt : float
+        The monitor's sample time, s (the logs must be on this grid).
+    nominal : list of Signals, or dict name -> Signals
+        Nominal logs in monitor channels (e.g. :func:`fdikit.monitor.config.nominal_logs`, named
+        by their paths); every run of a log is a record.
+    accept_miscalibrated : bool
+        Keep a design whose measured rate misses its claimed interval (with a printed warning)
+        instead of refusing it.
+    level : float
+        Confidence level of the measured intervals.
+
+    Returns
+    -------
+    dict
+        As :func:`simulated_thresholds`, with ``claims`` carrying ``measured`` (the held-out
+        measurement) and ``verdict``, and ``records``/``fit_hours``/``measure_hours``.
+
+    Raises
+    ------
+    DataError
+        A log lacking a channel, off the sample time, with non-finite values; a target the fit part
+        cannot support; a claim the held-out part contradicts (unless ``accept_miscalibrated``).
+    """
+    from ..detect import FeatureNorms, Hold, design_threshold
+    from ..detect.rates import measure_alarm_rate, verdict
+    from ..residuals import FaultDetectionFilter
+
+    if not nominal:
+        raise DataError("config: [design].nominal_log names no log")
+    need = [*raw.u_names, *raw.y_names]
+    gen = FaultDetectionFilter(raw)
+    recs = []
+    items = list(nominal.items()) if isinstance(nominal, Mapping) else \
+        [(f"nominal log {i}", s) for i, s in enumerate(nominal)]
+    for where, log in items:
+        missing = [c for c in need if c not in log.names]
+        if missing:
+            raise DataError(f"{where}: lacks the channels {missing} the residual bank reads (it has "
+                            f"{list(log.names)})")
+        if log.n_samples < 3:
+            raise DataError(f"{where}: {log.n_samples} samples; a nominal log needs many")
+        step = float(np.median(np.diff(log.t)))
+        if abs(step - dt) > 1e-6 * dt:
+            raise DataError(f"{where}: sampled every {step:g} s, the design's sample time is {dt:g} s "
+                            "([design].sample_time; resample the log with [log].rate)")
+        sel = log.select(need)
+        bad = np.argwhere(~np.isfinite(sel.values))
+        if bad.size:
+            run, k, c = bad[0]
+            raise DataError(f"{where}: channel {need[c]!r} is not finite at run {run}, sample {k} (t = "
+                            f"{log.t[k]:g} s); a nominal log for thresholds must be complete")
+        r = gen.run(sel)
+        recs.extend(r.values[j] for j in range(r.runs))
+    warm = round(10.0 / dt) if dt < 1 else 10
+    parts = []
+    for x in recs:
+        w = min(x.shape[0] // 2, warm)
+        f, m = _halves(x, w)
+        if f.stop - f.start < 2 * alarm.hold or m.stop - m.start < 2 * alarm.hold:
+            raise DataError(f"a nominal log of {x.shape[0]} samples is too short: after the filter's "
+                            f"warm-up ({w} samples) each half needs more than {2 * alarm.hold} samples")
+        parts.append((x[f], x[m]))
+    fit = np.concatenate([p[0] for p in parts])
+    W = _whitening(raw, groups, fit[None])
+    white = _white_design(raw, W, groups)
+    feats = FeatureNorms(groups, dt, 0.0)
+
+    def features(x):
+        s = Signals(np.arange(x.shape[0]) * dt, (x @ W.T)[None], list(raw.residual_names), check=False)
+        return feats.run(s)
+
+    f_fit = [features(p[0]) for p in parts]
+    f_meas = [features(p[1]) for p in parts]
+    per = _per(alarm)
+    try:
+        td = dict(design_threshold(f_fit, alarm.pfa, per=per, Z=alarm.hold, dt=dt, family_wise=True))
+    except DataError as exc:
+        raise DataError(f"config: [design].nominal_log: the fit half of the nominal logs "
+                        f"({sum(f.n_samples for f in f_fit) * dt / 3600:.3g} h in {len(f_fit)} record(s)) "
+                        f"cannot support the target pfa = {alarm.pfa:g} per {alarm.per} (hold "
+                        f"{alarm.hold}): {exc}. Give more or longer nominal logs, or a larger "
+                        "target") from None
+    thr = np.atleast_1d(np.asarray(td["threshold"], float))
+    claims = _claims(feats.output_names, td, alarm, "nominal logs")
+    hold = Hold(feats.output_names, thr, Z=alarm.hold, absolute=True)
+    alarms = [hold.run(f).values[0] for f in f_meas]     # (T_i, channels)
+    for c in claims:
+        if c["kind"] == "decision":
+            continue   # announcements need the whole monitor: fdikit validate measures them
+        idx = [hold.output_names.index(n) for n in c["channels"]]
+        a = [np.any(al[:, idx] > 0.5, axis=1) for al in alarms]
+        m = measure_alarm_rate(a, per, dt, level=level)
+        c["measured"] = {k: m[k] for k in ("rate", "interval", "events", "samples", "hours",
+                                           "interval_method")}
+        c["verdict"] = verdict(c["interval"], m["interval"])
+    bad = [c for c in claims if c.get("verdict", "inside") != "inside"]
+    if bad:
+        lines = "; ".join(f"{c['name']}: claimed {c['interval'][0]:.3g}..{c['interval'][1]:.3g}, measured "
+                          f"{c['measured']['rate']:.3g} ({c['measured']['interval'][0]:.3g}.."
+                          f"{c['measured']['interval'][1]:.3g}) per {c['per']}, {c['verdict']}" for c in bad)
+        msg = (f"the held-out half of the nominal logs contradicts {len(bad)} claim(s): {lines}. The "
+               "nominal logs are not stationary enough for these thresholds (or too short)")
+        if not accept_miscalibrated:
+            raise DataError(f"config: [design].nominal_log: {msg}. Refused; set "
+                            "[design].accept_miscalibrated = true to keep it anyway (with a warning)")
+        warnings.warn(f"design: {msg}. Kept because [design].accept_miscalibrated = true", UserWarning,
+                      stacklevel=3)
+    return {"white": white, "features": feats, "thr": thr, "td": td, "claims": claims, "records": len(parts),
+            "fit_hours": sum(f.n_samples for f in f_fit) * dt / 3600.0,
+            "measure_hours": sum(f.n_samples for f in f_meas) * dt / 3600.0}
