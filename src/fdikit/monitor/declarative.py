@@ -20,6 +20,9 @@ The ``[design]`` table of a monitor config (:mod:`fdikit.monitor.config`) may de
     #                                  # the config
     # identify = { logs = ["nominal1.csv", "nominal2.csv"], inputs = ["V"],
     #              outputs = ["i_meas", "w_meas"], order = "auto", method = "n4sid" }
+    #                                  # (rate = 50.0: grid the logs at 50 Hz; a multi-rate log
+    #                                  # (ULog, ROS bag) needs it: by default its grid follows the
+    #                                  # fastest topic's median period, jitter included)
     #                                  # no model: identified from nominal logs (many records
     #                                  # pooled; fdikit.estimate.identify), discrete at the logs'
     #                                  # sample time, in deviations from the logs' mean operating
@@ -192,7 +195,7 @@ def _from_object(obj: Any, spec: Mapping[str, Any], where: str) -> LinearFaultMo
 #: Keys of ``[design.plant].identify`` (:func:`identification_from_config`).
 IDENTIFY_KEYS: dict[str, type | tuple[type, ...]] = {
     "logs": (list, str), "inputs": list, "outputs": list, "order": (str, int), "method": str, "time": str,
-    "criterion": str, "block_rows": int, "validation": (int, float)}
+    "criterion": str, "block_rows": int, "validation": (int, float), "rate": (int, float)}
 
 
 def identification_from_config(spec: Mapping[str, Any], base_dir: str | Path = ".", *,
@@ -224,12 +227,16 @@ def identification_from_config(spec: Mapping[str, Any], base_dir: str | Path = "
     method = spec.get("method", "n4sid")
     if method not in ("n4sid", "arx"):
         raise DataError(f"config: [{where}].method must be \"n4sid\" or \"arx\", got {method!r}")
+    rate = spec.get("rate")
+    if rate is not None and not (math.isfinite(float(rate)) and float(rate) > 0):
+        raise DataError(f"config: [{where}].rate must be a positive number of samples per second (Hz), "
+                        f"got {rate!r}")
     records = []
     for k, f in enumerate(logs):
         path = config_path(base_dir, f, where=f"[{where}].logs[{k}]")
         if not Path(path).exists():
             raise DataError(f"config: [{where}].logs[{k}] {str(path)!r} does not exist")
-        log = read_log(path, **({"time": spec["time"]} if "time" in spec else {}))
+        log = read_log(path, rate=rate, **({"time": spec["time"]} if "time" in spec else {}))
         missing = [c for c in [*spec["inputs"], *spec["outputs"]] if c not in log.names]
         if missing:
             raise DataError(f"config: [{where}].logs[{k}] {str(path)!r} has no channels {missing}; its "
@@ -416,15 +423,19 @@ def noise_from_config(design: Mapping[str, Any], model: LinearFaultModel, base_d
     ``nominal_log`` (:func:`estimate_noise`); the process variance defaults to 1e-8 of the unit
     squared per state (a nearly exact model). For an identified plant (``identification``, an
     :class:`~fdikit.estimate.Identification`) without a ``[design.noise]`` table, the diagonals of
-    the identified ``R`` and ``Q``.
+    the identified ``R`` and ``Q``; with ``process`` alone, the identified ``R`` and that process
+    variance (a smaller ``Q`` than the identified one makes a slower observer, whose residual keeps
+    a slow fault longer).
     """
     spec = _check(design.get("noise", {}), DESIGN_KEYS["noise"], f"{where}.noise")
-    if not spec and identification is not None:
+    if identification is not None and set(spec) <= {"process"}:
         r = np.diag(np.asarray(identification.R, float))
         q = np.diag(np.asarray(identification.Q, float)).copy()
         floor = 1e-12 * max(float(np.max(r)), 1e-300)
-        return {"measurement": {y: max(float(v), floor) for y, v in zip(model.outputs, r)},
-                "process": np.maximum(q, 0.0)}
+        meas_id = {y: max(float(v), floor) for y, v in zip(model.outputs, r)}
+        if not spec:
+            return {"measurement": meas_id, "process": np.maximum(q, 0.0)}
+        spec = {**spec, "measurement": meas_id}     # process given: the identified R, the user's Q
     meas = spec.get("measurement")
     if meas is None and "nominal_log" not in spec:
         raise DataError(f"config: [{where}.noise] needs measurement = {{output = variance}} or nominal_log")
