@@ -14,7 +14,10 @@ initialised by least squares on the design flights and then tracked by RLS with 
 ``lambda``; its a-priori prediction error, normalised by the design flights' standard deviation,
 feeds a two-sided CUSUM (drift 0.5) per output; an alarm when one exceeds ``h``, and the CUSUMs
 restart. ``h`` is tuned on the design flights to the same false-alarm target (the smallest ``h``
-with no alarm on them, times 1.05: 12 min of design data cannot show 1 per hour).
+with no alarm on them, times 1.05: 12 min of design data cannot show 1 per hour). fdikit gets the
+same rule: its thresholds come from the design (1 per hour, from the identified model's noise),
+and its hold (samples over the threshold) starts at the config's and grows by 5 until the
+monitor raises no alarm on the design flights.
 
 Also measured: what the monitor sees when the logged command is removed (the throttle dropped from
 the logs: the identification, design and monitor read the elevator only, and the fault declared is
@@ -92,8 +95,22 @@ def run_fdikit(cfg_path: Path, flights: list[dict], folder: Path) -> dict:
         onsets[f["file"]] = [float(e["t"]) for e in _events(res) if e["kind"] == "onset"]
     report = json.loads((cfg.artifacts / "design_report.json").read_text())
     return {"onsets": onsets, "design_s": t_design, "monitor_s": time.perf_counter() - t0,
+            "hold": report["alarm"]["hold"],
             "thresholds": report["thresholds"], "threshold_method": report["threshold_design"].get("method"),
             "order": report["identification"]["order"]}
+
+
+def _tune_hold(cfg_path: Path, design: list[dict], folder: Path) -> Path:
+    """The peer's rule for fdikit: the smallest hold (the config's, then +5 samples at a time) with
+    no alarm on the design flights themselves; the config is rewritten with it."""
+    text = cfg_path.read_text()
+    hold = int(re.search(r"^hold = (\d+)", text, re.M).group(1))
+    while True:
+        cfg_path.write_text(re.sub(r"^hold = \d+", f"hold = {hold}", text, flags=re.M))
+        on = run_fdikit(cfg_path, design, folder)["onsets"]
+        if not any(t >= SKIP for v in on.values() for t in v) or hold >= 50:
+            return cfg_path
+        hold += 5
 
 
 def _events(res) -> list[dict]:
@@ -272,8 +289,9 @@ def main(argv=None) -> dict:
         design = sim.write_flights(tmp / "design", n_design, 0, dur, seed=1)["flights"]
         held = sim.write_flights(tmp / "held", n_nom, n_fail, dur, seed=2)["flights"]
         design_logs = [f"design/{f['file']}" for f in design]
-        res_f = run_fdikit(_config(tmp, design_logs), held, tmp / "held")
-        res_d = run_fdikit(_config(tmp, design_logs, drop_throttle=True), held, tmp / "held")
+        res_f = run_fdikit(_tune_hold(_config(tmp, design_logs), design, tmp / "design"), held, tmp / "held")
+        res_d = run_fdikit(_tune_hold(_config(tmp, design_logs, drop_throttle=True), design, tmp / "design"),
+                           held, tmp / "held")
         # the peer on the same grid, in the same deviations
         cfg = load_config(tmp / "monitor.toml")
         ins = ["actuator_controls_0.elevator", THROTTLE]
@@ -294,8 +312,9 @@ def main(argv=None) -> dict:
         t_peer = time.perf_counter() - t0
         out["fdikit"] = {**score(res_f["onsets"], held), "design_s": round(res_f["design_s"], 2),
                          "monitor_s": round(res_f["monitor_s"], 2), "order": res_f["order"],
-                         "threshold_method": res_f["threshold_method"]}
-        out["fdikit_throttle_dropped"] = {**score(res_d["onsets"], held), "order": res_d["order"]}
+                         "threshold_method": res_f["threshold_method"], "hold": res_f["hold"]}
+        out["fdikit_throttle_dropped"] = {**score(res_d["onsets"], held), "order": res_d["order"],
+                                          "hold": res_d["hold"]}
         out["rls_peer"] = {**score(peer_on, held), "h": round(peer.h, 3), "fit_s": round(t_fit, 2),
                            "run_s": round(t_peer, 2), "lambda": peer.lam}
         out["reader"] = reader_speed(tmp / "held", [f["file"] for f in held])
