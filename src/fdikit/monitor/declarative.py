@@ -210,6 +210,11 @@ def identification_from_config(spec: Mapping[str, Any], base_dir: str | Path = "
     ...
     fdikit.errors.DataError: config: [design.plant.identify].logs must name at least one nominal log
     """
+    return _identify_logs(spec, base_dir, where)[0]
+
+
+def _identify_logs(spec: Mapping[str, Any], base_dir: str | Path, where: str):
+    """The Identification of :func:`identification_from_config` and the logs read (Signals)."""
     from ..estimate import identify
     from ..io import read_log
 
@@ -245,7 +250,7 @@ def identification_from_config(spec: Mapping[str, Any], base_dir: str | Path = "
     kw = {k: spec[k] for k in ("criterion", "block_rows", "validation") if k in spec}
     try:
         return identify(records, spec["inputs"], spec["outputs"], method=method,
-                        order=None if order == "auto" else int(order), name="identified", **kw)
+                        order=None if order == "auto" else int(order), name="identified", **kw), records
     except (DataError, ModelError) as exc:
         raise DataError(f"config: [{where}]: identification failed: {exc}") from None
 
@@ -279,7 +284,8 @@ def plant_from_config(design: Mapping[str, Any], base_dir: str | Path = ".", *,
 
 
 def _plant(design: Mapping[str, Any], base_dir: str | Path, where: str):
-    """The plant of :func:`plant_from_config` and its Identification (None unless identified)."""
+    """The plant of :func:`plant_from_config`, its Identification and the logs identified from
+    (None, None unless identified)."""
     if "plant" not in design:
         raise DataError(f"config: [{where}.plant] is missing (state-space matrices, a file, an object or "
                         "identify = {logs = [...], ...})")
@@ -289,13 +295,13 @@ def _plant(design: Mapping[str, Any], base_dir: str | Path, where: str):
     if len(given) != 1:
         raise DataError(f"config: [{where}.plant] needs exactly one of A/B/C matrices, file, object or "
                         f"identify; got {given or 'none'}")
-    ident = None
+    ident = records = None
     if "identify" in spec:
         extra = [k for k in spec if k != "identify"]
         if extra:
             raise DataError(f"config: [{where}.plant] names and sample time come from the identification; "
                             f"remove {extra}")
-        ident = identification_from_config(spec["identify"], base, where=f"{where}.plant.identify")
+        ident, records = _identify_logs(spec["identify"], base, where=f"{where}.plant.identify")
         model = ident.model
     elif "object" in spec:
         model = _from_object(import_object(spec["object"], base, where=f"[{where}.plant].object"), spec,
@@ -378,7 +384,7 @@ def _plant(design: Mapping[str, Any], base_dir: str | Path, where: str):
         model = model.without_faults().with_faults(*faults)
     except ModelError as exc:
         raise DataError(f"config: [{where}.faults]: {exc}") from None
-    return model, ident
+    return model, ident, records
 
 
 def estimate_noise(signals: Signals, channels: Sequence[str] | None = None) -> dict[str, float]:
@@ -580,7 +586,10 @@ def design_monitor(design: Mapping[str, Any], base_dir: str | Path = ".", *, whe
        dimension ``k``, chi-distributed, and its ``1 - p`` quantile (``p`` the per-sample target,
        Bonferroni over the residuals) bounds the samples over the threshold, hence the alarms.
        That fallback is announced with a :class:`UserWarning` naming the target, the data and
-       why, and the report says which method set each threshold and why.
+       why, and the report says which method set each threshold and why. For a plant identified
+       from nominal logs, the residuals of those logs (after the filter's start-up) replace the
+       simulation, for the whitening and the thresholds: they hold the identified model's error,
+       which noise simulated from that model does not.
     5. Isolation: :class:`fdikit.isolate.SignatureDecision` on the alarms with the bank's signature.
 
     Returns
@@ -598,7 +607,7 @@ def design_monitor(design: Mapping[str, Any], base_dir: str | Path = ".", *, whe
     from ..residuals import FaultDetectionFilter, FilterDesign, design_residual_bank
     from ..sim import simulate
 
-    model, ident = _plant(design, base_dir, where)
+    model, ident, logs = _plant(design, base_dir, where)
     noise = noise_from_config(design, model, base_dir, where=where, identification=ident)
     alarm = alarm_from_config(design, where=where)
     dt = sample_time(design, model, where=where)
@@ -629,6 +638,15 @@ def design_monitor(design: Mapping[str, Any], base_dir: str | Path = ".", *, whe
     r = gen.run(data)
     warm = min(r.n_samples // 2, round(10.0 / dt) if dt < 1 else 10)
     vals = r.values[:, warm:]
+    source = f"the simulated nominal data ({runs} runs, {runs * duration / 3600:.3g} h at dt = {dt:g} s)"
+    real = _log_residuals(gen, ident, logs, warm) if logs else None
+    if real:
+        # an identified plant: its residuals on the nominal logs it was identified from carry the
+        # model's own error (closed-loop bias, sensors held between slow messages), which noise
+        # simulated from the model does not; their covariance whitens, their features set thresholds
+        vals = np.concatenate(real)[None]
+        source = (f"the {len(real)} nominal logs identified from ({vals.shape[1] * dt / 3600:.3g} h at "
+                  f"dt = {dt:g} s after {warm * dt:g} s of filter start-up each)")
     # whiten each residual's channels by their nominal covariance
     W = np.zeros((len(raw.residual_names), len(raw.residual_names)))
     for name, chans in groups.items():
@@ -646,6 +664,9 @@ def design_monitor(design: Mapping[str, Any], base_dir: str | Path = ".", *, whe
     # the whitened filter's output is W times the raw one (C, Du, Dy premultiplied): no second run
     f_nom = feats.run(Signals(r.t, r.values @ W.T, r.names, check=False))
     f_nom = Signals(f_nom.t[warm:], f_nom.values[:, warm:], f_nom.names, check=False)
+    if real:
+        f_nom = [feats.run(Signals(np.arange(len(x)) * dt, (x @ W.T)[None], r.names, check=False))
+                 for x in real]
     per = {"sample": "sample", "run": float(alarm.run_length or 0.0), "hour": "hour"}[alarm.per]
     try:
         td = dict(design_threshold(f_nom, alarm.pfa, per=per, Z=alarm.hold, dt=dt, family_wise=True))
@@ -669,8 +690,7 @@ def design_monitor(design: Mapping[str, Any], base_dir: str | Path = ".", *, whe
         unit = {"hour": "expected false alarms per hour", "sample": "per sample"}.get(
             alarm.per, f"per run of {alarm.run_length} s")
         warnings.warn(f"design: the false-alarm target pfa = {alarm.pfa:g} {unit} (hold {alarm.hold}) "
-                      f"cannot be shown by the simulated nominal data ({runs} runs, "
-                      f"{runs * duration / 3600:.3g} h at dt = {dt:g} s): {exc}. Falling back to the "
+                      f"cannot be shown by {source}: {exc}. Falling back to the "
                       f"Gaussian chi bound: thresholds {np.round(thr, 4).tolist()} at a per-sample "
                       f"probability {p_each:.3g} per residual (conservative; nominal_hours sets the "
                       "simulated data)", UserWarning, stacklevel=2)
@@ -680,6 +700,7 @@ def design_monitor(design: Mapping[str, Any], base_dir: str | Path = ".", *, whe
     report = {"faults": list(sig.faults), "residuals": list(bank.residual_names),
               "signature": np.asarray(sig.matrix, int).tolist(), "isolability": str(bank.isolability()),
               "weak": weak, "sample_time": dt, "nominal_hours_simulated": runs * duration / 3600.0,
+              "nominal_data": source,
               "alarm": {"pfa": alarm.pfa, "per": alarm.per, "hold": alarm.hold},
               "thresholds": dict(zip(feats.output_names, thr.tolist() if thr.size > 1 else
                                      [float(thr[0])] * len(feats.output_names))),
@@ -691,6 +712,21 @@ def design_monitor(design: Mapping[str, Any], base_dir: str | Path = ".", *, whe
                                                       "fit_per_record", "u_offset", "y_offset", "records",
                                                       "integrators", "kalman") if k in i}
     return {"bank": white, "features": feats, "hold": hold, "isolate": iso, "_report": report}
+
+
+def _log_residuals(gen: Any, ident: Any, logs: Sequence[Signals], warm: int) -> list[np.ndarray]:
+    """Residuals (T - warm, q) of the filter ``gen`` on each nominal log (every run), in the
+    identification's deviation variables; logs shorter than twice ``warm`` are left out."""
+    names = [*gen.u_names, *gen.y_names]
+    off = {**ident.info["u_offset"], **ident.info["y_offset"]}
+    out = []
+    for log in logs:
+        if log.n_samples < 2 * warm:
+            continue
+        v = log.values[:, :, log.index(names)] - np.array([off[n] for n in names])
+        res = gen.run(Signals(log.t, v, names, check=False))
+        out.extend(res.values[i, warm:] for i in range(res.runs))
+    return out
 
 
 def decision_for(design: Mapping[str, Any]) -> dict[str, Any]:
