@@ -692,8 +692,9 @@ def design_monitor(design: Mapping[str, Any], base_dir: str | Path = ".", *, whe
         warnings.warn(f"design: the false-alarm target pfa = {alarm.pfa:g} {unit} (hold {alarm.hold}) "
                       f"cannot be shown by {source}: {exc}. Falling back to the "
                       f"Gaussian chi bound: thresholds {np.round(thr, 4).tolist()} at a per-sample "
-                      f"probability {p_each:.3g} per residual (conservative; nominal_hours sets the "
-                      "simulated data)", UserWarning, stacklevel=2)
+                      f"probability {p_each:.3g} per residual (conservative; "
+                      + ("more nominal logs can show the target)" if real else
+                         "nominal_hours sets the simulated data)"), UserWarning, stacklevel=2)
     hold = Hold(feats.output_names, thr if thr.size > 1 else float(thr[0]), Z=alarm.hold, absolute=True)
     sig = bank.signature
     iso = SignatureDecision(np.asarray(sig.matrix, int), list(sig.faults), hold.output_names)
