@@ -31,6 +31,19 @@ nominal flights and before the failure on failure flights, after the first 5 s, 
 flight time.
 
 Usage: ``python benchmarks/bench_uav.py [--quick]``; the last line is one JSON object.
+
+Measured (full run: 6 design flights, 6 nominal + 6 engine failures held out, 120 s each, 2 shared
+cores; deterministic seeds)::
+
+    detector                     mean delay  max delay missed   FA    FA/h
+    fdikit_as_designed               1.39 s     2.18 s      0    1    3.43
+    fdikit                           2.13 s     3.26 s      0    0    0.00   (hold 15, tuned)
+    fdikit_throttle_dropped               -          -      6    0    0.00   (hold 10, tuned)
+    rls_peer                         2.31 s     2.79 s      0    1    3.43
+    ULog reader on 4.333 MB: fdikit read_ulog 4.06 MB/s, pyulog data_list 4.1 MB/s
+
+With the throttle dropped and the config's hold 5 (untuned): 3 of 6 failures found (0.41, 1.77,
+9.53 s), 1 false alarm.
 """
 
 from __future__ import annotations
