@@ -26,7 +26,9 @@ Schema (every key is checked: an unknown key or a wrong type is an error naming 
     [channels.pos1]               # a monitor channel (the name the designs use)
     source = "POS.P1"             # the column / "MESSAGE.SIGNAL" in the log (default: the name)
     scale = 1.0                   # value = scale * source - offset
-    offset = 0.0                  # nominal operating point to subtract (ng-chen-speyer, Section V)
+    offset = 0.0                  # nominal operating point to subtract (ng-chen-speyer, Section V);
+                                  # "identified": the mean of the nominal logs that identified the
+                                  # plant ([design.plant].identify; the design report's offsets)
     unit = "m"                    # unit after scaling (documentation, stored in artifacts)
     min = -1.0                    # plausibility, in the channel's monitor units (after scale and
     max = 1.0                     #   offset): physical range,
@@ -76,6 +78,7 @@ import hashlib
 import importlib
 import inspect
 import json
+import math
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -90,8 +93,8 @@ from ..signals import Signals
 from .core import Decision, Monitor
 from .logs import check_log_table
 
-__all__ = ["TIME_UNITS", "ChannelMap", "MonitorConfig", "build_monitor", "design_hash", "load_config",
-           "map_channels", "nominal_log_paths", "nominal_logs", "read_log", "run_design",
+__all__ = ["TIME_UNITS", "ChannelMap", "MonitorConfig", "build_monitor", "design_hash", "identified_offsets",
+           "load_config", "map_channels", "nominal_log_paths", "nominal_logs", "read_log", "run_design",
            "source_plausibility"]
 
 #: ``[log].time_unit`` -> seconds per unit (``"auto"``: by the magnitude of the first timestamp,
@@ -117,7 +120,7 @@ _SCHEMA: dict[str, dict[str, type | tuple[type, ...]]] = {
 #: Plausibility keys of a channel (monitor units), passed to :class:`fdikit.monitor.Plausibility`.
 PLAUSIBILITY_KEYS = ("min", "max", "max_rate", "spike")
 _CHANNEL_KEYS: dict[str, type | tuple[type, ...]] = {"source": str, "scale": (int, float),
-                                                      "offset": (int, float), "unit": str,
+                                                      "offset": (int, float, str), "unit": str,
                                                       **{k: (int, float) for k in PLAUSIBILITY_KEYS},
                                                       "spike_window": int, "shared_source": bool}
 _STAGE_KEYS: dict[str, type | tuple[type, ...]] = {"artifact": str}
@@ -139,6 +142,9 @@ class ChannelMap:
     unit: str = ""
     plausibility: dict[str, float] = field(default_factory=dict)
     shared_source: bool = False
+    #: ``offset = "identified"``: the offset is the identification's operating point, read from the
+    #: design report by :func:`identified_offsets` (NaN until then)
+    offset_identified: bool = False
 
 
 @dataclass
@@ -227,10 +233,15 @@ def load_config(path: str | Path) -> MonitorConfig:
                 raise DataError(f"config: [channels.{name}].spike_window must be >= 5 samples, got "
                                 f"{spec['spike_window']}")
             plaus["window"] = int(spec["spike_window"])
+        off = spec.get("offset", 0.0)
+        ident = isinstance(off, str)
+        if ident and off != "identified":
+            raise DataError(f"config: [channels.{name}].offset must be a number or \"identified\", "
+                            f"got {off!r}")
         c = ChannelMap(name, spec.get("source", name), float(spec.get("scale", 1.0)),
-                       float(spec.get("offset", 0.0)), spec.get("unit", ""), plaus,
-                       bool(spec.get("shared_source", False)))
-        if not (np.isfinite(c.scale) and np.isfinite(c.offset)) or c.scale == 0:
+                       math.nan if ident else float(off), spec.get("unit", ""), plaus,
+                       bool(spec.get("shared_source", False)), ident)
+        if not (np.isfinite(c.scale) and (ident or np.isfinite(c.offset))) or c.scale == 0:
             raise DataError(f"config: [channels.{name}] scale must be finite and non-zero and offset finite")
         _check_plausibility(plaus, f"channels.{name}", c.unit)
         chans.append(c)
@@ -264,6 +275,11 @@ def load_config(path: str | Path) -> MonitorConfig:
                 raise DataError(f"config: [[{sec}]] number {i + 1} needs an 'artifact' name")
         stages[sec] = [it["artifact"] for it in items]
     declarative = "plant" in raw.get("design", {})
+    identified = [c.name for c in chans if c.offset_identified]
+    if identified and not (isinstance(raw.get("design", {}).get("plant"), dict)
+                           and "identify" in raw["design"]["plant"]):
+        raise DataError(f"config: [channels.{identified[0]}].offset = \"identified\" needs an identified "
+                        "plant ([design.plant] identify = {...})")
     if declarative:
         from .declarative import DESIGN_KEYS, GENERATORS, PROCESSORS, decision_for
 
@@ -579,6 +595,7 @@ def build_monitor(cfg: MonitorConfig) -> Monitor:
         artifact reading channels the config does not define.
     """
     _check_fresh(cfg, [*cfg.generators, *cfg.processors])
+    identified_offsets(cfg)
     gens = [_runtime(load_artifact(cfg.artifacts / a)) for a in cfg.generators]
     procs = [_runtime(load_artifact(cfg.artifacts / a)) for a in cfg.processors]
     for a, g in zip(cfg.generators, gens):
@@ -705,8 +722,43 @@ def source_plausibility(cfg: MonitorConfig) -> dict[str, dict[str, float]]:
     return out
 
 
+def identified_offsets(cfg: MonitorConfig) -> dict[str, float]:
+    """Set the offsets of the channels declared ``offset = "identified"`` to the operating point of
+    the plant's identification (the nominal logs' mean, ``u_offset`` and ``y_offset`` in
+    ``<artifacts>/design_report.json`` written by ``fdikit design``), and return them by channel.
+
+    Raises
+    ------
+    DataError
+        No design report (``fdikit design`` not run), or a channel that the identification has no
+        offset for (naming it and those it has).
+    """
+    todo = [c for c in cfg.channels if c.offset_identified]
+    if not todo:
+        return {}
+    if all(math.isfinite(c.offset) for c in todo):
+        return {c.name: c.offset for c in todo}
+    path = cfg.artifacts / "design_report.json"
+    try:
+        ident = json.loads(path.read_text()).get("identification") or {}
+    except FileNotFoundError:
+        raise DataError(f"{cfg.path}: channels {[c.name for c in todo]} take offset = \"identified\" from "
+                        f"{path}, which does not exist: run 'fdikit design {cfg.path}' first") from None
+    except (OSError, ValueError) as exc:
+        raise DataError(f"{cfg.path}: cannot read the design report {path} ({exc})") from None
+    known = {**ident.get("u_offset", {}), **ident.get("y_offset", {})}
+    for c in todo:
+        if c.name not in known:
+            raise DataError(f"{cfg.path}: [channels.{c.name}].offset = \"identified\", but the "
+                            f"identification in {path} has no offset for {c.name!r} (it has {sorted(known)})")
+        c.offset = float(known[c.name])
+    return {c.name: c.offset for c in todo}
+
+
 def map_channels(cfg: MonitorConfig, log: Signals) -> Signals:
-    """Monitor channels from log channels: ``scale * source - offset``, renamed; NaN (gaps) kept."""
+    """Monitor channels from log channels: ``scale * source - offset``, renamed; NaN (gaps) kept
+    (``offset = "identified"`` resolved by :func:`identified_offsets`)."""
+    identified_offsets(cfg)
     idx = log.index([c.source for c in cfg.channels])
     scale = np.array([c.scale for c in cfg.channels])
     offset = np.array([c.offset for c in cfg.channels])
@@ -716,6 +768,8 @@ def map_channels(cfg: MonitorConfig, log: Signals) -> Signals:
 
 def map_sample(cfg: MonitorConfig, row: dict[str, float]) -> dict[str, float]:
     """One sample (source name -> value) mapped to monitor channels (for follow mode)."""
+    if cfg.channels and any(c.offset_identified and not math.isfinite(c.offset) for c in cfg.channels):
+        identified_offsets(cfg)
     out = {}
     for c in cfg.channels:
         if c.source not in row:

@@ -20,6 +20,9 @@ The ``[design]`` table of a monitor config (:mod:`fdikit.monitor.config`) may de
     #                                  # the config
     # identify = { logs = ["nominal1.csv", "nominal2.csv"], inputs = ["V"],
     #              outputs = ["i_meas", "w_meas"], order = "auto", method = "n4sid" }
+    #                                  # (rate = 50.0: grid the logs at 50 Hz; a multi-rate log
+    #                                  # (ULog, ROS bag) needs it: by default its grid follows the
+    #                                  # fastest topic's median period, jitter included)
     #                                  # no model: identified from nominal logs (many records
     #                                  # pooled; fdikit.estimate.identify), discrete at the logs'
     #                                  # sample time, in deviations from the logs' mean operating
@@ -197,7 +200,7 @@ def _from_object(obj: Any, spec: Mapping[str, Any], where: str) -> LinearFaultMo
 #: Keys of ``[design.plant].identify`` (:func:`identification_from_config`).
 IDENTIFY_KEYS: dict[str, type | tuple[type, ...]] = {
     "logs": (list, str), "inputs": list, "outputs": list, "order": (str, int), "method": str, "time": str,
-    "criterion": str, "block_rows": int, "validation": (int, float)}
+    "criterion": str, "block_rows": int, "validation": (int, float), "rate": (int, float)}
 
 
 def identification_from_config(spec: Mapping[str, Any], base_dir: str | Path = ".", *,
@@ -215,6 +218,12 @@ def identification_from_config(spec: Mapping[str, Any], base_dir: str | Path = "
     ...
     fdikit.errors.DataError: config: [design.plant.identify].logs must name at least one nominal log
     """
+    return _identify_logs(spec, base_dir, where, log)[0]
+
+
+def _identify_logs(spec: Mapping[str, Any], base_dir: str | Path, where: str,
+                   log: Mapping[str, Any] | None = None):
+    """The Identification of :func:`identification_from_config` and the logs read (Signals)."""
     from ..estimate import identify
 
     spec = _check(spec, IDENTIFY_KEYS, where)
@@ -231,12 +240,17 @@ def identification_from_config(spec: Mapping[str, Any], base_dir: str | Path = "
     method = spec.get("method", "n4sid")
     if method not in ("n4sid", "arx"):
         raise DataError(f"config: [{where}].method must be \"n4sid\" or \"arx\", got {method!r}")
+    rate = spec.get("rate")
+    if rate is not None and not (math.isfinite(float(rate)) and float(rate) > 0):
+        raise DataError(f"config: [{where}].rate must be a positive number of samples per second (Hz), "
+                        f"got {rate!r}")
     records = []
     for k, f in enumerate(logs):
         path = config_path(base_dir, f, where=f"[{where}].logs[{k}]")
         if not Path(path).exists():
             raise DataError(f"config: [{where}].logs[{k}] {str(path)!r} does not exist")
-        rec = _read_design_log(path, log, base_dir, [*spec["inputs"], *spec["outputs"]], spec.get("time"))
+        rec = _read_design_log(path, log, base_dir, [*spec["inputs"], *spec["outputs"]], spec.get("time"),
+                               rate=rate)
         missing = [c for c in [*spec["inputs"], *spec["outputs"]] if c not in rec.names]
         if missing:
             raise DataError(f"config: [{where}].logs[{k}] {str(path)!r} has no channels {missing}; its "
@@ -245,7 +259,7 @@ def identification_from_config(spec: Mapping[str, Any], base_dir: str | Path = "
     kw = {k: spec[k] for k in ("criterion", "block_rows", "validation") if k in spec}
     try:
         return identify(records, spec["inputs"], spec["outputs"], method=method,
-                        order=None if order == "auto" else int(order), name="identified", **kw)
+                        order=None if order == "auto" else int(order), name="identified", **kw), records
     except (DataError, ModelError) as exc:
         raise DataError(f"config: [{where}]: identification failed: {exc}") from None
 
@@ -282,19 +296,24 @@ def plant_from_config(design: Mapping[str, Any], base_dir: str | Path = ".", *,
     return _plant(design, base_dir, where, log)[0]
 
 
-def _read_design_log(path, log: Mapping[str, Any] | None, base_dir, signals, time: str | None):
+def _read_design_log(path, log: Mapping[str, Any] | None, base_dir, signals, time: str | None,
+                     rate: float | None = None):
     """A nominal log of the design, read as the config's ``[log]`` table says (every column of a
-    table; ``signals`` from a CAN or MDF log), ``time`` overriding ``[log].time``."""
+    table; ``signals`` from a CAN or MDF log), ``time`` overriding ``[log].time`` and ``rate`` (an
+    identification's own grid) the reader's."""
     from ..io import read_log
     from .logs import read_options
 
     _, kw = read_options(log or {}, path, base_dir, signals=signals, time=time,
                          tables_as_recordings=False, where="config")
+    if rate is not None:
+        kw["rate"] = float(rate)
     return read_log(path, **kw)
 
 
 def _plant(design: Mapping[str, Any], base_dir: str | Path, where: str, log: Mapping[str, Any] | None = None):
-    """The plant of :func:`plant_from_config` and its Identification (None unless identified)."""
+    """The plant of :func:`plant_from_config`, its Identification and the logs identified from
+    (None, None unless identified)."""
     if "plant" not in design:
         raise DataError(f"config: [{where}.plant] is missing (state-space matrices, a file, an object or "
                         "identify = {logs = [...], ...})")
@@ -304,13 +323,13 @@ def _plant(design: Mapping[str, Any], base_dir: str | Path, where: str, log: Map
     if len(given) != 1:
         raise DataError(f"config: [{where}.plant] needs exactly one of A/B/C matrices, file, object or "
                         f"identify; got {given or 'none'}")
-    ident = None
+    ident = records = None
     if "identify" in spec:
         extra = [k for k in spec if k != "identify"]
         if extra:
             raise DataError(f"config: [{where}.plant] names and sample time come from the identification; "
                             f"remove {extra}")
-        ident = identification_from_config(spec["identify"], base, where=f"{where}.plant.identify", log=log)
+        ident, records = _identify_logs(spec["identify"], base, where=f"{where}.plant.identify", log=log)
         model = ident.model
     elif "object" in spec:
         model = _from_object(import_object(spec["object"], base, where=f"[{where}.plant].object"), spec,
@@ -393,7 +412,7 @@ def _plant(design: Mapping[str, Any], base_dir: str | Path, where: str, log: Map
         model = model.without_faults().with_faults(*faults)
     except ModelError as exc:
         raise DataError(f"config: [{where}.faults]: {exc}") from None
-    return model, ident
+    return model, ident, records
 
 
 def estimate_noise(signals: Signals, channels: Sequence[str] | None = None) -> dict[str, float]:
@@ -439,15 +458,19 @@ def noise_from_config(design: Mapping[str, Any], model: LinearFaultModel, base_d
     ``nominal_log`` (:func:`estimate_noise`); the process variance defaults to 1e-8 of the unit
     squared per state (a nearly exact model). For an identified plant (``identification``, an
     :class:`~fdikit.estimate.Identification`) without a ``[design.noise]`` table, the diagonals of
-    the identified ``R`` and ``Q``.
+    the identified ``R`` and ``Q``; with ``process`` alone, the identified ``R`` and that process
+    variance (a smaller ``Q`` than the identified one makes a slower observer, whose residual keeps
+    a slow fault longer).
     """
     spec = _check(design.get("noise", {}), DESIGN_KEYS["noise"], f"{where}.noise")
-    if not spec and identification is not None:
+    if identification is not None and set(spec) <= {"process"}:
         r = np.diag(np.asarray(identification.R, float))
         q = np.diag(np.asarray(identification.Q, float)).copy()
         floor = 1e-12 * max(float(np.max(r)), 1e-300)
-        return {"measurement": {y: max(float(v), floor) for y, v in zip(model.outputs, r)},
-                "process": np.maximum(q, 0.0)}
+        meas_id = {y: max(float(v), floor) for y, v in zip(model.outputs, r)}
+        if not spec:
+            return {"measurement": meas_id, "process": np.maximum(q, 0.0)}
+        spec = {**spec, "measurement": meas_id}     # process given: the identified R, the user's Q
     meas = spec.get("measurement")
     if meas is None and "nominal_log" not in spec:
         raise DataError(f"config: [{where}.noise] needs measurement = {{output = variance}} or nominal_log")
@@ -634,7 +657,7 @@ def design_monitor(design: Mapping[str, Any], base_dir: str | Path = ".", *, whe
     from ..residuals import design_residual_bank
     from .declarative_thresholds import logged_thresholds, simulated_thresholds
 
-    model, ident = _plant(design, base_dir, where, log)
+    model, ident, id_logs = _plant(design, base_dir, where, log)
     noise = noise_from_config(design, model, base_dir, where=where, identification=ident, log=log)
     alarm = alarm_from_config(design, where=where)
     dt = sample_time(design, model, where=where)
@@ -654,6 +677,11 @@ def design_monitor(design: Mapping[str, Any], base_dir: str | Path = ".", *, whe
     taken = set(bank.design.residual_names)
     groups = {(f"{name}:norm" if name in taken else name): ch for name, ch in chans_of.items()}
     md = model.discretize(dt) if model.dt is None else model
+    if not nominal and id_logs:
+        # an identified plant: the nominal logs it was identified from, in its deviation variables,
+        # carry the model's own error (closed-loop bias, sensors held between slow messages), which
+        # noise simulated from the model does not
+        nominal = _deviation_logs(ident, id_logs, [*raw.u_names, *raw.y_names])
     if nominal:   # real nominal logs: thresholds set and measured on them, time-blocked
         th = logged_thresholds(raw, groups, alarm, dt, nominal,
                                accept_miscalibrated=bool(design.get("accept_miscalibrated", False)))
@@ -689,6 +717,17 @@ def design_monitor(design: Mapping[str, Any], base_dir: str | Path = ".", *, whe
                                                       "fit_per_record", "u_offset", "y_offset", "records",
                                                       "integrators", "kalman") if k in i}
     return {"bank": white, "features": feats, "hold": hold, "isolate": iso, "_report": report}
+
+
+def _deviation_logs(ident: Any, logs: Sequence[Signals], names: list[str]) -> dict[str, Signals]:
+    """The identification logs in the identified model's deviation variables (each channel minus the
+    identification's operating point), named for messages."""
+    off = {**ident.info["u_offset"], **ident.info["y_offset"]}
+    out = {}
+    for k, log in enumerate(logs):
+        v = log.values[:, :, log.index(names)] - np.array([off[n] for n in names])
+        out[f"identification log {k}"] = Signals(log.t, v, names, check=False)
+    return out
 
 
 def decision_for(design: Mapping[str, Any]) -> dict[str, Any]:
