@@ -135,7 +135,8 @@ def test_identified_plant_whitens_and_thresholds_on_its_nominal_logs(tmp_path):
         warnings.simplefilter("ignore")
         d = design_monitor(design, tmp_path)
     rep = d["_report"]
-    assert rep["nominal_data"].startswith("the 2 nominal logs identified from"), rep["nominal_data"]
+    assert rep["threshold_source"] == "the identification's nominal logs", rep["threshold_source"]
+    assert rep["nominal_records"] == 2 and rep["rates"] == "measured on held-out nominal logs"
     off = {**rep["identification"]["u_offset"], **rep["identification"]["y_offset"]}
     log = read_log(tmp_path / "held.csv")
     v = log.values[:, :, log.index(["u", "y"])] - np.array([off["u"], off["y"]])

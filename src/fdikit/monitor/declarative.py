@@ -681,10 +681,15 @@ def design_monitor(design: Mapping[str, Any], base_dir: str | Path = ".", *, whe
         # an identified plant: the nominal logs it was identified from, in its deviation variables,
         # carry the model's own error (closed-loop bias, sensors held between slow messages), which
         # noise simulated from the model does not
-        nominal = _deviation_logs(ident, id_logs, [*raw.u_names, *raw.y_names])
-    if nominal:   # real nominal logs: thresholds set and measured on them, time-blocked
-        th = logged_thresholds(raw, groups, alarm, dt, nominal,
-                               accept_miscalibrated=bool(design.get("accept_miscalibrated", False)))
+        implicit = _deviation_logs(ident, id_logs, [*raw.u_names, *raw.y_names])
+    else:
+        implicit = None
+    if nominal or implicit:   # real nominal logs: thresholds set and measured on them, time-blocked
+        th = logged_thresholds(raw, groups, alarm, dt, nominal or implicit,
+                               accept_miscalibrated=bool(design.get("accept_miscalibrated", False)),
+                               fallback=not nominal,
+                               source="[design].nominal_log" if nominal else
+                               "the logs the plant was identified from ([design.plant].identify.logs)")
     else:         # simulated noise of the declared model: the rates are model-based
         th = simulated_thresholds(md, raw, groups, R, Q, alarm, dt, nominal_hours=nominal_hours, seed=seed)
     white, feats, thr, td = th["white"], th["features"], th["thr"], th["td"]
@@ -700,8 +705,9 @@ def design_monitor(design: Mapping[str, Any], base_dir: str | Path = ".", *, whe
               "threshold_design": {k: v for k, v in td.items() if k != "threshold"
                                    and not isinstance(v, np.ndarray)},
               "claims": th["claims"]}
-    if nominal:
-        report.update(rates="measured on held-out nominal logs", threshold_source="nominal logs",
+    if nominal or implicit:
+        report.update(rates="measured on held-out nominal logs",
+                      threshold_source="nominal logs" if nominal else "the identification's nominal logs",
                       nominal_records=th["records"], nominal_hours_fit=th["fit_hours"],
                       nominal_hours_measured=th["measure_hours"],
                       split="each log's first half (after the filter's warm-up) fits the whitening and the "

@@ -154,7 +154,8 @@ def _halves(x: np.ndarray, warm: int) -> tuple[slice, slice]:
 
 
 def logged_thresholds(raw, groups: dict[str, list[str]], alarm, dt: float, nominal: list,
-                      *, accept_miscalibrated: bool = False, level: float = 0.95) -> dict[str, Any]:
+                      *, accept_miscalibrated: bool = False, level: float = 0.95,
+                      fallback: bool = False, source: str = "[design].nominal_log") -> dict[str, Any]:
     """Whitening and thresholds set on real nominal logs, time-blocked, with claims measured on
     held-out data.
 
@@ -181,6 +182,14 @@ def logged_thresholds(raw, groups: dict[str, list[str]], alarm, dt: float, nomin
         instead of refusing it.
     level : float
         Confidence level of the measured intervals.
+    fallback : bool
+        When the fit half cannot support the target (too few effective samples for its tail), fall
+        back to the Gaussian chi bound of the whitened residuals (with a printed warning, and the
+        claims still measured on the held-out halves) instead of refusing. The declarative design
+        uses it for the logs a plant was identified from, which the user did not give as
+        threshold data.
+    source : str
+        What the logs are, for messages.
 
     Returns
     -------
@@ -247,14 +256,31 @@ def logged_thresholds(raw, groups: dict[str, list[str]], alarm, dt: float, nomin
     per = _per(alarm)
     try:
         td = dict(design_threshold(f_fit, alarm.pfa, per=per, Z=alarm.hold, dt=dt, family_wise=True))
+        thr = np.atleast_1d(np.asarray(td["threshold"], float))
+        claims = _claims(feats.output_names, td, alarm, "nominal logs")
     except DataError as exc:
-        raise DataError(f"config: [design].nominal_log: the fit half of the nominal logs "
-                        f"({sum(f.n_samples for f in f_fit) * dt / 3600:.3g} h in {len(f_fit)} record(s)) "
-                        f"cannot support the target pfa = {alarm.pfa:g} per {alarm.per} (hold "
-                        f"{alarm.hold}): {exc}. Give more or longer nominal logs, or a larger "
-                        "target") from None
-    thr = np.atleast_1d(np.asarray(td["threshold"], float))
-    claims = _claims(feats.output_names, td, alarm, "nominal logs")
+        why = (f"the fit half of {source} ({sum(f.n_samples for f in f_fit) * dt / 3600:.3g} h in "
+               f"{len(f_fit)} record(s)) cannot support the target pfa = {alarm.pfa:g} per {alarm.per} "
+               f"(hold {alarm.hold}): {exc}")
+        if not fallback:
+            raise DataError(f"config: {source}: {why}. Give more or longer nominal logs, or a larger "
+                            "target") from None
+        from scipy.stats import chi2
+
+        p_each = alarm.per_sample(dt) / len(groups)
+        dims = []
+        for g in feats.output_names:
+            ix = [raw.residual_names.index(c) for c in groups[g]]
+            dims.append(int(np.linalg.matrix_rank(W[np.ix_(ix, ix)])))
+        thr = np.array([np.sqrt(chi2.isf(p_each, k)) for k in dims])
+        td = {"method": "gaussian chi bound", "reason": str(exc), "per_sample_each": p_each, "dims": dims}
+        warnings.warn(f"design: {why}. Falling back to the Gaussian chi bound of the whitened real "
+                      f"residuals: thresholds {np.round(thr, 4).tolist()} at a per-sample probability "
+                      f"{p_each:.3g} per residual; the held-out halves measure it (give more nominal "
+                      "logs, [design].nominal_log, to set the thresholds on data)", UserWarning, stacklevel=3)
+        each = alarm.pfa / len(groups)
+        bound = {"ci": [[0.0, each]] * len(groups), "target": [each] * len(groups), "method": td["method"]}
+        claims = _claims(feats.output_names, bound, alarm, "nominal logs (Gaussian bound)")
     hold = Hold(feats.output_names, thr, Z=alarm.hold, absolute=True)
     alarms = [hold.run(f).values[0] for f in f_meas]     # (T_i, channels)
     for c in claims:
@@ -274,7 +300,7 @@ def logged_thresholds(raw, groups: dict[str, list[str]], alarm, dt: float, nomin
         msg = (f"the held-out half of the nominal logs contradicts {len(bad)} claim(s): {lines}. The "
                "nominal logs are not stationary enough for these thresholds (or too short)")
         if not accept_miscalibrated:
-            raise DataError(f"config: [design].nominal_log: {msg}. Refused; set "
+            raise DataError(f"config: {source}: {msg}. Refused; set "
                             "[design].accept_miscalibrated = true to keep it anyway (with a warning)")
         warnings.warn(f"design: {msg}. Kept because [design].accept_miscalibrated = true", UserWarning,
                       stacklevel=3)
