@@ -3,7 +3,9 @@
 recursion, no globals with state, only ``<math.h>`` and ``<stdint.h>``; double and float32.
 
 * :func:`generate` (a config's artifacts) and :func:`generate_monitor` (a built Monitor) write
-  the code (:mod:`.generate`, :mod:`.emit`, the stages in :mod:`.stages`);
+  the code (:mod:`.generate`, :mod:`.emit`, the stages in :mod:`.stages`, the tabulated
+  MHSSPT in :mod:`.stages_mhsspt_tab`, the plausibility rules in :mod:`.plausibility`; system
+  stages register their emitters with :func:`register_emitter`, :mod:`.registry`);
 * :class:`CMonitor` and :func:`compile_shared` are the equivalence harness (:mod:`.harness`).
 
 A stage the generator does not know is refused by name (``stage X cannot be generated yet``).
@@ -22,8 +24,28 @@ from .harness import (
     run_driver,
     signals_input,
 )
+from .registry import register_emitter, registered
 from .stages import EMITTERS
+from .stages_mhsspt_tab import TabulatedMHSSPTEmitter
 
-__all__ = ["CFLAGS", "EMITTERS", "CMonitor", "GeneratedSource", "c_to_py_state", "compile_shared",
-           "config_digest", "driver_source", "emit_monitor", "find_compiler", "generate", "generate_monitor",
-           "py_to_c_state", "run_driver", "signals_input", "stage_digest"]
+__all__ = [
+    "CFLAGS",
+    "EMITTERS",
+    "CMonitor",
+    "GeneratedSource",
+    "TabulatedMHSSPTEmitter",
+    "c_to_py_state",
+    "compile_shared",
+    "config_digest",
+    "driver_source",
+    "emit_monitor",
+    "find_compiler",
+    "generate",
+    "generate_monitor",
+    "py_to_c_state",
+    "register_emitter",
+    "registered",
+    "run_driver",
+    "signals_input",
+    "stage_digest",
+]

@@ -165,7 +165,7 @@ def emit_monitor(mon: Any, *, name: str = "fdk_monitor", precision: str = "doubl
          f'static const char FDK_HASH[] = "{design_hash}";',
          f"const char *{name}_design_hash(void) {{ return FDK_HASH; }}",
          f"int {name}_state_size(void) {{ return (int)sizeof({name}_state); }}", "",
-         *dict.fromkeys(e.helpers for e in (*gens, *procs) if e.helpers),
+         *dict.fromkeys(h for e in (*gens, *procs) for h in _helpers(e)),
          f"static void fdk_reset_processors({name}_state *s)", "{"]
     c += [e.reset_code() for e in procs if e.reset_code()]
     c += ["    (void)s;", "}", "", f"void {name}_reset({name}_state *s)", "{", "    int i;"]
@@ -272,6 +272,13 @@ def emit_monitor(mon: Any, *, name: str = "fdk_monitor", precision: str = "doubl
     out = GeneratedSource(name, header, source, layout)
     out.emitters = (gens, procs)  # type: ignore[attr-defined]
     return out
+
+
+def _helpers(e: Any) -> tuple[str, ...]:
+    """A stage emitter's file-scope C (``helpers``: one string or a tuple of them, each emitted
+    once per file however many stages share it)."""
+    h = e.helpers
+    return tuple(x for x in ((h,) if isinstance(h, str) else h) if x)
 
 
 def stage_digest(mon: Any) -> str:

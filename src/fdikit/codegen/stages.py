@@ -394,13 +394,19 @@ static void fdk_mhsspt_update(double *logF, const double *ll, double *phi, int H
 """
 
 
+#: The densities and log-sum-exp (shared with the tabulated MHSSPT) and the recursion step, each
+#: emitted once per file.
+MHSSPT_DENSITY_HELPERS, _sep, _rest = MHSSPT_HELPERS.partition("/* one step of the log-domain")
+MHSSPT_UPDATE_HELPER = _sep + _rest
+
+
 class MHSSPTEmitter(StageEmitter):
     """:class:`~fdikit.detect.MHSSPT` with exact :class:`~fdikit.detect.UniformMeanGaussian`
     densities (not tabulated): log densities, the log-domain recursion, the posteriors and group
     sums. Computed in double in both variants (the recursion's logs and exps need it)."""
 
     kinds = ("MHSSPT",)
-    helpers = MHSSPT_HELPERS
+    helpers = (MHSSPT_DENSITY_HELPERS, MHSSPT_UPDATE_HELPER)
 
     def __init__(self, obj, prefix):
         if obj.tabulate is not None or obj._umg is None:
@@ -465,12 +471,19 @@ EMITTERS: dict[str, type[StageEmitter]] = {k: e for e in (FilterEmitter, Feature
 
 def stage_emitter(obj: Any, prefix: str) -> StageEmitter:
     """The emitter of one stage, or a :class:`DataError` naming a stage that cannot be generated."""
+    from .registry import emitter_for, registered
+
     name = type(obj).__name__
-    cls = EMITTERS.get(name)
+    cls = emitter_for(obj)   # registered emitters (new generic stages, the systems') first
     module = type(obj).__module__
-    if cls is None or not module.startswith("fdikit.") or module.startswith("fdikit.systems"):
+    if cls is None:
+        cls = EMITTERS.get(name)
+        if cls is not None and (not module.startswith("fdikit.") or module.startswith("fdikit.systems")):
+            cls = None
+    if cls is None:
+        known = sorted({*EMITTERS, *(k.rsplit(":", 1)[1] for k in registered())})
         raise DataError(f"stage {name} cannot be generated yet (fdikit.codegen supports "
-                        f"{', '.join(sorted(EMITTERS))})")
-    if any(hasattr(obj, a) for a in ("resume",)):
+                        f"{', '.join(known)})")
+    if hasattr(obj, "resume") and not getattr(cls, "handles_resume", False):
         raise DataError(f"stage {name} cannot be generated yet: it has a resume() rule")
     return cls(obj, prefix)
