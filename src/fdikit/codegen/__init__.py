@@ -26,12 +26,14 @@ from .harness import (
 )
 from .registry import register_emitter, registered
 from .stages import EMITTERS
+from .stages_dmatrix import DMatrixDecisionEmitter
 from .stages_mhsspt_tab import TabulatedMHSSPTEmitter
 
 __all__ = [
     "CFLAGS",
     "EMITTERS",
     "CMonitor",
+    "DMatrixDecisionEmitter",
     "GeneratedSource",
     "TabulatedMHSSPTEmitter",
     "c_to_py_state",
