@@ -32,7 +32,8 @@ class DMatrixDecisionEmitter(StageEmitter):
     def reset_code(self):
         f = self.f
         return (f"    {{ int j; for (j = 0; j < {self.nt}; ++j) {f('fired')}[j] = 0; }}\n"
-                f"    {f('since')}[0] = 0; {f('quiet')}[0] = 0; {f('locked')}[0] = -1; {f('value')}[0] = 0.0; "
+                f"    {f('since')}[0] = 0; {f('quiet')}[0] = 0; {f('locked')}[0] = -1;\n"
+                f"    {f('value')}[0] = 0.0; "
                 f"{f('size')}[0] = 0.0;")
 
     def step_code(self, inp, out):
@@ -53,14 +54,18 @@ class DMatrixDecisionEmitter(StageEmitter):
         for r in range(nr):
             ta = " + ".join(f"(double){f('fired')}[{t}] * {lit(logp[t, r])}" for t in range(nt))
             tb = " + ".join(f"(1.0 - (double){f('fired')}[{t}]) * {lit(log1mp[t, r])}" for t in range(nt))
-            lines += [f"            a = 0.0 + {ta};", f"            b = 0.0 + {tb};", f"            ll[{r}] = a + b;"]
-        lines += ["            m = ll[0];", f"            for (j = 1; j < {nr}; ++j) if (ll[j] > m) m = ll[j];",
-                  f"            sw = 0.0; for (j = 0; j < {nr}; ++j) {{ ll[j] = exp(ll[j] - m); sw += ll[j]; }}",
+            lines += [f"            a = 0.0 + {ta};", f"            b = 0.0 + {tb};",
+                      f"            ll[{r}] = a + b;"]
+        lines += ["            m = ll[0];",
+                  f"            for (j = 1; j < {nr}; ++j) if (ll[j] > m) m = ll[j];",
+                  f"            sw = 0.0; for (j = 0; j < {nr}; ++j) "
+                  "{ ll[j] = exp(ll[j] - m); sw += ll[j]; }",
                   f"            for (j = 0; j < {nr}; ++j) ll[j] = ll[j] / sw;"]
         for g in range(G):
             rows = [int(i) for i in np.flatnonzero(np.asarray(o._row_group) == g)]
             lines.append(f"            post[{g}] = " + " + ".join(f"ll[{i}]" for i in rows) + ";")
-        lines += ["            best = 0;", f"            for (j = 1; j < {G}; ++j) if (post[j] > post[best]) best = j;",
+        lines += ["            best = 0;",
+                  f"            for (j = 1; j < {G}; ++j) if (post[j] > post[best]) best = j;",
                   f"            {f('locked')}[0] = best; {f('value')}[0] = post[best];",
                   f"            {f('size')}[0] = 0.0;"]
         for g, src in enumerate(o._size_src):
@@ -73,18 +78,22 @@ class DMatrixDecisionEmitter(StageEmitter):
                       f"            {f('since')}[0] = 0; {f('locked')}[0] = -1; {f('value')}[0] = 0.0; "
                       f"{f('size')}[0] = 0.0;", "        }"]
         for g in range(G):
-            lines.append(f"        {out[g]} = ({f('locked')}[0] == {g}) ? FDK_R({f('value')}[0]) : FDK_R(0.0);")
+            lines.append(f"        {out[g]} = ({f('locked')}[0] == {g}) ? "
+                         f"FDK_R({f('value')}[0]) : FDK_R(0.0);")
         for k, g in enumerate(o._size_cols):
-            lines.append(f"        {out[G + k]} = ({f('locked')}[0] == {g}) ? FDK_R({f('size')}[0]) : FDK_R(0.0);")
+            lines.append(f"        {out[G + k]} = ({f('locked')}[0] == {g}) ? "
+                         f"FDK_R({f('size')}[0]) : FDK_R(0.0);")
         lines += ["        (void)post; (void)best;", "    }"]
         return "\n".join(lines)
 
     def to_py(self, arrays):
         a, p = arrays, self.p
         return {"_fired": a[f"{p}_fired"].astype(bool).reshape(1, -1),
-                "_since": a[f"{p}_since"].astype(np.int64).reshape(1), "_quiet": a[f"{p}_quiet"].astype(np.int64),
+                "_since": a[f"{p}_since"].astype(np.int64).reshape(1),
+                "_quiet": a[f"{p}_quiet"].astype(np.int64).reshape(1),
                 "_locked": a[f"{p}_locked"].astype(np.int64).reshape(1),
-                "_value": a[f"{p}_value"].astype(float).reshape(1), "_size": a[f"{p}_size"].astype(float).reshape(1)}
+                "_value": a[f"{p}_value"].astype(float).reshape(1),
+                "_size": a[f"{p}_size"].astype(float).reshape(1)}
 
     def from_py(self, state):
         p = self.p

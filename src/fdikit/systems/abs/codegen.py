@@ -43,7 +43,10 @@ static double fdk_abs_mu_nb(double lam)
     double a = fabs(lam), m, z;
     int i;
     if (a >= 1.0) m = FDK_ABS_MU[{n}];
-    else {{ z = a * {lit(float(n))}; i = (int)z; m = FDK_ABS_MU[i] + (z - (double)i) * (FDK_ABS_MU[i + 1] - FDK_ABS_MU[i]); }}
+    else {{
+        z = a * {lit(float(n))}; i = (int)z;
+        m = FDK_ABS_MU[i] + (z - (double)i) * (FDK_ABS_MU[i + 1] - FDK_ABS_MU[i]);
+    }}
     return lam >= 0.0 ? m : -m;
 }}
 """
@@ -76,9 +79,10 @@ class ABSObserverEmitter(StageEmitter):
                  "        int sub;",
                  f"        pm = (double){pm}; uin = (double){uin}; uout = (double){uout};",
                  f"        y1 = (double){y1}; y2 = (double){y2};",
-                 "        if (!isfinite(y1) || !isfinite(y2) || !isfinite(pm) || !isfinite(uin) || !isfinite(uout)) "
-                 "return FDK_ERR_STAT;",
-                 f"        if (!{self.f('started')}[0]) {{ {x}[0] = y1; {x}[1] = y2; {x}[2] = 0.0; {x}[3] = 0.0; "
+                 "        if (!isfinite(y1) || !isfinite(y2) || !isfinite(pm) || !isfinite(uin) "
+                 "|| !isfinite(uout)) return FDK_ERR_STAT;",
+                 f"        if (!{self.f('started')}[0]) {{ {x}[0] = y1; {x}[1] = y2; "
+                 f"{x}[2] = 0.0; {x}[3] = 0.0; "
                  f"{x}[4] = 0.0; {self.f('started')}[0] = 1; }}",
                  f"        r0 = y1 - {x}[0]; r1 = y2 - {x}[1]; e1 = r0; e2 = r1;",
                  f"        for (sub = 0; sub < {int(o.q[_SUB])}; ++sub) {{"]
@@ -88,8 +92,10 @@ class ABSObserverEmitter(StageEmitter):
         lines += [
             f"            lam = ({x}[1] > {q[_EPS]}) ? ({x}[1] - {x}[0]) / {x}[1] : 0.0;",
             "            m = fdk_abs_mu_nb(lam);",
-            f"            d0 = ({q[_RW]} * {q[_NV]} * m - {x}[2]) / {q[_IW]} + {L[0][0]} * e1 + {L[0][1]} * e2;",
-            f"            d1 = -4.0 * {q[_NV]} * m / ({q[_RW]} * {q[_MV]}) + {L[1][0]} * e1 + {L[1][1]} * e2;",
+            f"            d0 = ({q[_RW]} * {q[_NV]} * m - {x}[2]) / {q[_IW]} + {L[0][0]} * e1 "
+            f"+ {L[0][1]} * e2;",
+            f"            d1 = -4.0 * {q[_NV]} * m / ({q[_RW]} * {q[_MV]}) + {L[1][0]} * e1 "
+            f"+ {L[1][1]} * e2;",
             f"            d2 = {x}[3] + {L[2][0]} * e1 + {L[2][1]} * e2;",
             f"            d3 = {wn} * {wn} * ({q[_KF]} * {x}[4] - 2.0 * {q[_ZETA]} * {x}[3] / {wn} - {x}[2]) "
             f"+ {L[3][0]} * e1 + {L[3][1]} * e2;",
@@ -101,7 +107,8 @@ class ABSObserverEmitter(StageEmitter):
             f"            if ({x}[1] < 0.0) {x}[1] = 0.0;",
             "        }"]
         if o.v_min > 0.0:
-            lines.append(f"        if (!({lit(o.p['R_w'])} * y2 >= {lit(o.v_min)})) {{ r0 = 0.0; r1 = 0.0; }}")
+            lines.append(f"        if (!({lit(o.p['R_w'])} * y2 >= {lit(o.v_min)})) "
+                         "{ r0 = 0.0; r1 = 0.0; }")
         lines += [f"        {out[0]} = FDK_R(r0);", f"        {out[1]} = FDK_R(r1);", "    }"]
         return "\n".join(lines)
 
@@ -164,7 +171,8 @@ class ParityR1Emitter(StageEmitter):
         from .plant import MU_SLIP, MU_TABLE
 
         if obj.variant != "causal":
-            raise DataError("stage ParityR1 (zero-phase variant) cannot be generated: it needs the whole record")
+            raise DataError("stage ParityR1 (zero-phase variant) cannot be generated: it needs the whole "
+                            "record")
         super().__init__(obj, prefix)
         self.sos = np.asarray(obj._lp.sos, float)
         self.ns = self.sos.shape[0]
@@ -204,7 +212,8 @@ class ParityR1Emitter(StageEmitter):
         W = self.W
         lines += [f"        if (!{self.f('has_buf')}[0]) {{ for (j = 0; j < {W}; ++j) {b}[j] = yv[1]; "
                   f"{self.f('has_buf')}[0] = 1; }}",
-                  f"        else {{ for (j = 0; j < {W - 1}; ++j) {b}[j] = {b}[j + 1]; {b}[{W - 1}] = yv[1]; }}",
+                  f"        else {{ for (j = 0; j < {W - 1}; ++j) {b}[j] = {b}[j + 1]; "
+                  f"{b}[{W - 1}] = yv[1]; }}",
                   "        d2 = 0.0;"]
         lines += [f"        d2 += {b}[{i}] * {lit(self.w[i])};" for i in range(W)]
         p = o.p
