@@ -26,15 +26,19 @@ from .harness import (
 )
 from .registry import register_emitter, registered
 from .stages import EMITTERS
+from .stages_dglrt import DirectionalGLRTEmitter
 from .stages_dmatrix import DMatrixDecisionEmitter
 from .stages_mhsspt_tab import TabulatedMHSSPTEmitter
+from .stages_sensitivity import ParameterSensitivityEmitter
 
 __all__ = [
     "CFLAGS",
     "EMITTERS",
     "CMonitor",
     "DMatrixDecisionEmitter",
+    "DirectionalGLRTEmitter",
     "GeneratedSource",
+    "ParameterSensitivityEmitter",
     "TabulatedMHSSPTEmitter",
     "c_to_py_state",
     "compile_shared",

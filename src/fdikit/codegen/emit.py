@@ -303,7 +303,10 @@ def stage_digest(mon: Any) -> str:
     for st in (*mon.generators, *mon.processors):
         d = getattr(st, "design", st)
         d = getattr(st, "observer_design", d)
-        data = d.to_dict() if hasattr(d, "to_dict") else repr(d)
+        try:
+            data = d.to_dict() if hasattr(d, "to_dict") else repr(d)
+        except DataError:   # a composite whose parts have no to_dict (e.g. twins built in code)
+            data = {k: v for k, v in sorted(vars(d).items()) if not k.startswith("__")}
         parts.append([type(st).__name__, data])
     dec = mon.decision
     parts.append(None if dec is None else [dec.alarm_channels, dec.level, dec.names, dec.clear_level,
@@ -320,5 +323,8 @@ def _plain(x: Any) -> Any:
         return x.tolist()
     if isinstance(x, np.generic):
         return x.item()
+    d = getattr(x, "design", None)   # a stage inside a composite: its design's plain data
+    if d is not None and hasattr(d, "to_dict"):
+        return [type(x).__name__, d.to_dict()]
     return str(x)
 
