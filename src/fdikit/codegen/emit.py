@@ -234,6 +234,8 @@ def emit_monitor(mon: Any, *, name: str = "fdk_monitor", precision: str = "doubl
           "    if (invalid) return fdk_hold(s, out, 1, t);",
           "    n_resume = s->missing[0] + s->held_t[0];",
           f"    if (n_resume) {{ s->warm_left[0] = {n_warm}; s->reset_due[0] = 1;"]
+    # components with a resume() rule (e.g. a warm-up again after a gap), as Monitor tells them
+    c += [e.resume_code() for e in (*gens, *procs) if getattr(e, "handles_resume", False)]
     if mon.warmup is None and dec is not None:
         c.append(f"        s->warm_min[0] = {n_warm} < 10 * n_resume ? {n_warm} : 10 * n_resume;")
         c.append("        s->quiet[0] = 0;")
