@@ -12,7 +12,7 @@ from ..errors import DataError
 from .registry import register_emitter
 from .stages import MHSSPT_DENSITY_HELPERS, Field, StageEmitter, lit
 
-__all__ = ["TabulatedMHSSPTEmitter"]
+__all__ = ["TabulatedMHSSPTEmitter", "c_array"]
 
 #: The recursion step that also forms the normalised posteriors ``P`` (``mhsspt_update`` with its
 #: ``P`` output, as the fused table kernels use it).
@@ -50,10 +50,17 @@ static void fdk_mhsspt_update_p(double *logF, const double *ll, double *phi, dou
 """
 
 
-def _array(name: str, values: np.ndarray, ctype: str = "double") -> str:
+def c_array(name: str, values: np.ndarray, ctype: str = "double") -> str:
+    """A ``static const`` C array of ``values`` (doubles as shortest round-trip literals; a large
+    table of finite values takes the fast path: ``repr`` of each, ~0.2 s per million values)."""
     v = np.asarray(values).ravel()
-    fmt = lit if ctype == "double" else (lambda a: str(int(a)))
-    body = ",\n".join(", ".join(fmt(a) for a in v[i:i + 8]) for i in range(0, max(v.size, 1), 8))
+    if ctype != "double":
+        items = [str(int(a)) for a in v.tolist()]
+    elif np.isfinite(v).all():
+        items = list(map(repr, v.astype(float).tolist()))
+    else:
+        items = [lit(a) for a in v]
+    body = ",\n".join(", ".join(items[i:i + 8]) for i in range(0, len(items), 8))
     return f"static const {ctype} {name}[{max(v.size, 1)}] = {{\n{body or '0'}\n}};"
 
 
@@ -74,9 +81,9 @@ class TabulatedMHSSPTEmitter(StageEmitter):
         tabs = []
         if self.cubic:
             coef = obj._cubic[0]
-            tabs.append(_array(f"fdk_{prefix}_coef", coef))
+            tabs.append(c_array(f"fdk_{prefix}_coef", coef))
         else:
-            tabs.append(_array(f"fdk_{prefix}_tab", obj._table[0]))
+            tabs.append(c_array(f"fdk_{prefix}_tab", obj._table[0]))
         self.helpers = (MHSSPT_DENSITY_HELPERS, UPDATE_P_HELPER, "\n".join(tabs) + "\n")
 
     def fields(self):

@@ -12,17 +12,10 @@ import numpy as np
 
 from ...codegen.registry import register_emitter
 from ...codegen.stages import MHSSPT_DENSITY_HELPERS, Field, StageEmitter, lit
-from ...codegen.stages_mhsspt_tab import UPDATE_P_HELPER
+from ...codegen.stages_mhsspt_tab import UPDATE_P_HELPER, c_array
 from .monitor_fused import _colspans
 
 __all__ = ["FusedCarMonitorEmitter"]
-
-
-def _arr(name: str, v, ctype: str = "double") -> str:
-    v = np.asarray(v).ravel()
-    fmt = lit if ctype == "double" else (lambda a: str(int(a)))
-    body = ",\n    ".join(", ".join(fmt(a) for a in v[i:i + 8]) for i in range(0, v.size, 8)) or "0"
-    return f"static const {ctype} {name}[{max(v.size, 1)}] = {{\n    {body}\n}};"
 
 
 class FusedCarMonitorEmitter(StageEmitter):
@@ -44,9 +37,10 @@ class FusedCarMonitorEmitter(StageEmitter):
         arrs = []
         for m, k in (("A", "A"), ("B", "Bv"), ("C", "C"), ("D", "Dv")):
             lo, hi, off, vals, _n = _colspans(a[k])
-            arrs += [_arr(f"{P}_{m}_l", lo, "int64_t"), _arr(f"{P}_{m}_h", hi, "int64_t"),
-                     _arr(f"{P}_{m}_o", off, "int64_t"), _arr(f"{P}_{m}_x", vals)]
-        arrs += [_arr(f"{P}_v0", a["v0"]), _arr(f"{P}_tab", a["tab"]), _arr(f"{P}_logp_pi", a["logp_pi"])]
+            arrs += [c_array(f"{P}_{m}_l", lo, "int64_t"), c_array(f"{P}_{m}_h", hi, "int64_t"),
+                     c_array(f"{P}_{m}_o", off, "int64_t"), c_array(f"{P}_{m}_x", vals)]
+        arrs += [c_array(f"{P}_v0", a["v0"]), c_array(f"{P}_tab", a["tab"]),
+                 c_array(f"{P}_logp_pi", a["logp_pi"])]
         self.helpers = (MHSSPT_DENSITY_HELPERS, UPDATE_P_HELPER, "\n".join(arrs) + "\n")
 
     def fields(self):
