@@ -18,8 +18,13 @@ The RAV4 monitor (``rav4-lateral``) runs on the real minute (``../shared/data/ra
 injected faults, generated up to its peer checks (:data:`RAV4_FAULTS`; its fault-type stage is not
 generated yet). The load average is printed with the results.
 
-Usage: ``python benchmarks/bench_codegen.py [--repeat 20] [--examples two-mass own-system]``.
-The last printed line is one JSON object.
+An example is a folder of ``examples/`` (its ``monitor.toml``) or ``FOLDER:CONFIG.toml``
+(``abs:monitor_extended.toml``, the ABS monitor with the directional tests). ``--quick-design``
+designs the ABS monitors from fewer Monte Carlo runs (:data:`QUICK_DESIGN`: the same stages, other
+thresholds), for a run in minutes instead of an hour on two cores.
+
+Usage: ``python benchmarks/bench_codegen.py [--repeat 20] [--examples two-mass own-system]
+[--quick-design]``. The last printed line is one JSON object.
 """
 
 from __future__ import annotations
@@ -77,23 +82,41 @@ int main(int argc, char **argv)
 """
 
 
-def _design(example: str, tmp: Path) -> tuple[Path, list[Path]]:
+#: ``--quick-design``: [design.params] overrides per example config (fewer Monte Carlo runs).
+QUICK_DESIGN = {"abs": {"design_runs": 40, "dmatrix_runs": 6}}
+
+
+def _split(example: str) -> tuple[str, str]:
+    folder, _, cfg = example.partition(":")
+    return folder, cfg or "monitor.toml"
+
+
+def _design(example: str, tmp: Path, quick: bool = False) -> tuple[Path, list[Path]]:
     """A designed copy of an example and its logs (CSV)."""
-    ex = tmp / example
-    shutil.copytree(ROOT / "examples" / example, ex, ignore=shutil.ignore_patterns("designs"))
+    folder, cfg_name = _split(example)
+    ex = tmp / example.replace(":", "-")
+    shutil.copytree(ROOT / "examples" / folder, ex, ignore=shutil.ignore_patterns("designs*"))
+    cfg = ex / cfg_name
+    if quick and folder in QUICK_DESIGN:
+        text = cfg.read_text()
+        for k, v in QUICK_DESIGN[folder].items():
+            lines = [ln for ln in text.splitlines() if not ln.startswith(f"{k} =")]
+            i = lines.index("[design.params]")
+            text = "\n".join([*lines[:i + 1], f"{k} = {v}", *lines[i + 1:]]) + "\n"
+        cfg.write_text(text)
     cli = [sys.executable, "-m", "fdikit.cli"]
-    subprocess.run([*cli, "design", str(ex / "monitor.toml")], check=True, capture_output=True)
-    logs = tmp / f"{example}-logs"
+    subprocess.run([*cli, "design", str(cfg)], check=True, capture_output=True)
+    logs = tmp / f"{ex.name}-logs"
     sim = ex / "simulate_logs.py"
     if sim.exists():
         subprocess.run([sys.executable, str(sim), str(logs), "--minutes", "1"], check=True,
                        capture_output=True)
-        return ex / "monitor.toml", sorted(logs.glob("*.csv"))
-    r = subprocess.run([*cli, "example-log", str(ex / "monitor.toml"), "--out", str(logs), "--json"],
+        return cfg, sorted(logs.glob("*.csv"))
+    r = subprocess.run([*cli, "example-log", str(cfg), "--out", str(logs), "--json"],
                        capture_output=True, text=True)
     if r.returncode != 0:
-        return ex / "monitor.toml", []
-    return ex / "monitor.toml", sorted(logs.glob("*.csv"))
+        return cfg, []
+    return cfg, sorted(logs.glob("*.csv"))
 
 
 def _size(obj: Path) -> int:
@@ -104,7 +127,7 @@ def _size(obj: Path) -> int:
     return obj.stat().st_size
 
 
-def bench(example: str, tmp: Path, repeat: int) -> dict:
+def bench(example: str, tmp: Path, repeat: int, quick: bool = False) -> dict:
     from fdikit.codegen import generate
     from fdikit.errors import DataError
     from fdikit.monitor.config import build_monitor, load_config, map_channels, read_log
@@ -112,7 +135,7 @@ def bench(example: str, tmp: Path, repeat: int) -> dict:
     out: dict = {"example": example}
     t0 = time.perf_counter()
     try:
-        cfgp, logs = _design(example, tmp)
+        cfgp, logs = _design(example, tmp, quick)
     except subprocess.CalledProcessError as exc:
         return {**out, "refused": f"design failed: {exc.stderr.decode(errors='replace')[-300:]}"}
     out["design_seconds"] = round(time.perf_counter() - t0, 2)
@@ -136,6 +159,8 @@ def bench(example: str, tmp: Path, repeat: int) -> dict:
     sig = map_channels(cfg, read_log(cfg, log))
     x = sig.values[0][:, sig.index(gen["layout"]["inputs"])]
     out["log"] = log.name
+    if quick and _split(example)[0] in QUICK_DESIGN:
+        out["design"] = f"quick: {QUICK_DESIGN[_split(example)[0]]}"
     return _time_monitor(out, mon, cdir, sig.t, x, repeat)
 
 
@@ -184,6 +209,8 @@ def _time_monitor(out: dict, mon, cdir: Path, t: np.ndarray, x: np.ndarray, repe
         ev = [(e["k"], e["kind"], e["hypothesis"]) for e in run["events"]]
         d["events_equal"] = ev == py_ev
         d["max_error_rel_to_channel_scale"] = float(np.max(np.abs(run["out"] - py_out) / scale))
+        d["channels_not_bitwise"] = [n for j, n in enumerate([*mon.residual_names, *mon.stat_names])
+                                     if not np.array_equal(run["out"][:, j], py_out[:, j])]
         if prec == "double":
             d["bitwise_equal"] = bool(np.array_equal(run["out"], py_out))
         else:
@@ -285,8 +312,10 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeat", type=int, default=20, help="passes of the C loop over the log")
     ap.add_argument("--examples", nargs="*",
-                    default=["two-mass", "own-system", "synthetic-mhsspt", "abs", "passenger-car",
-                             "rav4-lateral", "aircraft-smo"])
+                    default=["two-mass", "own-system", "synthetic-mhsspt", "abs", "abs:monitor_extended.toml",
+                             "passenger-car", "rav4-lateral", "aircraft-smo"])
+    ap.add_argument("--quick-design", action="store_true",
+                    help="design the ABS monitors from fewer Monte Carlo runs (QUICK_DESIGN)")
     args = ap.parse_args(argv)
     rows = []
     with tempfile.TemporaryDirectory() as d:
@@ -296,7 +325,7 @@ def main(argv=None) -> int:
             elif ex == "rav4-lateral":
                 r = rav4(Path(d), args.repeat)
             else:
-                r = bench(ex, Path(d), args.repeat)
+                r = bench(ex, Path(d), args.repeat, args.quick_design)
             rows.append(r)
             if "refused" in r or "c" not in r:
                 print(f"{ex:14s} not generated: {r.get('refused', r.get('note'))}")

@@ -356,10 +356,11 @@ def test_unsupported_stages_refused_by_name():
         emit_monitor(Monitor(base.generators, [_Doubler(["r0"], 1.0)]))
     mh = _mhsspt_monitor().processors[1]
     tab = MHSSPT(mh.input_names, dict(zip(mh.hypotheses, mh.densities)), p=1e-3, tabulate=0.125)
-    with pytest.raises(DataError, match=r"stage MHSSPT \(tabulated densities\) cannot be generated yet"):
-        emit_monitor(Monitor(base.generators, [base.processors[0], tab]))
-    with pytest.raises(DataError, match="stage plausibility cannot be generated yet"):
-        emit_monitor(Monitor(base.generators, plausibility={"y0": Plausibility(min=-1.0, max=1.0)}))
+    # (tabulated densities are generated since: tests/codegen/test_codegen_mhsspt_tab.py)
+    assert "fdk_mhsspt_update_p" in emit_monitor(Monitor(base.generators, [base.processors[0], tab])).source
+    # (plausibility rules are generated since: tests/codegen/test_codegen_plausibility.py)
+    assert "s->pl_ref" in emit_monitor(Monitor(base.generators,
+                                               plausibility={"y0": Plausibility(min=-1.0, max=1.0)})).source
 
 
 # ------------------------------------------------------------------ the example config

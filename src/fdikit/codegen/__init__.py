@@ -3,11 +3,13 @@
 recursion, no globals with state, only ``<math.h>`` and ``<stdint.h>``; double and float32.
 
 * :func:`generate` (a config's artifacts) and :func:`generate_monitor` (a built Monitor) write
-  the code (:mod:`.generate`, :mod:`.emit`, the stages in :mod:`.stages`);
+  the code (:mod:`.generate`, :mod:`.emit`, the stages in :mod:`.stages`, the tabulated
+  MHSSPT in :mod:`.stages_mhsspt_tab`, the plausibility rules in :mod:`.plausibility`);
 * :class:`CMonitor` and :func:`compile_shared` are the equivalence harness (:mod:`.harness`);
 * :func:`register_emitter` adds the emitter of another stage class (:mod:`.registry`: system
   stages register from their own package, found by the plugin convention); the sensor checks
-  (:mod:`.sensor`) and the scheduled blend (:mod:`.scheduled`) register there;
+  (:mod:`.sensor`), the scheduled blend (:mod:`.scheduled`), the directional GLRT, the D-matrix
+  decision, the parameter sensitivity and the tabulated MHSSPT register there;
 * :func:`subset_monitor` cuts a monitor after a processor (``generate(..., stop_after=...)``).
 
 A stage the generator does not know is refused by name (``stage X cannot be generated yet``).
@@ -26,14 +28,27 @@ from .harness import (
     run_driver,
     signals_input,
 )
-from .registry import class_path, register_emitter, registered_emitter, registered_names
+from .registry import (
+    class_path,
+    emitter_for,
+    register_emitter,
+    registered,
+    registered_emitter,
+    registered_names,
+)
 from .scheduled import ScheduledFilterEmitter
 from .sensor import PeerCheckEmitter, StuckEmitter
 from .stages import EMITTERS
+from .stages_dglrt import DirectionalGLRTEmitter
+from .stages_dmatrix import DMatrixDecisionEmitter
+from .stages_mhsspt_tab import TabulatedMHSSPTEmitter
+from .stages_sensitivity import ParameterSensitivityEmitter
 from .subset import subset_monitor
 
-__all__ = ["CFLAGS", "EMITTERS", "CMonitor", "GeneratedSource", "PeerCheckEmitter", "ScheduledFilterEmitter",
-           "StuckEmitter", "c_to_py_state", "class_path", "compile_shared", "config_digest", "driver_source",
-           "emit_monitor", "find_compiler", "generate", "generate_monitor", "py_to_c_state",
-           "register_emitter", "registered_emitter", "registered_names", "run_driver", "signals_input",
-           "stage_digest", "subset_monitor"]
+__all__ = ["CFLAGS", "EMITTERS", "CMonitor", "DMatrixDecisionEmitter", "DirectionalGLRTEmitter",
+           "GeneratedSource", "ParameterSensitivityEmitter", "PeerCheckEmitter", "ScheduledFilterEmitter",
+           "StuckEmitter",
+           "TabulatedMHSSPTEmitter", "c_to_py_state", "class_path", "compile_shared", "config_digest",
+           "driver_source", "emit_monitor", "emitter_for", "find_compiler", "generate", "generate_monitor",
+           "py_to_c_state", "register_emitter", "registered", "registered_emitter", "registered_names",
+           "run_driver", "signals_input", "stage_digest", "subset_monitor"]

@@ -10,11 +10,11 @@ signal has a frame after it; values are the last frame at or before the grid tim
 hold, the default; a frame at most :data:`fdikit.io.can.HOLD_TOL` after it counts as at it) and
 invalid (NaN) when that frame is older than ``max_gap`` source periods (the median of the last 256
 intervals), or, with ``method="linear"``, linear interpolations between the neighbouring frames,
-invalid when the bracket spans more than ``max_gap`` source periods; a run of such samples is held back and dropped when at one of
-them every signal is in a gap; frames going back in time, or more than ``max_jump`` s after the
-previous one, are refused. The config's channel scale and offset then map the signals to the
-monitor's inputs. Only ``<math.h>`` and ``<stdint.h>``; every buffer sized at generation time (a
-frame that would overflow one is refused with an error code).
+invalid when the bracket spans more than ``max_gap`` source periods; a run of such samples is
+held back and dropped when at one of them every signal is in a gap; frames going back in time,
+or more than ``max_jump`` s after the previous one, are refused. The config's channel scale and
+offset then map the signals to the monitor's inputs. Only ``<math.h>`` and ``<stdint.h>``; every
+buffer sized at generation time (a frame that would overflow one is refused with an error code).
 """
 
 from __future__ import annotations

@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import DataError
+from .plausibility import PlausibilityEmitter
 from .stages import Field, lit, rl, stage_emitter
 
 __all__ = ["GeneratedSource", "emit_monitor"]
@@ -65,12 +66,16 @@ def emit_monitor(mon: Any, *, name: str = "fdk_monitor", precision: str = "doubl
         raise DataError(f"precision must be 'double' or 'float', got {precision!r}")
     if not name.isidentifier():
         raise DataError(f"the C name prefix must be an identifier, got {name!r}")
-    if mon.plausibility:
-        raise DataError(f"stage plausibility cannot be generated yet (rules on {sorted(mon.plausibility)})")
     dt = mon.expected_dt()
     if dt is None:
         raise DataError("a monitor without a known sample period cannot be generated yet: give "
                         "Monitor(dt=...)")
+    pl = None
+    if mon.plausibility:
+        if not mon.validate:
+            raise DataError("stage plausibility cannot be generated with validate=False (rules on "
+                            f"{sorted(mon.plausibility)})")
+        pl = PlausibilityEmitter(mon._checker, dt)
     gens = [stage_emitter(g, f"g{i}") for i, g in enumerate(mon.generators)]
     procs = [stage_emitter(p, f"p{i}") for i, p in enumerate(mon.processors)]
     for e in procs:
@@ -92,6 +97,8 @@ def emit_monitor(mon: Any, *, name: str = "fdk_monitor", precision: str = "doubl
               Field("below", "i64", max(A, 1)), Field("ep_id", "i64", max(A, 1))]
     for e in (*gens, *procs):
         fields += e.fields()
+    if pl is not None:
+        fields += pl.fields()
     n_ck = sum(f.n for f in fields)
     N = name.upper()
     # ---- header
@@ -171,11 +178,13 @@ def emit_monitor(mon: Any, *, name: str = "fdk_monitor", precision: str = "doubl
          f"static const char *const FDK_HYP[{max(A, 1)}] = {{{hyps or '0'}}};",
          f"const char *{name}_hypothesis(int channel)",
          f"{{ return channel >= 0 && channel < {A} ? FDK_HYP[channel] : 0; }}", "",
-         *dict.fromkeys(h for e in (*gens, *procs) for h in _helpers(e)),
+         *dict.fromkeys(h for e in (*gens, *procs, *([pl] if pl else [])) for h in _helpers(e)),
          f"static void fdk_reset_processors({name}_state *s)", "{"]
     c += [e.reset_code() for e in procs if e.reset_code()]
     c += ["    (void)s;", "}", "", f"void {name}_reset({name}_state *s)", "{", "    int i;"]
     c += [e.reset_code() for e in gens if e.reset_code()]
+    if pl is not None:
+        c.append(pl.reset_code())
     c += ["    fdk_reset_processors(s);",
           "    s->k[0] = 0; s->has_t_prev[0] = 0; s->t_prev[0] = 0.0; s->held[0] = 0; s->held_t[0] = 0;",
           "    s->missing[0] = 0; s->has_last[0] = 0; s->n_ep[0] = 0; s->last_gap = 0;",
@@ -217,12 +226,17 @@ def emit_monitor(mon: Any, *, name: str = "fdk_monitor", precision: str = "doubl
           "        if (m > 9007199254740992.0) m = 9007199254740992.0;",
           "        n_gap = m < 1.0 ? 1 : (int64_t)m;",
           "    }"]
-    if mon.validate:  # NaN, and |x| > max_abs (Python: an inf passes when max_abs is None)
-        c += [f"    for (i = 0; i < {len(inputs)}; ++i) if (!(fabs(x[i]) <= {vlimit})) invalid = 1;"]
+    if mon.validate:  # NaN, inf (also when max_abs is None, as in Python) and |x| > max_abs
+        c += [f"    for (i = 0; i < {len(inputs)}; ++i) if (!(fabs(x[i]) <= {vlimit}) || isinf(x[i])) "
+              "invalid = 1;"]
+        if pl is not None:   # range, rate and spike rules of a finite sample, judged before any change
+            c.append(pl.check_code())
         if raise_:
             c.append(f"    if (invalid) return {N}_ERR_VALUE;")
     c += ["    /* state changes from here on */",
-          "    if (n_gap) { s->missing[0] += n_gap; s->last_gap = n_gap; }",
+          "    if (n_gap) { s->missing[0] += n_gap; s->last_gap = n_gap;",
+          *([pl.gap_code()] if pl is not None else []), "    }",
+          *([pl.observe_code()] if pl is not None else []),
           "    if (invalid) return fdk_hold(s, out, 1, t);",
           "    n_resume = s->missing[0] + s->held_t[0];",
           f"    if (n_resume) {{ s->warm_left[0] = {n_warm}; s->reset_due[0] = 1;",
@@ -275,7 +289,8 @@ def emit_monitor(mon: Any, *, name: str = "fdk_monitor", precision: str = "doubl
               "checkpoint_len": n_ck, "alarm_channels": list(dec.alarm_channels) if dec else [],
               "hypotheses": [dec.hypothesis(ch) for ch in dec.alarm_channels] if dec else [],
               "dt": dt, "design_hash": design_hash,
-              "stages": [type(e.obj).__name__ for e in (*gens, *procs)]}
+              "stages": [type(e.obj).__name__ for e in (*gens, *procs)],
+              "plausibility": None if pl is None else pl.layout()}
     out = GeneratedSource(name, header, source, layout)
     out.emitters = (gens, procs)  # type: ignore[attr-defined]
     return out
@@ -295,12 +310,17 @@ def stage_digest(mon: Any) -> str:
     for st in (*mon.generators, *mon.processors):
         d = getattr(st, "design", st)
         d = getattr(st, "observer_design", d)
-        data = d.to_dict() if hasattr(d, "to_dict") else repr(d)
+        try:
+            data = d.to_dict() if hasattr(d, "to_dict") else repr(d)
+        except DataError:   # a composite whose parts have no to_dict (e.g. twins built in code)
+            data = {k: v for k, v in sorted(vars(d).items()) if not k.startswith("__")}
         parts.append([type(st).__name__, data])
     dec = mon.decision
     parts.append(None if dec is None else [dec.alarm_channels, dec.level, dec.names, dec.clear_level,
                                            dec.clear_after, dec.size_channels])
     parts.append([mon.dt, mon.max_gap, mon.warmup, mon.max_abs, mon.on_invalid, mon.validate])
+    if mon.plausibility:   # (appended only with rules: the digest of a monitor without is unchanged)
+        parts.append({k: v.to_dict() for k, v in sorted(mon.plausibility.items())})
     text = json.dumps(parts, sort_keys=True, default=_plain)
     return hashlib.sha256(text.encode()).hexdigest()
 
@@ -310,5 +330,8 @@ def _plain(x: Any) -> Any:
         return x.tolist()
     if isinstance(x, np.generic):
         return x.item()
+    d = getattr(x, "design", None)   # a stage inside a composite: its design's plain data
+    if d is not None and hasattr(d, "to_dict"):
+        return [type(x).__name__, d.to_dict()]
     return str(x)
 

@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import DataError
+from .plausibility import plausibility_from_py, plausibility_to_py
 
 __all__ = ["CFLAGS", "CMonitor", "c_to_py_state", "compile_shared", "driver_source", "find_compiler",
            "py_to_c_state", "run_driver"]
@@ -184,7 +185,8 @@ def c_to_py_state(layout: dict, buf: np.ndarray, mon: Any, emitters) -> dict[str
                          "below": a["below"][:A].astype(np.int64).reshape(1, A),
                          "id": a["ep_id"][:A].astype(np.int64).reshape(1, A),
                          "count": np.array([i["n_ep"]], np.int64)},
-            "plausibility": None, "runs": 1,
+            "plausibility": None if not layout.get("plausibility") else
+            plausibility_to_py(layout["plausibility"], a), "runs": 1,
             "generators": [e.to_py(a) for e in gens], "processors": [e.to_py(a) for e in procs],
             "last": [last[None, :R].copy(), last[None, R:].copy()] if i["has_last"] else None,
             "channels": {"inputs": list(mon.input_names), "residuals": list(mon.residual_names),
@@ -206,6 +208,10 @@ def py_to_c_state(layout: dict, state: dict[str, Any], emitters) -> np.ndarray:
         "t_prev": 0.0 if state["t_prev"] is None else state["t_prev"],
         "last": None if last is None else np.concatenate([np.ravel(last[0]), np.ravel(last[1])]),
         "active": np.ravel(ep["active"]), "below": np.ravel(ep["below"]), "ep_id": np.ravel(ep["id"])}
+    if layout.get("plausibility"):
+        if state.get("plausibility") is None:
+            raise DataError("the checkpoint has no plausibility state; the generated monitor has rules")
+        vals.update(plausibility_from_py(state["plausibility"]))
     gens, procs = emitters
     for e, s in zip(gens, state["generators"]):
         vals.update(e.from_py(s))

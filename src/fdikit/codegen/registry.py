@@ -22,7 +22,8 @@ from __future__ import annotations
 import importlib
 from typing import Any
 
-__all__ = ["class_path", "register_emitter", "registered_emitter", "registered_names"]
+__all__ = ["class_path", "emitter_for", "register_emitter", "registered", "registered_emitter",
+           "registered_names"]
 
 _REGISTRY: dict[str, type] = {}
 _TRIED: set[str] = set()
@@ -94,3 +95,12 @@ def registered_names() -> list[str]:
     """The class names of the stages with a registered emitter (those registered so far: a system's
     emitters once its ``codegen`` module was imported)."""
     return sorted({k.rsplit(":", 1)[1].rsplit(".", 1)[-1] for k in _REGISTRY})
+
+
+def registered() -> dict[str, type]:
+    """A copy of the registry: class path -> emitter (those registered so far)."""
+    return dict(_REGISTRY)
+
+
+#: The registered emitter of a stage (:func:`registered_emitter`), by its other name.
+emitter_for = registered_emitter

@@ -399,13 +399,19 @@ static void fdk_mhsspt_update(double *logF, const double *ll, double *phi, int H
 """
 
 
+#: The densities and log-sum-exp (shared with the tabulated MHSSPT) and the recursion step, each
+#: emitted once per file.
+MHSSPT_DENSITY_HELPERS, _sep, _rest = MHSSPT_HELPERS.partition("/* one step of the log-domain")
+MHSSPT_UPDATE_HELPER = _sep + _rest
+
+
 class MHSSPTEmitter(StageEmitter):
     """:class:`~fdikit.detect.MHSSPT` with exact :class:`~fdikit.detect.UniformMeanGaussian`
     densities (not tabulated): log densities, the log-domain recursion, the posteriors and group
     sums. Computed in double in both variants (the recursion's logs and exps need it)."""
 
     kinds = ("MHSSPT",)
-    helpers = MHSSPT_HELPERS
+    helpers = (MHSSPT_DENSITY_HELPERS, MHSSPT_UPDATE_HELPER)
 
     def __init__(self, obj, prefix):
         if obj.tabulate is not None or obj._umg is None:
