@@ -338,12 +338,12 @@ def design_ewma(nominal: Any, lam: float = 0.1, level: float = 0.99, *, confiden
 
 
 def choose_lambda(nominal: Any, faulty: Any, candidates: Sequence[float] = (0.05, 0.1, 0.2, 0.3, 1.0),
-                  level: float = 0.99, *, warmup: int = 0, tol: float = 0.005) -> tuple[float, dict]:
+                  level: float = 0.99, *, warmup: int = 0, tol: float = 0.0) -> tuple[float, dict]:
     """The EWMA constant that misses fewest samples of faulty TRAINING records at a held-out limit.
 
     For each candidate, :func:`design_ewma` on ``nominal``, then the missed-detection rate (the
-    fraction of samples at or below the limit) of every faulty record, averaged. The largest
-    ``lam`` (the shortest memory, the shortest delay) within ``tol`` of the best mean wins. Use
+    fraction of samples at or below the limit) of every faulty record, averaged. The smallest mean
+    wins; ties (within ``tol``) go to the largest ``lam`` (the shortest memory and delay). Use
     training records only: choosing on the test records would tune the detector to them.
 
     Parameters
@@ -359,7 +359,9 @@ def choose_lambda(nominal: Any, faulty: Any, candidates: Sequence[float] = (0.05
     warmup : int
         See :func:`design_ewma` (also left out of the faulty records).
     tol : float
-        Ties within this missed-detection rate go to the larger ``lam``.
+        Means within ``tol`` of the smallest count as ties (default 0: exact ties only). The
+        faulty records carry no delay cost beyond their first samples, so a wide ``tol`` is the
+        way to prefer a shorter memory.
 
     Returns
     -------
