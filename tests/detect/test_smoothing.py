@@ -15,6 +15,7 @@ from fdikit.base.artifacts import load_artifact, save_artifact
 from fdikit.detect import (
     EWMA,
     EWMADesign,
+    Hold,
     choose_lambda,
     design_ewma,
     ewma,
@@ -150,3 +151,20 @@ def test_tep_slow_faults_are_found_by_the_smoothed_cva_index():
         miss[lam] = {k: float(np.mean(d.smooth(v)[160:] <= d.limit)) for k, v in judged.items()}
     assert miss[0.1][11] < 0.5 * miss[1.0][11], miss
     assert miss[0.1][21] < miss[1.0][21], miss
+
+
+def test_in_a_monitor_after_a_data_driven_generator():
+    """PCA -> EWMA of its T² -> Hold at the design's limit: the monitor's smoothed statistic is the
+    design's, and the alarm rate on fresh nominal data is inside the stated interval."""
+    from fdikit.monitor import Monitor
+    from fdikit.residuals import PCAResidual
+
+    x = np.random.default_rng(5).standard_normal((9000, 4))
+    pca = PCAResidual.fit(x[:1000], n_components=2)
+    d = design_ewma(pca.run_array(x[1000:5000])[0][:, 0], 0.1, 0.99)
+    m = Monitor([pca], [d.processor("T2"), Hold(["T2:ewma"], d.limit, absolute=False)])
+    out = m.run(Signals(np.arange(4000.0), x[5000:], pca.y_names))
+    z = out.statistics["T2:ewma"][0]
+    np.testing.assert_allclose(z, d.smooth(pca.run_array(x[5000:])[0][:, 0]), rtol=1e-12)
+    lo, hi = d.predictive(4000)
+    assert lo <= float(np.mean(out.statistics["T2:ewma:alarm"][0] > 0)) <= hi
