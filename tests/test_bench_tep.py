@@ -87,3 +87,28 @@ def test_held_out_design_leaves_each_record_out():
     assert loro[1] > 10.0 and loro[3] > 10.0
     d0, same = out["d00"]
     assert set(same.values()) == {d0["limit"]}
+
+
+def test_smoothed_designs_choose_lambda_on_training_sets_and_leave_each_record_out():
+    """The EWMA rows: lam from the training-set index only (a slow shift there favours smoothing),
+    each '+pre' test set judged by a design without its own pre-onset record, the rows and the
+    claims added beside the raw ones, and the delay counted from the onset."""
+    bench = _bench()
+    rng = np.random.default_rng(1)
+    faults = [1, 2, 3]
+    idx = {k: rng.chisquare(3, 960) for k in [0, *faults]}
+    for k in faults:
+        idx[k][bench.ONSET:] += 1.5                   # a small, persistent shift after the onset
+    idx[2][:bench.ONSET] += 50.0                      # record 2's pre-onset part is far off
+    i00 = rng.chisquare(3, 500)
+    tr = {k: rng.chisquare(3, 480) + 1.5 for k in faults}
+    tables, designs, claims = {}, {}, []
+    lams = bench.smoothed_designs({"X": (idx, i00)}, {"X": tr}, faults, {"X": 0}, tables, designs, claims)
+    assert lams["X"]["lam"] < 1.0
+    t = lams["X"]["train_missed"]
+    assert t[str(lams["X"]["lam"])] == min(t.values())
+    assert set(designs) == {"X ewma", "X ewma+pre"} and len(claims) == 2
+    pre = tables["X ewma+pre @1%"]
+    # record 2 is not in its own limit: its pre-onset part alarms; the others' limits are raised by it
+    assert pre["far_pre"][2] > 0.9 and pre["far_pre"][1] == 0.0
+    assert tables["X ewma @1%"]["mdr"][1] < 0.5 and tables["X ewma @1%"]["delay"][1] is not None

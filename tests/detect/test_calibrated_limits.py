@@ -120,3 +120,14 @@ def test_tep_calibrated_limits_against_the_theoretical_ones():
         assert np.all((iv[:, 0] <= rate) & (rate <= iv[:, 1])), (type(gen).__name__, rate, iv)
         worst_cal, worst_theo = max(worst_cal, rate.max()), max(worst_theo, theo.max())
     assert worst_cal <= 0.03 and worst_theo > 0.05, (worst_cal, worst_theo)
+
+
+def test_min_tau_floors_the_autocorrelation_time():
+    """A statistic known to be correlated (an EWMA) is not credited with more effective samples than
+    ``samples / min_tau``; the limit itself is unchanged and the default changes nothing."""
+    v = np.random.default_rng(3).standard_normal(2000)
+    base = held_out_limit(v, 0.95)
+    assert held_out_limit(v, 0.95, min_tau=1.0) == base
+    d = held_out_limit(v, 0.95, min_tau=20.0)
+    assert d["limit"] == base["limit"] and d["tau"] == 20.0 and d["effective_samples"] == 100.0
+    assert d["interval"][1] - d["interval"][0] > base["interval"][1] - base["interval"][0]

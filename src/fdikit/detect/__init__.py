@@ -3,7 +3,8 @@ pre-whitened), feature norms, peer checks of redundant sensors (:mod:`.redundanc
 sensor-fault detectors (stuck, drift, gain, intermittent:
 :mod:`.sensor`), banks of tests designed together, and threshold design for a target per
 sample, per run or per hour (:mod:`.tail`: block bootstrap and GPD tails), and control limits of
-data-driven statistics calibrated on held-out nominal records (:mod:`.calibrated_limits`)."""
+data-driven statistics calibrated on held-out nominal records (:mod:`.calibrated_limits`), and
+the EWMA of a statistic with its held-out limit, for slow and small faults (:mod:`.smoothing`)."""
 
 from .bank import TestBank, TestSpec
 from .calibrated_limits import (
@@ -46,16 +47,19 @@ from .sensor import (
     design_intermittent,
     design_stuck,
 )
+from .smoothing import EWMA, EWMADesign, choose_lambda, design_ewma, ewma, ewma_tau
 from .threshold import ABSOLUTE_DEFAULT, Hold, consecutive_count
 from .whiten import VARWhitener
 
 __all__ = [
     "ABSOLUTE_DEFAULT",
+    "EWMA",
     "GLRT",
     "MHSSPT",
     "CalibratedLimits",
     "DirectionalGLRT",
     "DriftDetector",
+    "EWMADesign",
     "FeatureNorms",
     "GainDetector",
     "Hold",
@@ -75,9 +79,11 @@ __all__ = [
     "calibrate_densities",
     "calibrate_limits",
     "calibrate_segments",
+    "choose_lambda",
     "consecutive_count",
     "design_calibrated_mhsspt",
     "design_drift",
+    "design_ewma",
     "design_gain",
     "design_intermittent",
     "design_mhsspt",
@@ -86,6 +92,8 @@ __all__ = [
     "design_threshold",
     "detection_time",
     "directional_statistic",
+    "ewma",
+    "ewma_tau",
     "extend_ranges",
     "final_diagnosis",
     "fit_calibrated",

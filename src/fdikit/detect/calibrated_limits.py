@@ -167,7 +167,8 @@ def _tau(records: list[np.ndarray]) -> float:
     return float(max(1.0, np.average(taus, weights=ns)))
 
 
-def held_out_limit(records: Any, level: float, *, confidence: float = 0.95) -> dict[str, Any]:
+def held_out_limit(records: Any, level: float, *, confidence: float = 0.95,
+                   min_tau: float = 1.0) -> dict[str, Any]:
     """The ``level`` limit of a scalar statistic on held-out nominal records, with its rate's interval.
 
     Parameters
@@ -178,6 +179,10 @@ def held_out_limit(records: Any, level: float, *, confidence: float = 0.95) -> d
         In (0, 1); the target exceedance rate is ``1 - level``.
     confidence : float
         Of the interval.
+    min_tau : float
+        Floor of the autocorrelation time (samples): a statistic known to be at least this
+        correlated (e.g. an EWMA, :func:`fdikit.detect.design_ewma`) is not credited with more
+        effective samples because a short record under-estimates its correlation.
 
     Returns
     -------
@@ -212,7 +217,7 @@ def held_out_limit(records: Any, level: float, *, confidence: float = 0.95) -> d
     n = v.size
     j = min(n, int(np.ceil((n + 1) * level)))          # split-conformal rank
     limit = float(np.sort(v)[j - 1])
-    tau = max(_tau(recs), _tau([(r > limit).astype(float) for r in recs]))
+    tau = max(_tau(recs), _tau([(r > limit).astype(float) for r in recs]), float(min_tau))
     ne = n / tau
     # exceedance probability of the rank-j order statistic ~ Beta(n + 1 - j, j), at n_eff samples
     a, b = _beta_ab(level, ne)
