@@ -61,6 +61,9 @@ def test_the_lmi_refusal_says_why_and_what_to_try():
         with pytest.raises(ConditionError, match="What to try") as ei:
             design_reconstructor(m, D1=1e-3 * np.eye(C.shape[0]), check=False, hinf_check=False)
     assert "badly scaled" in ei.value.details["why"]
+    # and it names the invariant zeros, the fixed modes of the sliding motion (46)
+    assert "Invariant zeros of (A, M, C)" in str(ei.value)
+    assert "closest_zero_damping" in ei.value.details
 
 
 # ----------------------------------------------------------------------------- finite ladder
@@ -211,3 +214,45 @@ def test_a_60_state_random_plant_designs():
         rec = design_reconstructor(as_fault_model(A, M, C, Q), hinf_check=False)
     assert rec.info["n_aug"] == 62 and rec.info["solver"]["primary"]["solver"] == "riccati"
     assert rec.info["l2_bound"] > 0 and rec.info["l2_bound_claimed"] is not None
+
+
+# ----------------------------------------------------------------------------- noise by simulation
+def test_the_noise_design_chooses_by_simulated_error_and_states_it():
+    (A, M, C, _Q), m = _model(0)
+    sigma = 5e-5
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        rec = design_reconstructor(m, noise_std=sigma, hinf_check=False, check_horizon=0.5)
+    nz = rec.info["noise"]
+    assert nz["predicted_by"] == "simulation"
+    errs = [c["error"] for c in nz["candidates"] if "error" in c]
+    assert nz["predicted_error"] == min(errs)
+    assert {c["delta2"] for c in nz["candidates"]} >= set(smo_design.DELTA_LADDER)
+    assert (rec.primary["delta"], rec.secondary["delta"], rec.lpf_tau) == (nz["delta"], nz["delta2"],
+                                                                             nz["lpf_tau"])
+    # independent: another noise realisation, a sinusoid whose rate is fault_rate (default 10)
+    h = rec.dt
+    t = np.arange(round(0.5 / h) + 1) * h
+    f = np.sin(10.0 * t)[:, None]
+    Y = simulate_plant(A, M, C, f, h)
+    Y = Y + sigma * np.random.default_rng(99).standard_normal(Y.shape)
+    fh = integrate_observers(rec, np.zeros((1, t.size, 0)), Y)[0]
+    sel = t >= 0.25
+    measured = float(np.sqrt(np.mean((fh[sel] - f[sel]) ** 2)))
+    assert measured <= 1.5 * nz["predicted_error"]
+
+
+def test_the_noise_design_at_negligible_noise_is_no_worse_than_the_default_on_clean_data():
+    (A, M, C, _Q), m = _model(0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        rec0 = design_reconstructor(m, hinf_check=False, check_horizon=0.5)
+        recn = design_reconstructor(m, noise_std=1e-12, hinf_check=False, check_horizon=0.5)
+    h = rec0.dt
+    t = np.arange(round(1.0 / h) + 1) * h
+    f = np.where(t >= 0.2, np.sin(2 * np.pi * 0.5 * (t - 0.2)), 0.0)[:, None]
+    Y = simulate_plant(A, M, C, f, h)
+    sel = t >= 0.5
+    r = [float(np.sqrt(np.mean((integrate_observers(x, np.zeros((1, t.size, 0)), Y)[0][sel] - f[sel]) ** 2)))
+         for x in (rec0, recn)]
+    assert r[1] <= 1.1 * r[0] + 1e-6
