@@ -256,3 +256,16 @@ def test_the_noise_design_at_negligible_noise_is_no_worse_than_the_default_on_cl
     r = [float(np.sqrt(np.mean((integrate_observers(x, np.zeros((1, t.size, 0)), Y)[0][sel] - f[sel]) ** 2)))
          for x in (rec0, recn)]
     assert r[1] <= 1.1 * r[0] + 1e-6
+
+
+# ----------------------------------------------------------------------------- ladder cost
+def test_a_layer_that_misses_the_accuracy_skips_its_xi_runs_but_the_pick_has_them():
+    A, M, C, Q = random_fault_system(2, "rd2")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        rec = design_reconstructor(as_fault_model(A, M, C, Q), hinf_check=False, check_horizon=0.3)
+    tried = rec.info["boundary_layers"]["tried"]
+    missed = [x for x in tried if not x["step_error"] <= 1e-3]
+    assert missed, "this system's largest layers miss the accuracy"
+    assert all(x.get("xi_skipped") and x["xi_gain"] is None for x in missed)
+    assert rec.info["self_check"]["xi_gain"] is not None and not rec.info["self_check"].get("xi_skipped")
