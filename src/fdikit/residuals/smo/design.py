@@ -140,8 +140,14 @@ def _secondary(A2, M2, C2, Q2, D1m, gamma_o, retry, cond):
         return secondary_smo_lmi_search(A2, M2, C2, Q2, D1=D1m, gamma_o=gamma_o, retry=retry)
     except ConditionError as exc:
         z = np.asarray(cond.zeros)
-        if exc.condition != "LMI" or not z.size or exc.details.get("gamma_o_works") is not None:
+        if exc.condition != "LMI" or exc.details.get("gamma_o_works") is not None:
             raise
+        if not z.size:
+            raise ConditionError(exc.condition, f"{exc} Invariant zeros of (A, M, C): none (the "
+                                 f"sliding motion has no fixed mode; what fails is the scaling of "
+                                 f"the LMIs or the filter inequality (47)).",
+                                 {**exc.details, "invariant_zeros": [], "closest_zero_damping": None}
+                                 ) from None
         zc = z[np.argmax(z.real)]
         damp = float(-zc.real / abs(zc)) if abs(zc) > 0 else 1.0
         zs = ", ".join(f"{v.real:.4g}{v.imag:+.4g}j" for v in z)

@@ -182,7 +182,8 @@ def _noise_scenario(details: dict, dt: float, sig: np.ndarray, f_amp: float, fau
                     horizon: float) -> tuple[np.ndarray, np.ndarray, int]:
     """Faults and noisy measurements of the simulated noise design: a step of every fault (at
     10 % of ``horizon``) and, when ``fault_rate > 0``, a sinusoid of amplitude ``f_amp`` whose
-    rate peaks at ``fault_rate``; white noise ``sig`` on every output (seed :data:`NOISE_SEED`).
+    rate peaks at ``fault_rate`` (raised-cosine window over the first 20 %); white noise ``sig``
+    on every output (seed :data:`NOISE_SEED`).
     Returns ``F`` (runs, T, q), ``Y`` (runs, T, p) and the first scored sample."""
     from .plant import simulate_plant
 
@@ -193,7 +194,10 @@ def _noise_scenario(details: dict, dt: float, sig: np.ndarray, f_amp: float, fau
     signs = np.where(np.arange(q) % 2 == 0, 1.0, -1.0) / np.sqrt(q)
     F = [np.where(t >= 0.1 * horizon, f_amp, 0.0)[:, None] * signs[None, :]]
     if fault_rate > 0:
-        F.append(f_amp * np.sin(fault_rate / f_amp * t)[:, None] * signs[None, :])
+        # under a raised-cosine window over the first 20 % (no reaching phase from a kink at t = 0)
+        win = np.clip(t / (0.2 * horizon), 0.0, 1.0)
+        win = 0.5 - 0.5 * np.cos(np.pi * win)
+        F.append(f_amp * (np.sin(fault_rate / f_amp * t) * win)[:, None] * signs[None, :])
     F = np.stack(F)
     Y = simulate_plant(A, M, C, F, dt)
     Y = Y + sig[None, None, :] * np.random.default_rng(NOISE_SEED).standard_normal(Y.shape)
