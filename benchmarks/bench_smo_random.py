@@ -13,8 +13,9 @@ of three levels (noise-aware design; a crash is counted). Large plants (``--larg
 n states, p = n / 6 outputs, q = h = 2) are designed and timed. Also: a relative-degree-3 system
 must give B1's error, an unstable invariant zero B2's, and the aircraft keeps its numbers.
 
-Run: ``python benchmarks/bench_smo_random.py [--systems 40] [--large 30,60] [--quick]``; prints
-figures and the targets, the last line is one JSON object.
+Run: ``python benchmarks/bench_smo_random.py [--systems 40] [--large 30,60] [--quick] [--first K]``
+(``--first K``: only systems K..systems-1, a shard of a parallel run); prints figures, one
+``ROW {json}`` line per system and the targets, the last line is one JSON object.
 """
 
 from __future__ import annotations
@@ -164,7 +165,8 @@ def large_case(n: int) -> dict:
             "l2_bound_claimed": i["l2_bound_claimed"], "l2_bound_worst_ratio": i.get("l2_bound_worst_ratio")}
 
 
-def main(n_systems: int = 40, large: tuple[int, ...] = (30, 60), noise_systems: int = 8) -> dict:
+def main(n_systems: int = 40, large: tuple[int, ...] = (30, 60), noise_systems: int = 8,
+         first: int = 0) -> dict:
     t0 = time.perf_counter()
     t = np.arange(round(T_END / H) + 1) * H
     sel = t >= SETTLE
@@ -178,7 +180,8 @@ def main(n_systems: int = 40, large: tuple[int, ...] = (30, 60), noise_systems: 
     noise = {str(s): [] for s in NOISE_LEVELS}
     noise_crashes = []
     square = []
-    for seed, kind in kinds(n_systems):
+    for seed, kind in kinds(n_systems)[first:]:
+        silent0 = dict(silent)
         A, M, C, Q = random_system(seed, kind)
         n, p, q, h = A.shape[0], C.shape[0], M.shape[1], Q.shape[1]
         c = check_conditions(A, M, C, Q)
@@ -190,6 +193,7 @@ def main(n_systems: int = 40, large: tuple[int, ...] = (30, 60), noise_systems: 
             row["design_error"] = str(exc)
             rows.append(row)
             print(f"seed {seed:2d} {kind:8s} n={n} p={p} q={q}: DESIGN FAILED {exc}")
+            print("ROW " + json.dumps(row, default=float), flush=True)
             continue
         designed += 1
         for obs in rec.info["solver"].values():
@@ -280,6 +284,14 @@ def main(n_systems: int = 40, large: tuple[int, ...] = (30, 60), noise_systems: 
                                       "lpf_tau": recn.info["noise"]["lpf_tau"],
                                       "predicted_noise_std": recn.info["noise"]["fhat_noise_std"]})
         rows.append(row)
+        # one JSON line per system (a partial run can be summarised from these)
+        print("ROW " + json.dumps({**row, "silent_default": silent["default"] - silent0["default"],
+                                   "silent_undersized": silent["undersized"] - silent0["undersized"],
+                                   "bound": bound_checks[-1],
+                                   "noise": {s_: [x for x in v if x["seed"] == seed]
+                                             for s_, v in noise.items()},
+                                   "noise_crashes": [x for x in noise_crashes if x["seed"] == seed]},
+                                  default=float), flush=True)
         print(f"seed {seed:2d} {kind:8s} n={n} p={p} q={q} h={h} gamma={row['l2_bound']:.3g} "
               f"rho={row['rho']:.3g} "
               f"rho2={row['rho2']:.3g} worst rmse={max(ratios.values()):.2e} "
@@ -381,10 +393,11 @@ if __name__ == "__main__":
     ap.add_argument("--systems", type=int, default=None, help="random systems (default 40; quick 8)")
     ap.add_argument("--large", default=None, help="sizes of the large plants (default 30,60; quick 30)")
     ap.add_argument("--quick", action="store_true", help="8 systems, noise on 4, large n = 30")
+    ap.add_argument("--first", type=int, default=0, help="first system (seed) to run (a shard)")
     a = ap.parse_args()
     n_sys = a.systems if a.systems is not None else (8 if a.quick else 40)
     large = a.large if a.large is not None else ("30" if a.quick else "30,60")
-    res = main(n_sys, tuple(int(x) for x in large.split(",") if x), 4 if a.quick else 8)
+    res = main(n_sys, tuple(int(x) for x in large.split(",") if x), 4 if a.quick else 8, a.first)
     print(f"targets (jump window {JUMP_WINDOW:g} s):")
     for k, v in res["targets_met"].items():
         print(f"  {k:45s} {'met' if v else 'MISSED'}")

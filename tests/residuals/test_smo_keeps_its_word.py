@@ -61,6 +61,9 @@ def test_the_lmi_refusal_says_why_and_what_to_try():
         with pytest.raises(ConditionError, match="What to try") as ei:
             design_reconstructor(m, D1=1e-3 * np.eye(C.shape[0]), check=False, hinf_check=False)
     assert "badly scaled" in ei.value.details["why"]
+    # and it names the invariant zeros, the fixed modes of the sliding motion (46)
+    assert "Invariant zeros of (A, M, C)" in str(ei.value)
+    assert "invariant_zeros" in ei.value.details and "closest_zero_damping" in ei.value.details
 
 
 # ----------------------------------------------------------------------------- finite ladder
@@ -211,3 +214,68 @@ def test_a_60_state_random_plant_designs():
         rec = design_reconstructor(as_fault_model(A, M, C, Q), hinf_check=False)
     assert rec.info["n_aug"] == 62 and rec.info["solver"]["primary"]["solver"] == "riccati"
     assert rec.info["l2_bound"] > 0 and rec.info["l2_bound_claimed"] is not None
+
+
+# ----------------------------------------------------------------------------- noise by simulation
+def test_the_noise_design_chooses_by_simulated_error_and_states_it():
+    (A, M, C, _Q), m = _model(0)
+    sigma = 5e-5
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        rec = design_reconstructor(m, noise_std=sigma, hinf_check=False, check_horizon=0.5)
+    nz = rec.info["noise"]
+    assert nz["predicted_by"] == "simulation"
+    errs = [c["error"] for c in nz["candidates"] if "error" in c]
+    assert nz["predicted_error"] == min(errs)
+    assert {c["delta2"] for c in nz["candidates"]} >= set(smo_design.DELTA_LADDER)
+    assert (rec.primary["delta"], rec.secondary["delta"], rec.lpf_tau) == (nz["delta"], nz["delta2"],
+                                                                             nz["lpf_tau"])
+    # independent: another noise realisation, a sinusoid whose rate is fault_rate (default 10)
+    h = rec.dt
+    t = np.arange(round(0.5 / h) + 1) * h
+    f = np.sin(10.0 * t)[:, None]
+    Y = simulate_plant(A, M, C, f, h)
+    Y = Y + sigma * np.random.default_rng(99).standard_normal(Y.shape)
+    fh = integrate_observers(rec, np.zeros((1, t.size, 0)), Y)[0]
+    sel = t >= 0.25
+    measured = float(np.sqrt(np.mean((fh[sel] - f[sel]) ** 2)))
+    assert measured <= 1.5 * nz["predicted_error"]
+
+
+def test_the_noise_design_beats_the_default_at_its_noise_and_keeps_its_prediction_on_clean_data():
+    # even 1e-9 of noise ruins the default's thin layers (they amplify it); the noise design,
+    # whose candidates include those layers, is no worse there, and on clean data it stays within
+    # the error it predicted (its low-pass lag, not noise, is what remains)
+    (A, M, C, _Q), m = _model(0)
+    sigma = 1e-9
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        rec0 = design_reconstructor(m, hinf_check=False, check_horizon=0.5)
+        recn = design_reconstructor(m, noise_std=sigma, hinf_check=False, check_horizon=0.5)
+    h = rec0.dt
+    t = np.arange(round(1.0 / h) + 1) * h
+    win = 0.5 - 0.5 * np.cos(np.pi * np.clip(t / 0.2, 0.0, 1.0))
+    f = (np.sin(10.0 * t) * win)[:, None]  # rate up to fault_rate = 10 (the default)
+    Y = simulate_plant(A, M, C, f, h)
+    Yn = Y + sigma * np.random.default_rng(5).standard_normal(Y.shape)
+    sel = t >= 0.5
+
+    def rms(rec, Y_):
+        return float(np.sqrt(np.mean((integrate_observers(rec, np.zeros((1, t.size, 0)), Y_)[0][sel]
+                                      - f[sel]) ** 2)))
+
+    assert rms(recn, Yn) <= rms(rec0, Yn)
+    assert rms(recn, Y) <= 1.5 * recn.info["noise"]["predicted_error"]
+
+
+# ----------------------------------------------------------------------------- ladder cost
+def test_a_layer_that_misses_the_accuracy_skips_its_xi_runs_but_the_pick_has_them():
+    _sys, m = _model(1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        rec = design_reconstructor(m, hinf_check=False, check_horizon=0.3, accuracy=1e-6)
+    tried = rec.info["boundary_layers"]["tried"]
+    missed = [x for x in tried if not x["step_error"] <= 1e-6]
+    assert missed, "the largest layers miss an accuracy of 1e-6"
+    assert all(x.get("xi_skipped") and x["xi_gain"] is None for x in missed)
+    assert rec.info["self_check"]["xi_gain"] is not None and not rec.info["self_check"].get("xi_skipped")

@@ -23,8 +23,16 @@ import numpy as np
 
 from ..errors import ConditionError, DataError
 
-__all__ = ["GAMMA_O_FACTORS", "PRIMARY_LMI_MAX_STATES", "PrimaryGains", "SecondaryGains", "primary_smo_lmi",
-           "secondary_smo_lmi", "secondary_smo_lmi_search"]
+__all__ = [
+    "GAMMA_O_FACTORS",
+    "PRIMARY_LMI_MAX_STATES",
+    "SECONDARY_FULL_MAX_STATES",
+    "PrimaryGains",
+    "SecondaryGains",
+    "primary_smo_lmi",
+    "secondary_smo_lmi",
+    "secondary_smo_lmi_search",
+]
 
 _OK = ("optimal", "optimal_inaccurate")
 
@@ -375,7 +383,8 @@ class SecondaryGains:
 
 
 def secondary_smo_lmi(A: np.ndarray, M: np.ndarray, C: np.ndarray, Q: np.ndarray, *,
-                      D1: np.ndarray, gamma_o: float, eps: float = 1e-7) -> SecondaryGains:
+                      D1: np.ndarray, gamma_o: float, eps: float = 1e-7, form: str = "auto"
+                      ) -> SecondaryGains:
     """Robust observer design, ng-tan-edwards-kuang eqs. (46)-(47) (Tan & Edwards 2003).
 
     The system ``(A, M, C, Q)`` must be in the coordinates of (33)-(36): ``C = [0 T]`` with ``T``
@@ -396,6 +405,16 @@ def secondary_smo_lmi(A: np.ndarray, M: np.ndarray, C: np.ndarray, Q: np.ndarray
         Fixed L2 level of (47) (paper: 100).
     eps : float
         Margin of the strict inequalities.
+    form : {"auto", "full", "reduced"}
+        ``"full"``: (46)-(47) as written, with ``P11 > 0`` and ``P > 0``. ``"reduced"``: the same
+        program with the ``pb`` rows of (47) that belong to the noise channels ``D1`` dropped
+        (``Bd`` and ``H`` are zero there, so they form the block ``-gamma_o I`` on their own,
+        which holds for any ``gamma_o > eps``) and ``P11 > 0`` dropped (implied by ``P > 0``):
+        the same feasible set and optimum, smaller PSD cones (the interior-point step's
+        factorisation grows with the cube of their sizes). ``P > 0`` is then checked at the
+        returned point and imposed in a second solve only when it fails there. ``"auto"``: ``"full"`` up to
+        :data:`SECONDARY_FULL_MAX_STATES` states (``nb``), else ``"reduced"``;
+        ``solver["form"]`` records which.
 
     Returns
     -------
@@ -432,6 +451,12 @@ def secondary_smo_lmi(A: np.ndarray, M: np.ndarray, C: np.ndarray, Q: np.ndarray
     D1 = _square(D1, pb, "D1", invertible=True)
     gamma_o = _positive(gamma_o, "gamma_o")
     eps = _positive(eps, "eps")
+    if form not in ("auto", "full", "reduced"):
+        raise DataError(f"form must be 'auto', 'full' or 'reduced', got {form!r}")
+    if form == "auto":
+        form = "full" if nb <= SECONDARY_FULL_MAX_STATES else "reduced"
+    if form == "reduced" and gamma_o <= eps:
+        form = "full"  # the dropped block -gamma_o I needs gamma_o > eps
     k = nb - pb  # non-output states
     m1 = pb - q  # free columns of L
     T = C[:, k:]
@@ -462,7 +487,9 @@ def secondary_smo_lmi(A: np.ndarray, M: np.ndarray, C: np.ndarray, Q: np.ndarray
             rows = [[blk11, -(W @ A3).T], [-(W @ A3), -gam * np.eye(q)]]
         L46 = cp.bmat(rows)
         dim46 = k + h + q if h else k + q
-        cons += [0.5 * (L46 + L46.T) << -eps * np.eye(dim46), P11 >> eps * np.eye(k)]
+        cons += [0.5 * (L46 + L46.T) << -eps * np.eye(dim46)]
+        if form == "full":
+            cons += [P11 >> eps * np.eye(k)]  # implied by P > 0 below (dropped when reduced)
     else:
         L46 = cp.bmat([[-gam * np.eye(h), (W @ Q2).T], [W @ Q2, -gam * np.eye(q)]])
         cons += [0.5 * (L46 + L46.T) << -eps * np.eye(h + q)]
@@ -472,14 +499,42 @@ def secondary_smo_lmi(A: np.ndarray, M: np.ndarray, C: np.ndarray, Q: np.ndarray
     R = np.linalg.inv(Dd @ Dd.T)
     E = cp.hstack([-(W @ A3), np.zeros((q, pb))]) if k else cp.Constant(np.zeros((q, nb)))
     H = cp.hstack([np.zeros((q, pb)), W @ Q2])
-    L47 = cp.bmat([[Pl @ A + A.T @ Pl - gamma_o * C.T @ R @ C, -(Pl @ Bd), E.T],
-                   [-(Pl @ Bd).T, -gamma_o * np.eye(pb + h), H.T],
-                   [E, H, -gamma_o * np.eye(q)]])
-    cons += [0.5 * (L47 + L47.T) << -eps * np.eye(nb + pb + h + q), Pl >> eps * np.eye(nb)]
+    if form == "full":
+        L47 = cp.bmat([[Pl @ A + A.T @ Pl - gamma_o * C.T @ R @ C, -(Pl @ Bd), E.T],
+                       [-(Pl @ Bd).T, -gamma_o * np.eye(pb + h), H.T],
+                       [E, H, -gamma_o * np.eye(q)]])
+        dim47 = nb + pb + h + q
+    else:
+        # the D1 columns of Bd and of H are zero: those rows of (47) are -gamma_o I alone
+        PQ = -(Pl @ Q) if h else None
+        rows47 = [[Pl @ A + A.T @ Pl - gamma_o * C.T @ R @ C, PQ, E.T],
+                  [PQ.T if h else None, -gamma_o * np.eye(h), (W @ Q2).T if h else None],
+                  [E, W @ Q2 if h else None, -gamma_o * np.eye(q)]]
+        if not h:
+            rows47 = [[rows47[0][0], E.T], [E, -gamma_o * np.eye(q)]]
+        L47 = cp.bmat(rows47)
+        dim47 = nb + h + q
+    cons += [0.5 * (L47 + L47.T) << -eps * np.eye(dim47)]
+    Pcone = [Pl >> eps * np.eye(nb)]
+    if form == "full":
+        cons += Pcone
     if h == 0:
         cons += [gam == 1.0]  # nothing to attenuate: feasibility only
     prob = cp.Problem(cp.Minimize(gam), cons)
     val, rec = _solve(prob, "secondary observer LMIs (46)-(47)", eps)
+    rec["form"] = form
+    if form == "reduced":
+        # P > 0 left to the check at the point (it held in every case measured); solved with it
+        # when it does not hold there
+        pmin = float(np.linalg.eigvalsh(_sym(np.asarray(Pl.value))).min())
+        rec["P_cone"] = "checked at the point"
+        rec["min_eig_P"] = pmin
+        if not pmin >= 0.5 * eps:
+            first = rec
+            prob = cp.Problem(cp.Minimize(gam), cons + Pcone)
+            val, rec = _solve(prob, "secondary observer LMIs (46)-(47)", eps)
+            rec.update(form=form, P_cone="imposed (the reduced solve gave min eig P = "
+                       f"{pmin:.3g})", first_solve=first)
     Pv = _sym(np.asarray(Pl.value))
     Wv = np.asarray(W.value).reshape(q, pb)
     Gl = gamma_o * np.linalg.solve(Pv, C.T @ R)
@@ -503,6 +558,12 @@ def secondary_smo_lmi(A: np.ndarray, M: np.ndarray, C: np.ndarray, Q: np.ndarray
                              {"eig_Po": np.linalg.eigvalsh(Po)})
     gamma = float(val) if h else 0.0
     return SecondaryGains(Pv, Gl, L, Po, Gn, Wv, gamma, rec, float(gamma_o))
+
+
+#: Largest secondary state dimension ``nb`` for which :func:`secondary_smo_lmi` (``form="auto"``)
+#: solves (46)-(47) as written; above it the reduced form (same feasible set, smaller cones).
+#: Below it the full form keeps the designs' numbers (the aircraft's gamma-bar) bitwise.
+SECONDARY_FULL_MAX_STATES = 16
 
 
 #: Multipliers of ``gamma_o`` tried, in this order, when the secondary LMIs are infeasible.

@@ -165,3 +165,123 @@ def _noise_design(build, sig, user, lpf_tau, fault_rate, rho1, rho2, g1, g2, dt)
                    "constants; lag_error_bound = fault_rate * lag_s; refused: low-pass time constants "
                    "whose step inside the boundary layers is unstable"}
     return rec, out
+
+
+#: Boundary layers (the same for both observers) the simulated noise design tries, as multiples
+#: of the noise norm ``||noise_std||``; the layers of the noise-free ladder are tried as well.
+NOISE_LAYER_FACTORS = (1.0, 3.0, 10.0, 30.0, 100.0, 300.0, 1000.0)
+
+#: Multipliers of the best secondary layer, then of the best primary layer, tried after that.
+NOISE_LAYER_REFINE = (0.1, 0.3, 3.0, 10.0, 100.0)
+
+#: Seed of the white noise of the simulated noise design (the choice is reproducible).
+NOISE_SEED = 2031
+
+
+def _noise_scenario(details: dict, dt: float, sig: np.ndarray, f_amp: float, fault_rate: float,
+                    horizon: float) -> tuple[np.ndarray, np.ndarray, int]:
+    """Faults and noisy measurements of the simulated noise design: a step of every fault (at
+    10 % of ``horizon``) and, when ``fault_rate > 0``, a sinusoid of amplitude ``f_amp`` whose
+    rate peaks at ``fault_rate`` (raised-cosine window over the first 20 %); white noise ``sig``
+    on every output (seed :data:`NOISE_SEED`).
+    Returns ``F`` (runs, T, q), ``Y`` (runs, T, p) and the first scored sample."""
+    from .plant import simulate_plant
+
+    A, M, C, _Q = details["model"]
+    q = M.shape[1]
+    T = max(round(horizon / dt) + 1, 50)
+    t = np.arange(T) * dt
+    signs = np.where(np.arange(q) % 2 == 0, 1.0, -1.0) / np.sqrt(q)
+    F = [np.where(t >= 0.1 * horizon, f_amp, 0.0)[:, None] * signs[None, :]]
+    if fault_rate > 0:
+        # under a raised-cosine window over the first 20 % (no reaching phase from a kink at t = 0)
+        win = np.clip(t / (0.2 * horizon), 0.0, 1.0)
+        win = 0.5 - 0.5 * np.cos(np.pi * win)
+        F.append(f_amp * (np.sin(fault_rate / f_amp * t) * win)[:, None] * signs[None, :])
+    F = np.stack(F)
+    Y = simulate_plant(A, M, C, F, dt)
+    Y = Y + sig[None, None, :] * np.random.default_rng(NOISE_SEED).standard_normal(Y.shape)
+    return F, Y, T // 2
+
+
+def _lowpass(fh: np.ndarray, a: float) -> np.ndarray:
+    """The runtime's output low-pass ``flp = a flp + (1 - a) fhat`` (first sample passed) along axis 1."""
+    from scipy.signal import lfilter
+
+    if a <= 0:
+        return fh
+    return lfilter([1.0 - a], [1.0, -a], fh, axis=1, zi=a * fh[:, :1, :])[0]
+
+
+def _simulated_noise_design(build, sig, user, lpf_tau, f_amp, fault_rate, dt, horizon, analytic,
+                            ladder):
+    """Boundary layers and low-pass chosen by the simulated error at the noise level ``sig``.
+
+    Candidates: the layers of ``ladder`` (the noise-free choices,
+    :data:`~fdikit.residuals.smo.design.DELTA_LADDER`), ``||sig||`` times
+    :data:`NOISE_LAYER_FACTORS` (both observers), the analytic noise design (``analytic``:
+    ``(rec, info)`` of :func:`_noise_design`, or None), then the best secondary layer and the best
+    primary layer each times :data:`NOISE_LAYER_REFINE` (a coordinate search: the secondary
+    observer sees the primary's injection, not the raw noise). Each is run once by the compiled
+    runtime on :func:`_noise_scenario` and every low-pass time constant (0 and 20 dt to 1 s, or
+    the given ``lpf_tau``) is applied to its output as the runtime does. The score is the
+    largest RMS of ``||fhat - f||`` over the runs' second halves; the smallest wins.
+
+    Returns
+    -------
+    (d1, d2, tau, score_abs, table, per_run_std)
+    """
+    from .runtime import integrate_observers
+
+    sn = float(np.linalg.norm(sig))
+    taus = ([float(lpf_tau)] if lpf_tau is not None else
+            [0.0] + [float(x) for x in np.logspace(np.log10(20 * dt), 0.0, 25)])
+    scen = {}
+    table = []
+    tried = {}
+
+    def run(d1, d2):
+        d1 = float(user["delta"] if user["delta"] is not None else d1)
+        d2 = float(user["delta2"] if user["delta2"] is not None else d2)
+        if (d1, d2) in tried:
+            return tried[(d1, d2)]
+        rec = build(d1, d2, 0.0)
+        if not scen:
+            scen["F"], scen["Y"], scen["k0"] = _noise_scenario(rec.details, dt, sig, f_amp, fault_rate,
+                                                               horizon)
+        F, Y, k0 = scen["F"], scen["Y"], scen["k0"]
+        fh = integrate_observers(rec, np.zeros((Y.shape[0], Y.shape[1], len(rec.u_names))), Y)
+        res = None
+        if not np.all(np.isfinite(fh)):
+            table.append({"delta": d1, "delta2": d2, "skipped": "non-finite run"})
+        else:
+            for tau in taus:
+                a = float(np.exp(-dt / tau)) if tau > 0 else 0.0
+                err = _lowpass(fh, a)[:, k0:] - F[:, k0:]
+                score = float(np.sqrt(np.mean(np.sum(err ** 2, axis=2), axis=1)).max())
+                if res is None or score < res[3]:
+                    res = (d1, d2, tau, score, err)
+            table.append({"delta": d1, "delta2": d2, "lpf_tau": res[2], "error": res[3]})
+        tried[(d1, d2)] = res
+        return res
+
+    def better(a, b):
+        return b if a is None or (b is not None and b[3] < a[3]) else a
+
+    best = None
+    # the noise-free layers, then equal layers scaled with the noise, then each layer on its own
+    for d in ladder:
+        best = better(best, run(d, d))
+    for k in NOISE_LAYER_FACTORS:
+        best = better(best, run(sn * k, sn * k))
+    if analytic is not None:
+        best = better(best, run(analytic[1]["delta"], analytic[1]["delta2"]))
+    if best is not None:
+        for k in NOISE_LAYER_REFINE:
+            best = better(best, run(best[0], best[1] * k))
+        for k in NOISE_LAYER_REFINE:
+            best = better(best, run(best[0] * k, best[1]))
+    if best is None:
+        return None
+    d1, d2, tau, score, err = best
+    return d1, d2, tau, score, table, np.std(err[0], axis=0).tolist()

@@ -13,7 +13,7 @@ The observers use the paper's switching gains and boundary layers (``rho = rho2 
 ``delta = delta2 = 1e-5``, :data:`PAPER_GAINS`) unless other values are passed. With sensor noise
 (``noise_std``, white, the same standard deviation on the three measurements) a second,
 noise-aware design (:func:`fdikit.residuals.smo.design_reconstructor` with ``noise_std``: boundary
-layers sized from the noise, a low-pass on ``fhat`` whose lag is part of the design) runs on the
+layers and a low-pass on ``fhat`` chosen by their simulated error at that noise) runs on the
 noisy measurements and its rmse ratios are reported under ``noise`` beside the noise-free ones.
 """
 
