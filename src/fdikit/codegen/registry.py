@@ -49,8 +49,9 @@ def register_emitter(path: str, emitter: type) -> None:
     ----------
     path : str
         The class's qualified path ``"module:qualname"`` (:func:`class_path`).
-    emitter : type
-        A :class:`~fdikit.codegen.stages.StageEmitter` subclass. An emitter that generates the
+    emitter : type or callable
+        A :class:`~fdikit.codegen.stages.StageEmitter` subclass, or a factory
+        ``emitter(stage, prefix)`` returning one. An emitter that generates the
         stage's ``resume`` rule (the stage has a ``resume`` method: warm-up again after a gap)
         sets ``handles_resume = True`` and implements ``resume_code``; otherwise such a stage is
         refused by name.
@@ -64,10 +65,14 @@ def register_emitter(path: str, emitter: type) -> None:
 
     if not isinstance(path, str) or path.count(":") != 1 or not all(path.split(":")):
         raise DataError(f"an emitter is registered under 'module:qualname', got {path!r}")
-    # (a StageEmitter by its interface: the registry sits below the stages module)
+    # (a StageEmitter by its interface: the registry sits below the stages module), or a factory
+    # called as emitter(stage, prefix) that returns one (e.g. by the stage's variant)
     api = ("fields", "reset_code", "step_code")
-    if not (isinstance(emitter, type) and all(hasattr(emitter, a) for a in api)):
+    if isinstance(emitter, type) and not all(hasattr(emitter, a) for a in api):
         raise DataError(f"the emitter of {path} must be a StageEmitter subclass, got {emitter!r}")
+    if not callable(emitter):
+        raise DataError(f"the emitter of {path} must be a StageEmitter subclass or a factory "
+                        f"emitter(stage, prefix), got {emitter!r}")
     _REGISTRY[path] = emitter
 
 
