@@ -7,13 +7,15 @@ recursion, no globals with state, only ``<math.h>`` and ``<stdint.h>``; double a
 * :class:`CMonitor` and :func:`compile_shared` are the equivalence harness (:mod:`.harness`);
 * :func:`register_emitter` adds the emitter of another stage class (:mod:`.registry`: system
   stages register from their own package, found by the plugin convention); the sensor checks
-  (:mod:`.sensor`) and the scheduled blend (:mod:`.scheduled`) register there;
+  (:mod:`.sensor`), the scheduled blend (:mod:`.scheduled`) and the fault-type classifier
+  (:mod:`.fault_type`) register there; the episode rule is :mod:`.episodes`;
 * :func:`subset_monitor` cuts a monitor after a processor (``generate(..., stop_after=...)``).
 
 A stage the generator does not know is refused by name (``stage X cannot be generated yet``).
 """
 
 from .emit import GeneratedSource, emit_monitor, stage_digest
+from .fault_type import FaultTypeEmitter
 from .generate import config_digest, generate, generate_monitor
 from .harness import (
     CFLAGS,
@@ -32,8 +34,8 @@ from .sensor import PeerCheckEmitter, StuckEmitter
 from .stages import EMITTERS
 from .subset import subset_monitor
 
-__all__ = ["CFLAGS", "EMITTERS", "CMonitor", "GeneratedSource", "PeerCheckEmitter", "ScheduledFilterEmitter",
-           "StuckEmitter", "c_to_py_state", "class_path", "compile_shared", "config_digest", "driver_source",
-           "emit_monitor", "find_compiler", "generate", "generate_monitor", "py_to_c_state",
-           "register_emitter", "registered_emitter", "registered_names", "run_driver", "signals_input",
-           "stage_digest", "subset_monitor"]
+__all__ = ["CFLAGS", "EMITTERS", "CMonitor", "FaultTypeEmitter", "GeneratedSource", "PeerCheckEmitter",
+           "ScheduledFilterEmitter", "StuckEmitter", "c_to_py_state", "class_path", "compile_shared",
+           "config_digest", "driver_source", "emit_monitor", "find_compiler", "generate", "generate_monitor",
+           "py_to_c_state", "register_emitter", "registered_emitter", "registered_names", "run_driver",
+           "signals_input", "stage_digest", "subset_monitor"]
