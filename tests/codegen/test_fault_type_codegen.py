@@ -6,13 +6,24 @@ checkpoints cross between C and Python mid-episode."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
-from fdikit.codegen import CMonitor, c_to_py_state, find_compiler, py_to_c_state
+from fdikit.codegen import (
+    CMonitor,
+    c_to_py_state,
+    compile_shared,
+    driver_source,
+    find_compiler,
+    py_to_c_state,
+    run_driver,
+)
 from fdikit.codegen.fault_type import FaultTypeEmitter
 from fdikit.codegen.stages import stage_emitter
 from fdikit.detect import Hold
+from fdikit.errors import DataError
 from fdikit.isolate import FAULT_TYPES, FaultTypeClassifier
 from fdikit.monitor import Decision, Monitor
 from fdikit.residuals import FaultDetectionFilter, FilterDesign
@@ -43,7 +54,6 @@ def _monitor():
 
 def _log(mon, seed, T=4000, gap=True):
     rng = np.random.default_rng(seed)
-    ins = mon.processors[0].input_names
     k = np.arange(T)
     cols = {}
     for j, m in enumerate(M):
@@ -166,3 +176,22 @@ def test_checkpoint_crosses_mid_episode(built, cut):
     res = fresh.run(t[cut:], x[cut:], reset=False)
     assert np.array_equal(res["out"], full_out[cut:])
     assert _c(res) == [e for e in full_ev if e[0] >= cut]
+
+
+def test_classifier_and_groups_under_sanitizers(built, tmp_path):
+    """The ring buffers' index arithmetic and the grouped episode rule as a program under
+    -fsanitize=address,undefined: the same numbers and events as Python."""
+    mon, gen, _c64, _c32, _em = built
+    layout = gen["layout"]
+    cdir = Path(gen["files"][0]).parent
+    (tmp_path / "main.c").write_text(driver_source(layout))
+    try:
+        exe = compile_shared([tmp_path / "main.c", cdir / f"{layout['name']}.c"], tmp_path / "asan",
+                             sanitize=True, shared=False, extra=(f"-I{cdir}",))
+    except DataError as exc:   # a compiler without the sanitizer runtimes
+        pytest.skip(f"no sanitizer runtime: {str(exc)[-200:]}")
+    t, x, names = _log(mon, 4)
+    py_out, py_ev = _py(mon, t, x, names)
+    res = run_driver(exe, layout, t, x)
+    assert np.array_equal(res["out"], py_out) and _c(res) == py_ev
+    assert "runtime error" not in res["stderr"]
