@@ -62,9 +62,10 @@ def _log(mon, spec: str, bad: bool):
     from fdikit.systems.car.monitor_rav4 import inject, load_rav4_raw, parse_inject
 
     sig = inject(load_rav4_raw(DATA), parse_inject(spec), mon.generators[0].pre)
-    t, x = sig.t.copy(), sig.values[0].copy()
+    names = list(mon.input_names)           # (the order the C takes and the tests name the columns)
+    t, x = sig.t.copy(), sig.values[0][:, sig.index(names)].copy()
     if bad:  # a NaN yaw rate, a sample of nonsense, then 0.3 s lost (the stages resume)
-        x[1500, 3] = np.nan
+        x[1500, names.index("yaw_rate_raw")] = np.nan
         x[1501, 0] = 1e300
         t[2200:] += 0.3
     return t, x
@@ -117,7 +118,9 @@ def test_rav4_full_chain_c_equals_python(rav4_full, spec):
     assert np.array_equal(c["out"], np.array(out))
     assert [(e["k"], e["kind"], e["hypothesis"], e["episode"], e["value"], e["size"], e["previous"])
             for e in c["events"]] == ev
-    assert {e[1] for e in ev} == {"onset", "change", "cleared"}
+    kinds = {e[1] for e in ev}
+    # (the gain of the wheel speed is typed a bias first and revised as the speed varies)
+    assert kinds == ({"onset", "change", "cleared"} if spec.startswith("gain") else {"onset", "cleared"})
 
 
 def test_rav4_full_chain_checkpoint_crosses(rav4_full):
