@@ -119,7 +119,7 @@ def test_rav4_full_chain_c_equals_python(rav4_full, spec):
     assert [(e["k"], e["kind"], e["hypothesis"], e["episode"], e["value"], e["size"], e["previous"])
             for e in c["events"]] == ev
     kinds = {e[1] for e in ev}
-    # (the gain of the wheel speed is typed a bias first and revised as the speed varies)
+    # (on the gain log a type is revised within an episode: a change event)
     assert kinds == ({"onset", "change", "cleared"} if spec.startswith("gain") else {"onset", "cleared"})
 
 
