@@ -55,6 +55,9 @@ static int parse_line(const char *s, double *t, uint32_t *id, uint8_t *data, int
     return 1;
 }
 
+/* the event kinds by code (FDK_RAV4_EVENT_CLEARED, _ONSET, _CHANGE) */
+static const char *const KIND[3] = {"cleared", "onset", "change"};
+
 static int step(fdk_rav4_state *m, const fdk_rav4_can_sample *smp, int n)
 {
     double out[FDK_RAV4_N_OUT];
@@ -68,10 +71,12 @@ static int step(fdk_rav4_state *m, const fdk_rav4_can_sample *smp, int n)
             char size[32] = "null";
             if (!isnan(e->size)) sprintf(size, "%.17g", e->size);
             printf("{\"t\": %.17g, \"run\": 0, \"sample\": %lld, \"kind\": \"%s\", \"hypothesis\": \"%s\", "
-                   "\"value\": %.17g, \"size\": %s, \"episode\": %lld, \"announcement\": %s%s}\n",
-                   e->t, (long long)e->k, e->kind ? "onset" : "cleared", fdk_rav4_hypothesis(e->channel),
-                   e->value, size, (long long)e->episode, e->kind ? "true" : "false",
-                   e->kind ? "" : ", \"label\": \"not seen any more\"");
+                   "\"value\": %.17g, \"size\": %s, \"episode\": %lld, \"announcement\": %s",
+                   e->t, (long long)e->k, KIND[e->kind], fdk_rav4_hypothesis(e->channel),
+                   e->value, size, (long long)e->episode, e->kind == FDK_RAV4_EVENT_ONSET ? "true" : "false");
+            if (e->kind == FDK_RAV4_EVENT_CLEARED) printf(", \"label\": \"not seen any more\"");
+            if (e->kind == FDK_RAV4_EVENT_CHANGE) printf(", \"previous\": \"%s\"", fdk_rav4_hypothesis(e->previous));
+            printf("}\n");
         }
     }
     return 0;

@@ -9,13 +9,15 @@ recursion, no globals with state, only ``<math.h>`` and ``<stdint.h>``; double a
 * :func:`register_emitter` adds the emitter of another stage class (:mod:`.registry`: system
   stages register from their own package, found by the plugin convention); the sensor checks
   (:mod:`.sensor`), the scheduled blend (:mod:`.scheduled`), the directional GLRT, the D-matrix
-  decision, the parameter sensitivity and the tabulated MHSSPT register there;
+  decision, the parameter sensitivity, the tabulated MHSSPT and the fault-type classifier
+  (:mod:`.fault_type`) register there; the episode rule is :mod:`.episodes`;
 * :func:`subset_monitor` cuts a monitor after a processor (``generate(..., stop_after=...)``).
 
 A stage the generator does not know is refused by name (``stage X cannot be generated yet``).
 """
 
 from .emit import GeneratedSource, emit_monitor, stage_digest
+from .fault_type import FaultTypeEmitter
 from .generate import config_digest, generate, generate_monitor
 from .harness import (
     CFLAGS,
@@ -46,6 +48,7 @@ from .stages_sensitivity import ParameterSensitivityEmitter
 from .subset import subset_monitor
 
 __all__ = ["CFLAGS", "EMITTERS", "CMonitor", "DMatrixDecisionEmitter", "DirectionalGLRTEmitter",
+           "FaultTypeEmitter",
            "GeneratedSource", "ParameterSensitivityEmitter", "PeerCheckEmitter", "ScheduledFilterEmitter",
            "StuckEmitter",
            "TabulatedMHSSPTEmitter", "c_to_py_state", "class_path", "compile_shared", "config_digest",

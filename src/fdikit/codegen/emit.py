@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import DataError
+from .episodes import EpisodeCode
 from .plausibility import PlausibilityEmitter
 from .stages import Field, lit, rl, stage_emitter
 
@@ -93,8 +94,12 @@ def emit_monitor(mon: Any, *, name: str = "fdk_monitor", precision: str = "doubl
     # warm-up, or by default the filters' start-up transient, ended early once quiet
     n_start = mon._start_warm_samples(dt)
     start = n_warm if mon.warmup else n_start
-    fields = [*CORE_FIELDS, Field("last", "f64", max(P, 1)), Field("active", "i64", max(A, 1)),
-              Field("below", "i64", max(A, 1)), Field("ep_id", "i64", max(A, 1))]
+    col = {n: i for i, n in enumerate(mon._pool_names)}
+    # the episode rule (None: no decision; its fields keep one element each)
+    epi = EpisodeCode(dec, col, n_clear) if dec is not None else None
+    ep_fields = epi.fields() if epi is not None else [
+        Field(n, "i64", 1) for n in ("active", "below", "ep_id", "cur", "prev_on")]
+    fields = [*CORE_FIELDS, Field("last", "f64", max(P, 1)), *ep_fields]
     for e in (*gens, *procs):
         fields += e.fields()
     if pl is not None:
@@ -115,6 +120,7 @@ def emit_monitor(mon: Any, *, name: str = "fdk_monitor", precision: str = "doubl
          f"typedef {PRECISIONS[precision]} {name}_real;",
          f"#define {N}_N_IN {len(inputs)}", f"#define {N}_N_RES {R}", f"#define {N}_N_STAT {S}",
          f"#define {N}_N_OUT {P}", f"#define {N}_N_ALARM {A}", f"#define {N}_MAX_EVENTS {max(2 * A, 1)}",
+         f"#define {N}_EVENT_CLEARED 0", f"#define {N}_EVENT_ONSET 1", f"#define {N}_EVENT_CHANGE 2",
          f"#define {N}_CHECKPOINT_LEN {n_ck}", "",
          f"#define {N}_OK 0", f"#define {N}_CANNOT_JUDGE 1", f"#define {N}_WARMUP 2",
          f"#define {N}_ERR_TIME (-1)   /* time not increasing (on_invalid = raise) or not finite */",
@@ -125,7 +131,8 @@ def emit_monitor(mon: Any, *, name: str = "fdk_monitor", precision: str = "doubl
          "    double size;        /* size estimate (NaN: none) */",
          "    int64_t episode;    /* per record, from 0 */",
          "    int32_t channel;    /* alarm channel index */",
-         "    int32_t kind;       /* 1 onset, 0 cleared */",
+         "    int32_t kind;       /* 1 onset, 0 cleared, 2 change (the episode renamed) */",
+         "    int32_t previous;   /* change: an alarm channel of the name replaced (-1: none) */",
          f"}} {name}_event;", "", "typedef struct {"]
     h += [f"    {_ctype(f.kind).replace('fdk_real', name + '_real')} {f.name}[{f.n}];" for f in fields]
     h += ["    int64_t last_gap;  /* samples missing in the gap that ended at the last step (0: none) */",
@@ -145,7 +152,6 @@ def emit_monitor(mon: Any, *, name: str = "fdk_monitor", precision: str = "doubl
     # ---- source
     inp_expr = {n: f"FDK_R(x[{i}])" for i, n in enumerate(inputs)}
     pool = [f"pool[{i}]" for i in range(P)]
-    col = {n: i for i, n in enumerate(mon._pool_names)}
     body = []
     j = 0
     for e, g in zip(gens, mon.generators):
@@ -157,10 +163,6 @@ def emit_monitor(mon: Any, *, name: str = "fdk_monitor", precision: str = "doubl
         ins = [pool[col[n]] for n in p.input_names]
         outs = [pool[col[n]] for n in p.output_names]
         body.append(e.step_code(ins, outs))
-    if dec is not None:
-        order = sorted(range(A), key=lambda a: (dec.hypothesis(dec.alarm_channels[a]), a))
-        dec_idx = [col[c] for c in dec.alarm_channels]
-        size_idx = [None if (c := dec.size_channel(ch)) is None else col[c] for ch in dec.alarm_channels]
     vlimit = lit(math.inf if mon.max_abs is None else mon.max_abs)
     # the hypotheses' names as C strings (JSON escapes, ASCII)
     hyps = ", ".join(json.dumps(dec.hypothesis(ch)) for ch in dec.alarm_channels) if dec is not None else ""
@@ -179,6 +181,7 @@ def emit_monitor(mon: Any, *, name: str = "fdk_monitor", precision: str = "doubl
          f"const char *{name}_hypothesis(int channel)",
          f"{{ return channel >= 0 && channel < {A} ? FDK_HYP[channel] : 0; }}", "",
          *dict.fromkeys(h for e in (*gens, *procs, *([pl] if pl else [])) for h in _helpers(e)),
+         *(epi.tables() + epi.function(name) if epi is not None else []),
          f"static void fdk_reset_processors({name}_state *s)", "{"]
     c += [e.reset_code() for e in procs if e.reset_code()]
     c += ["    (void)s;", "}", "", f"void {name}_reset({name}_state *s)", "{", "    int i;"]
@@ -189,7 +192,8 @@ def emit_monitor(mon: Any, *, name: str = "fdk_monitor", precision: str = "doubl
           "    s->k[0] = 0; s->has_t_prev[0] = 0; s->t_prev[0] = 0.0; s->held[0] = 0; s->held_t[0] = 0;",
           "    s->missing[0] = 0; s->has_last[0] = 0; s->n_ep[0] = 0; s->last_gap = 0;",
           f"    for (i = 0; i < {max(P, 1)}; ++i) s->last[i] = 0.0;",
-          f"    for (i = 0; i < {max(A, 1)}; ++i) {{ s->active[i] = 0; s->below[i] = 0; s->ep_id[i] = 0; }}",
+          *([epi.reset_code()] if epi is not None else
+            ["    s->active[0] = 0; s->below[0] = 0; s->ep_id[0] = 0; s->cur[0] = 0; s->prev_on[0] = 0;"]),
           f"    s->warm_left[0] = {start}; s->reset_due[0] = {int(start > 0)};",
           f"    s->warm_min[0] = 0; s->quiet[0] = {0 if n_start else -1};",
           "}", "", f"void {name}_init({name}_state *s) {{ {name}_reset(s); }}", ""]
@@ -251,35 +255,15 @@ def emit_monitor(mon: Any, *, name: str = "fdk_monitor", precision: str = "doubl
           f"{{ status = {N}_OK; if (s->reset_due[0]) {{ fdk_reset_processors(s); s->reset_due[0] = 0; }} }}",
           *body]
     if dec is not None:
-        c += ["    {", f"        fdk_real v[{A}];", f"        int on[{A}], done[{A}];"]
-        c += [f"        v[{a}] = pool[{dec_idx[a]}];" for a in range(A)]
-        c += [f"    if (status == {N}_OK) {{"]
-        for a in range(A):
-            c += [f"        on[{a}] = v[{a}] >= {rl(dec.level)};",
-                  f"        s->below[{a}] = (s->active[{a}] && v[{a}] < {rl(dec.low_level)}) ? s->below[{a}] "
-                  "+ 1 : 0;",
-                  f"        done[{a}] = s->active[{a}] && s->below[{a}] >= {n_clear};"]
-        for a in order:  # cleared events first, then onsets, each by (hypothesis, channel)
-            c += [f"        if (done[{a}]) "
-                  f"{{ {name}_event *e = &events[(*n_events)++]; e->k = s->k[0]; e->t = t;",
-                  f"            e->value = (double)v[{a}]; e->size = NAN; e->episode = s->ep_id[{a}];",
-                  f"            e->channel = {a}; e->kind = 0; }}"]
-        for a in order:
-            sz = "NAN" if size_idx[a] is None else f"(double)pool[{size_idx[a]}]"
-            c += [f"        if (on[{a}] && !s->active[{a}]) "
-                  f"{{ {name}_event *e = &events[(*n_events)++]; e->k = s->k[0];",
-                  f"            e->t = t; e->value = (double)v[{a}]; e->size = {sz}; e->episode = "
-                  "s->n_ep[0];",
-                  f"            s->ep_id[{a}] = s->n_ep[0]; s->n_ep[0] += 1; e->channel = {a}; e->kind = 1; "
-                  f"}}"]
-        for a in range(A):
-            c += [f"        if (done[{a}]) {{ s->active[{a}] = 0; s->below[{a}] = 0; }}",
-                  f"        if (on[{a}]) s->active[{a}] = 1;"]
-        c += ["    }", f"    if (status == {N}_WARMUP && s->quiet[0] >= 0) {{",
-              "        int quiet = " + " && ".join(f"(v[{a}] < {rl(dec.low_level)})" for a in range(A)) + ";",
-              "        s->quiet[0] = quiet ? s->quiet[0] + 1 : 0;",
-              f"        if (s->warm_min[0] == 0 && s->quiet[0] >= {n_clear}) s->warm_left[0] = 0;",
-              "    }", "    }"]
+        c += ["    {", f"        fdk_real v[{A}];",
+              f"        for (i = 0; i < {A}; ++i) v[i] = pool[FDK_EP_DEC[i]];",
+              f"        if (status == {N}_OK) fdk_decide(s, t, v, pool, events, n_events);",
+              f"        if (status == {N}_WARMUP && s->quiet[0] >= 0) {{",
+              "            int quiet = 1;",
+              f"            for (i = 0; i < {A}; ++i) if (!(v[i] < {rl(dec.low_level)})) quiet = 0;",
+              "            s->quiet[0] = quiet ? s->quiet[0] + 1 : 0;",
+              f"            if (s->warm_min[0] == 0 && s->quiet[0] >= {n_clear}) s->warm_left[0] = 0;",
+              "        }", "    }"]
     c += [f"    for (i = 0; i < {P}; ++i) {{ out[i] = (double)pool[i]; s->last[i] = out[i]; }}",
           "    s->has_last[0] = 1;", "    s->k[0] += 1; s->t_prev[0] = t; s->has_t_prev[0] = 1;",
           "    return status;", "}"]
@@ -288,7 +272,7 @@ def emit_monitor(mon: Any, *, name: str = "fdk_monitor", precision: str = "doubl
               "statistics": list(mon.stat_names), "fields": [[f.name, f.kind, f.n] for f in fields],
               "checkpoint_len": n_ck, "alarm_channels": list(dec.alarm_channels) if dec else [],
               "hypotheses": [dec.hypothesis(ch) for ch in dec.alarm_channels] if dec else [],
-              "dt": dt, "design_hash": design_hash,
+              "dt": dt, "design_hash": design_hash, **(epi.layout() if epi is not None else {}),
               "stages": [type(e.obj).__name__ for e in (*gens, *procs)],
               "plausibility": None if pl is None else pl.layout()}
     out = GeneratedSource(name, header, source, layout)
@@ -317,7 +301,8 @@ def stage_digest(mon: Any) -> str:
         parts.append([type(st).__name__, data])
     dec = mon.decision
     parts.append(None if dec is None else [dec.alarm_channels, dec.level, dec.names, dec.clear_level,
-                                           dec.clear_after, dec.size_channels])
+                                           dec.clear_after, dec.size_channels,
+                                           *([dec.groups] if dec.groups else [])])
     parts.append([mon.dt, mon.max_gap, mon.warmup, mon.max_abs, mon.on_invalid, mon.validate])
     if mon.plausibility:   # (appended only with rules: the digest of a monitor without is unchanged)
         parts.append({k: v.to_dict() for k, v in sorted(mon.plausibility.items())})

@@ -81,7 +81,7 @@ def generate(config: str | Path, out_dir: str | Path, *, name: str | None = None
     stop_after : str, optional
         The artifact name of the last processor to generate (:func:`~fdikit.codegen.subset_monitor`):
         the later processors are left out and the decision keeps the alarm channels still produced
-        (e.g. ``"peer_check"`` for the RAV4 monitor, whose fault-type stage is not generated).
+        (e.g. ``"peer_check"``: the RAV4 monitor without its fault-type classifier).
         The result's ``monitor`` is that monitor (what the C must equal); its design hash is that
         of the config and the cut (``sha256(config_digest + "\\0stop_after=" + artifact)``).
 

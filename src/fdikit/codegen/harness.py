@@ -55,7 +55,7 @@ def compile_shared(sources: list[str | Path], out: str | Path, *, sanitize: bool
 class _Event(ctypes.Structure):
     _fields_ = [("k", ctypes.c_int64), ("t", ctypes.c_double), ("value", ctypes.c_double),
                 ("size", ctypes.c_double), ("episode", ctypes.c_int64), ("channel", ctypes.c_int32),
-                ("kind", ctypes.c_int32)]
+                ("kind", ctypes.c_int32), ("previous", ctypes.c_int32)]
 
 
 class CMonitor:
@@ -118,9 +118,7 @@ class CMonitor:
         return st, self._out[:self.n_out].copy(), ev
 
     def _event(self, e) -> dict:
-        return {"k": int(e.k), "t": float(e.t), "hypothesis": self.layout["hypotheses"][e.channel],
-                "value": float(e.value), "kind": "onset" if e.kind == 1 else "cleared",
-                "size": None if np.isnan(e.size) else float(e.size), "episode": int(e.episode)}
+        return _event_dict(self.layout, e.k, e.t, e.value, e.size, e.episode, e.channel, e.kind, e.previous)
 
     def run(self, t: np.ndarray, x: np.ndarray, *, reset: bool = True) -> dict[str, Any]:
         """Step through a record: ``t`` (T,), ``x`` (T, n_in). Returns ``out`` (T, n_out),
@@ -153,6 +151,18 @@ class CMonitor:
         self._fn["restore"](self._state, b.ctypes.data)
 
 
+def _event_dict(layout: dict, k, t, value, size, episode, channel, kind, previous) -> dict:
+    """A generated event as a dict: ``kind`` "onset", "cleared" or "change" (with ``previous``, the
+    name it replaces; None otherwise)."""
+    hyp = layout["hypotheses"]
+    kind = {0: "cleared", 1: "onset", 2: "change"}.get(int(kind))
+    if kind is None:
+        raise DataError(f"the generated monitor wrote an event of unknown kind at sample {int(k)}")
+    return {"k": int(k), "t": float(t), "hypothesis": hyp[int(channel)], "value": float(value), "kind": kind,
+            "size": None if np.isnan(size) else float(size), "episode": int(episode),
+            "previous": hyp[int(previous)] if int(previous) >= 0 else None}
+
+
 def signals_input(layout: dict, signals: Any) -> tuple[np.ndarray, np.ndarray]:
     """The time and input matrix (T, n_in) of one-run :class:`~fdikit.Signals` in the layout's order."""
     if signals.runs != 1:
@@ -176,15 +186,18 @@ def c_to_py_state(layout: dict, buf: np.ndarray, mon: Any, emitters) -> dict[str
                                    "quiet", "has_t_prev", "has_last", "n_ep")}
     R, S = len(layout["residuals"]), len(layout["statistics"])
     A = len(layout["alarm_channels"])
+    U, H = int(layout.get("n_units", A)), int(layout.get("n_names", A))
     gens, procs = emitters
     last = a["last"][:R + S]
     return {"k": i["k"], "t_prev": float(a["t_prev"][0]) if i["has_t_prev"] else None, "held": i["held"],
             "held_t": i["held_t"], "missing": i["missing"], "dt": layout["dt"], "warm_left": i["warm_left"],
             "reset_due": bool(i["reset_due"]), "warm_min": i["warm_min"], "quiet": i["quiet"],
-            "episodes": {"active": a["active"][:A].astype(bool).reshape(1, A),
-                         "below": a["below"][:A].astype(np.int64).reshape(1, A),
-                         "id": a["ep_id"][:A].astype(np.int64).reshape(1, A),
-                         "count": np.array([i["n_ep"]], np.int64)},
+            "episodes": {"active": a["active"][:U].astype(bool).reshape(1, U),
+                         "below": a["below"][:U].astype(np.int64).reshape(1, U),
+                         "id": a["ep_id"][:U].astype(np.int64).reshape(1, U),
+                         "count": np.array([i["n_ep"]], np.int64),
+                         "current": a["cur"][:U].astype(np.int64).reshape(1, U),
+                         "prev_on": a["prev_on"][:H].astype(bool).reshape(1, H)},
             "plausibility": None if not layout.get("plausibility") else
             plausibility_to_py(layout["plausibility"], a), "runs": 1,
             "generators": [e.to_py(a) for e in gens], "processors": [e.to_py(a) for e in procs],
@@ -207,7 +220,10 @@ def py_to_c_state(layout: dict, state: dict[str, Any], emitters) -> np.ndarray:
         "has_last": last is not None, "n_ep": np.asarray(ep["count"]).reshape(-1)[0],
         "t_prev": 0.0 if state["t_prev"] is None else state["t_prev"],
         "last": None if last is None else np.concatenate([np.ravel(last[0]), np.ravel(last[1])]),
-        "active": np.ravel(ep["active"]), "below": np.ravel(ep["below"]), "ep_id": np.ravel(ep["id"])}
+        "active": np.ravel(ep["active"]), "below": np.ravel(ep["below"]), "ep_id": np.ravel(ep["id"]),
+        # (a checkpoint from before issue 27 has no names' state: zeros, as Python restores it)
+        "cur": np.ravel(ep["current"]) if "current" in ep else None,
+        "prev_on": np.ravel(ep["prev_on"]) if "prev_on" in ep else None}
     if layout.get("plausibility"):
         if state.get("plausibility") is None:
             raise DataError("the checkpoint has no plausibility state; the generated monitor has rules")
@@ -229,7 +245,7 @@ def py_to_c_state(layout: dict, state: dict[str, Any], emitters) -> np.ndarray:
 def driver_source(layout: dict) -> str:
     """A C ``main`` for the generated monitor: binary doubles on stdin, ``t`` then the inputs per
     sample; per sample on stdout ``status``, the outputs, the number of events and each event's
-    ``k, t, value, size, episode, channel, kind``, all as doubles. Used to run the code as a
+    ``k, t, value, size, episode, channel, kind, previous``, all as doubles. Used to run the code as a
     program (e.g. under the sanitizers) and in the benchmark."""
     nm = layout["name"]
     n_in = len(layout["inputs"])
@@ -242,7 +258,7 @@ int main(void)
 {{
     {nm}_state s;
     {nm}_event ev[{nm.upper()}_MAX_EVENTS];
-    double in[{n_in + 1}], out[{max(n_out, 1)}], rec[7];
+    double in[{n_in + 1}], out[{max(n_out, 1)}], rec[8];
     int n, i, st;
     {nm}_init(&s);
     while (fread(in, sizeof(double), {n_in + 1}, stdin) == {n_in + 1}) {{
@@ -257,7 +273,8 @@ int main(void)
         for (i = 0; i < n; ++i) {{
             rec[0] = (double)ev[i].k; rec[1] = ev[i].t; rec[2] = ev[i].value; rec[3] = ev[i].size;
             rec[4] = (double)ev[i].episode; rec[5] = (double)ev[i].channel; rec[6] = (double)ev[i].kind;
-            fwrite(rec, sizeof(double), 7, stdout);
+            rec[7] = (double)ev[i].previous;
+            fwrite(rec, sizeof(double), 8, stdout);
         }}
     }}
     return 0;
@@ -281,10 +298,7 @@ def run_driver(exe: str | Path, layout: dict, t: np.ndarray, x: np.ndarray) -> d
         n = int(v[p + 1 + n_out])
         p += 2 + n_out
         for _ in range(n):
-            k, tt, val, size, ep, ch, kind = v[p:p + 7]
-            events.append({"k": int(k), "t": float(tt), "hypothesis": layout["hypotheses"][int(ch)],
-                           "value": float(val), "kind": "onset" if kind == 1 else "cleared",
-                           "size": None if np.isnan(size) else float(size), "episode": int(ep)})
-            p += 7
+            events.append(_event_dict(layout, *v[p:p + 8]))
+            p += 8
     return {"out": np.array(out).reshape(-1, n_out), "status": np.array(status), "events": events,
             "stderr": res.stderr.decode(errors="replace")}

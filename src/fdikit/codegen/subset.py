@@ -32,8 +32,8 @@ def subset_monitor(mon: Any, n_processors: int, *, alarms: Sequence[str] | None 
     Returns
     -------
     Monitor
-        Its decision has ``mon``'s level, clear level, clear time and size channels (those still
-        produced); None when no alarm channel is left.
+        Its decision has ``mon``'s level, clear level, clear time, size channels and groups (those
+        still produced or announced); None when no alarm channel is left.
 
     Raises
     ------
@@ -79,6 +79,12 @@ def subset_monitor(mon: Any, n_processors: int, *, alarms: Sequence[str] | None 
                      if v in pool and (k in alarms or k in nm.values())}
             if sizes:
                 kw["size_channels"] = sizes
+            # the groups, on the names still announced (a group keeps one episode for its names)
+            kept_names = {nm.get(c, c) for c in alarms}
+            groups = {g: [h for h in m if h in kept_names] for g, m in (dec.groups or {}).items()}
+            groups = {g: m for g, m in groups.items() if m}
+            if groups:
+                kw["groups"] = groups
         decision = Decision(alarms, dec.level if dec is not None else 0.5, nm, **kw)
     return Monitor(list(mon.generators), kept, decision, validate=mon.validate, on_invalid=mon.on_invalid,
                    plausibility=dict(mon.plausibility) or None, dt=mon.dt, max_gap=mon.max_gap,

@@ -1,7 +1,8 @@
 """The RAV4 lateral monitor as C (issue 29) on the real minute: the chain up to the peer checks
-(``generate(..., stop_after="peer_check")``; the fault-type stage is refused by name) gives bitwise
-the Python monitor's outputs, statuses and events, with injected faults, NaN samples and a gap;
-checkpoints cross between C and Python; the float32 variant's error is measured."""
+(``generate(..., stop_after="peer_check")``) and the full chain with the fault-type classifier and
+its hold (the decision's groups: type revisions are change events) give bitwise the Python
+monitor's outputs, statuses and events, with injected faults, NaN samples and a gap; checkpoints
+cross between C and Python; the float32 variant's error is measured."""
 
 from __future__ import annotations
 
@@ -61,9 +62,10 @@ def _log(mon, spec: str, bad: bool):
     from fdikit.systems.car.monitor_rav4 import inject, load_rav4_raw, parse_inject
 
     sig = inject(load_rav4_raw(DATA), parse_inject(spec), mon.generators[0].pre)
-    t, x = sig.t.copy(), sig.values[0].copy()
+    names = list(mon.input_names)           # (the order the C takes and the tests name the columns)
+    t, x = sig.t.copy(), sig.values[0][:, sig.index(names)].copy()
     if bad:  # a NaN yaw rate, a sample of nonsense, then 0.3 s lost (the stages resume)
-        x[1500, 3] = np.nan
+        x[1500, names.index("yaw_rate_raw")] = np.nan
         x[1501, 0] = 1e300
         t[2200:] += 0.3
     return t, x
@@ -80,12 +82,67 @@ def _py(mon, t, x, names):
     return np.array(out), np.array(status), ev
 
 
-def test_stages_refused_by_name_without_stop_after(rav4_c, tmp_path):
+def test_stop_after_refuses_an_unknown_processor(rav4_c, tmp_path):
     cfg, _res, _libs = rav4_c
-    with pytest.raises(DataError, match="FaultTypeClassifier"):
-        generate(cfg, tmp_path / "all")
     with pytest.raises(DataError, match="stop_after"):
         generate(cfg, tmp_path / "x", stop_after="nonsense")
+
+
+@pytest.fixture(scope="module")
+def rav4_full(rav4_c, tmp_path_factory):
+    """The whole chain of the example config (no stop_after), double precision."""
+    cfg, _res, _libs = rav4_c
+    tmp = tmp_path_factory.mktemp("rav4_full")
+    res = generate(cfg, tmp, name="fdk_rav4_full", precisions=("double",))
+    return res, CMonitor(compile_shared([tmp / "fdk_rav4_full.c"], tmp / "libfull.so"),
+                         tmp / "fdk_rav4_full.layout.json")
+
+
+@pytest.mark.parametrize("spec", FAULTS)
+def test_rav4_full_chain_c_equals_python(rav4_full, spec):
+    """With the fault-type classifier: the same outputs bitwise and the same events, changes with
+    the name they replace included."""
+    res, c64 = rav4_full
+    mon = res["monitor"]
+    assert res["layout"]["stages"][-2:] == ["FaultTypeClassifier", "Hold"]
+    assert res["seconds"] < 2.0
+    t, x = _log(mon, spec, bad=True)
+    names = c64.layout["inputs"]
+    mon.reset(1)
+    out, ev = [], []
+    for k in range(len(t)):
+        r, s, e = mon.step(float(t[k]), x[k][None], names)
+        out.append(np.concatenate([r[0], s[0]]))
+        ev += [(e_.k, e_.kind, e_.hypothesis, e_.episode, e_.value, e_.size, e_.previous) for e_ in e]
+    c = c64.run(t, x)
+    assert np.array_equal(c["out"], np.array(out))
+    assert [(e["k"], e["kind"], e["hypothesis"], e["episode"], e["value"], e["size"], e["previous"])
+            for e in c["events"]] == ev
+    kinds = {e[1] for e in ev}
+    # (on the gain log a type is revised within an episode: a change event)
+    assert kinds == ({"onset", "change", "cleared"} if spec.startswith("gain") else {"onset", "cleared"})
+
+
+def test_rav4_full_chain_checkpoint_crosses(rav4_full):
+    res, c64 = rav4_full
+    mon = res["monitor"]
+    em = emit_monitor(mon, name="fdk_rav4_full").emitters
+    t, x = _log(mon, FAULTS[1], bad=False)
+    names = c64.layout["inputs"]
+    full = c64.run(t, x)
+    cut = 2600                                       # the wheel's gain being typed
+    _py(mon, t[:cut], x[:cut], names)
+    fresh = CMonitor(c64.lib._name, c64.layout)
+    fresh.restore(py_to_c_state(c64.layout, mon.state(), em))
+    rest = fresh.run(t[cut:], x[cut:], reset=False)
+    assert np.array_equal(rest["out"], full["out"][cut:])
+    assert rest["events"] == [e for e in full["events"] if e["k"] >= cut]
+    c64.run(t[:cut], x[:cut])
+    mon.reset(1)
+    mon.restore(c_to_py_state(c64.layout, c64.checkpoint(), mon, em))
+    tail = np.array([np.concatenate([r[0], s[0]]) for r, s, _ in
+                     (mon.step(float(t[k]), x[k][None], names) for k in range(cut, len(t)))])
+    assert np.array_equal(tail, full["out"][cut:])
 
 
 @pytest.mark.parametrize("spec", FAULTS)

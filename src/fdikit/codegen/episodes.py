@@ -1,0 +1,197 @@
+"""The C of the monitor's episode rule (:class:`~fdikit.monitor.Decision`): one episode per
+announced name, groups of names sharing one episode with their revisions as change events, the
+event order of the Python streaming path, and the rule's state fields with their checkpoint
+mapping to :meth:`Monitor.state` ``"episodes"``."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from .stages import Field, rl
+
+__all__ = ["EVENT_KINDS", "EpisodeCode"]
+
+#: The event kind codes of the generated ``event.kind``.
+EVENT_KINDS: dict[int, str] = {0: "cleared", 1: "onset", 2: "change"}
+
+
+def _arr(name: str, vals: list[int]) -> str:
+    return f"static const int {name}[{max(len(vals), 1)}] = {{{', '.join(map(str, vals)) or '0'}}};"
+
+
+class EpisodeCode:
+    """The generated episode rule of one decision (the streaming path's ``_decide``, exactly).
+
+    Parameters
+    ----------
+    dec : Decision
+    col : dict
+        Pool column of every channel name (the monitor's ``_pool_names``).
+    n_clear : int
+        ``clear_after`` in samples.
+
+    Notes
+    -----
+    The units (a group, or a name outside every group), the names of each unit and the channels
+    of each name are tables of the generated code; the state per unit is ``active``, ``below``
+    (judged samples below the clear level), ``ep_id`` and ``cur`` (the name the episode has now,
+    an index within its unit), and per name ``prev_on`` (on at the last judged sample; kept only
+    when a unit has several channels, as in Python).
+    """
+
+    def __init__(self, dec: Any, col: dict[str, int], n_clear: int):
+        self.dec = dec
+        self.n_clear = int(n_clear)
+        self.A = len(dec.alarm_channels)
+        self.U = len(dec._unit_chans)
+        self.H = sum(len(h) for h in dec._unit_hyps)
+        self.simple = bool(dec._simple)
+        self.dec_idx = [col[c] for c in dec.alarm_channels]
+        self.size_idx = [-1 if (c := dec.size_channel(ch)) is None else col[c] for ch in dec.alarm_channels]
+        self.h0 = [0]
+        for hs in dec._unit_hyps:
+            self.h0.append(self.h0[-1] + len(hs))
+        self.unit_of = [0] * self.A
+        self.hyp_of = [0] * self.A
+        for u, hc in enumerate(dec._hyp_chans):
+            for hi, chans in enumerate(hc):
+                for a in chans:
+                    self.unit_of[a], self.hyp_of[a] = u, self.h0[u] + hi
+        self.own = [int(h == dec._unit_names[u]) for u, hs in enumerate(dec._unit_hyps) for h in hs]
+        hyp = [dec.hypothesis(c) for c in dec.alarm_channels]
+        self.order = sorted(range(self.A), key=lambda a: (hyp[a], a))
+
+    # ------------------------------------------------------------------ state
+    def fields(self) -> list[Field]:
+        """The rule's state arrays (after the monitor's core fields)."""
+        U, H = max(self.U, 1), max(self.H, 1)
+        return [Field("active", "i64", U), Field("below", "i64", U), Field("ep_id", "i64", U),
+                Field("cur", "i64", U), Field("prev_on", "i64", H)]
+
+    def reset_code(self) -> str:
+        return (f"    for (i = 0; i < {max(self.U, 1)}; ++i) "
+                "{ s->active[i] = 0; s->below[i] = 0; s->ep_id[i] = 0; s->cur[i] = 0; }\n"
+                f"    for (i = 0; i < {max(self.H, 1)}; ++i) s->prev_on[i] = 0;")
+
+    def to_py(self, arrays: dict[str, np.ndarray], n_ep: int) -> dict[str, np.ndarray]:
+        """The C fields as :meth:`Monitor.state` ``"episodes"`` (one run)."""
+        U, H = self.U, self.H
+        return {"active": arrays["active"][:U].astype(bool).reshape(1, U),
+                "below": arrays["below"][:U].astype(np.int64).reshape(1, U),
+                "id": arrays["ep_id"][:U].astype(np.int64).reshape(1, U),
+                "count": np.array([n_ep], np.int64),
+                "current": arrays["cur"][:U].astype(np.int64).reshape(1, U),
+                "prev_on": arrays["prev_on"][:H].astype(bool).reshape(1, H)}
+
+    def from_py(self, ep: dict[str, Any]) -> dict[str, np.ndarray]:
+        """:meth:`Monitor.state` ``"episodes"`` as the C fields (a checkpoint from before issue 27,
+        without ``current``, restores as Python does: the names' state at zero)."""
+        out = {"active": np.ravel(ep["active"]), "below": np.ravel(ep["below"]), "ep_id": np.ravel(ep["id"])}
+        if "current" in ep:
+            out["cur"] = np.ravel(ep["current"])
+            out["prev_on"] = np.ravel(ep["prev_on"])
+        return out
+
+    # ------------------------------------------------------------------ code
+    def tables(self) -> list[str]:
+        """The rule's constant tables (C source lines)."""
+        d = self.dec
+        u_off, u_ch = [0], []
+        for chans in d._unit_chans:
+            u_ch += chans
+            u_off.append(len(u_ch))
+        h_off, h_ch = [0], []
+        for hc in d._hyp_chans:
+            for chans in hc:
+                h_ch += chans
+                h_off.append(len(h_ch))
+        return ["/* the episode rule: per alarm channel its unit (a group or a name) and name; per unit its",
+                " * channels and first name; per name its channels; the event order (by name, channel) */",
+                _arr("FDK_EP_UNIT", self.unit_of), _arr("FDK_EP_HYP", self.hyp_of),
+                _arr("FDK_EP_UOFF", u_off), _arr("FDK_EP_UCH", u_ch), _arr("FDK_EP_H0", self.h0),
+                _arr("FDK_EP_HOFF", h_off), _arr("FDK_EP_HCH", h_ch),
+                *([] if self.simple else [_arr("FDK_EP_OWN", self.own)]),
+                _arr("FDK_EP_ORDER", self.order), _arr("FDK_EP_SIZE", self.size_idx),
+                _arr("FDK_EP_DEC", self.dec_idx), ""]
+
+    def function(self, name: str) -> list[str]:
+        """``fdk_decide``: the rule at one judged sample (``v`` the alarm channels' values)."""
+        A, U, H = self.A, self.U, self.H
+        lvl, low = rl(self.dec.level), rl(self.dec.low_level)
+        c = ["static void fdk_event(" + name + "_event *e, int64_t k, double t, double value, double size,",
+             "                      int64_t episode, int channel, int kind, int previous)", "{",
+             "    e->k = k; e->t = t; e->value = value; e->size = size; e->episode = episode;",
+             "    e->channel = (int32_t)channel; e->kind = (int32_t)kind;",
+             "    e->previous = (int32_t)previous;", "}",
+             "",
+             f"static void fdk_decide({name}_state *s, double t, const fdk_real *v, const fdk_real *pool,",
+             f"                       {name}_event *events, int *n_events)", "{",
+             f"    int on[{A}], on_u[{U}], first[{U}], done[{U}], nw[{U}];",
+             "    int a, u, i, j, any = 0;"]
+        if not self.simple:
+            c += [f"    int rise[{H}], chg[{A}], h;"]
+        c += [f"    for (a = 0; a < {A}; ++a) on[a] = v[a] >= {lvl};"]
+        if not self.simple:   # per name: on, and turned on since the last judged sample
+            c += [f"    for (h = 0; h < {H}; ++h) {{",
+                  "        int o = 0;",
+                  "        for (j = FDK_EP_HOFF[h]; j < FDK_EP_HOFF[h + 1]; ++j)",
+                  "            if (on[FDK_EP_HCH[j]]) o = 1;",
+                  "        rise[h] = o && !s->prev_on[h];",
+                  "        s->prev_on[h] = o;", "    }"]
+        c += [f"    for (u = 0; u < {U}; ++u) {{",
+              "        on_u[u] = 0; first[u] = -1;",
+              "        for (j = FDK_EP_UOFF[u]; j < FDK_EP_UOFF[u + 1]; ++j)",
+              "            if (on[FDK_EP_UCH[j]] && !on_u[u]) { on_u[u] = 1; first[u] = FDK_EP_UCH[j]; }",
+              "        if (on_u[u] || s->active[u]) any = 1;", "    }",
+              "    if (!any) return;",
+              f"    for (u = 0; u < {U}; ++u) {{",
+              "        int lo = 1;",
+              "        for (j = FDK_EP_UOFF[u]; j < FDK_EP_UOFF[u + 1]; ++j)",
+              f"            if (!(v[FDK_EP_UCH[j]] < {low})) lo = 0;",
+              "        s->below[u] = (s->active[u] && lo) ? s->below[u] + 1 : 0;",
+              f"        done[u] = s->active[u] && s->below[u] >= {self.n_clear};",
+              "        nw[u] = on_u[u] && !s->active[u];", "    }"]
+        if not self.simple:   # a name of an open episode's group turned on: the episode is renamed
+            c += [f"    for (a = 0; a < {A}; ++a) chg[a] = -1;",
+                  f"    for (u = 0; u < {U}; ++u) {{",
+                  "        if (!s->active[u] || done[u]) continue;",
+                  "        for (h = FDK_EP_H0[u]; h < FDK_EP_H0[u + 1]; ++h) {",
+                  "            if (!rise[h] || h - FDK_EP_H0[u] == s->cur[u] || FDK_EP_OWN[h]) continue;",
+                  "            j = FDK_EP_HOFF[h];   /* its first channel on */",
+                  "            while (j < FDK_EP_HOFF[h + 1] - 1 && !on[FDK_EP_HCH[j]]) ++j;",
+                  "            chg[FDK_EP_HCH[j]] = FDK_EP_HCH[FDK_EP_HOFF[FDK_EP_H0[u] + s->cur[u]]];",
+                  "            s->cur[u] = h - FDK_EP_H0[u];", "        }", "    }"]
+        size = "(FDK_EP_SIZE[a] >= 0 ? (double)pool[FDK_EP_SIZE[a]] : NAN)"
+        c += ["    /* cleared events, onsets, then changes; each by (name, channel) */",
+              f"    for (i = 0; i < {A}; ++i) {{",
+              "        a = FDK_EP_ORDER[i]; u = FDK_EP_UNIT[a];",
+              "        if (done[u] && a == FDK_EP_HCH[FDK_EP_HOFF[FDK_EP_H0[u] + s->cur[u]]])",
+              "            fdk_event(&events[(*n_events)++], s->k[0], t, (double)v[a], NAN, s->ep_id[u],",
+              "                      a, 0, -1);",
+              "    }",
+              f"    for (u = 0; u < {U}; ++u) if (done[u]) {{ s->active[u] = 0; s->below[u] = 0; }}",
+              f"    for (i = 0; i < {A}; ++i) {{",
+              "        a = FDK_EP_ORDER[i]; u = FDK_EP_UNIT[a];",
+              "        if (nw[u] && first[u] == a) {",
+              "            s->ep_id[u] = s->n_ep[0]; s->n_ep[0] += 1;",
+              "            s->cur[u] = FDK_EP_HYP[a] - FDK_EP_H0[u];",
+              "            fdk_event(&events[(*n_events)++], s->k[0], t, (double)v[a],",
+              f"                      {size}, s->ep_id[u], a, 1, -1);",
+              "        }", "    }",
+              f"    for (u = 0; u < {U}; ++u) if (nw[u]) s->active[u] = 1;"]
+        if not self.simple:
+            c += [f"    for (i = 0; i < {A}; ++i) {{",
+                  "        a = FDK_EP_ORDER[i];",
+                  "        if (chg[a] >= 0) fdk_event(&events[(*n_events)++], s->k[0], t, (double)v[a],",
+                  f"                                   {size}, s->ep_id[FDK_EP_UNIT[a]], a, 2, chg[a]);",
+                  "    }"]
+        c += ["}", ""]
+        return c
+
+    def layout(self) -> dict[str, Any]:
+        """What the harness needs to read the events (plain data)."""
+        return {"event_kinds": {str(k): v for k, v in EVENT_KINDS.items()},
+                "units": list(self.dec._unit_names), "n_units": self.U, "n_names": self.H}
+

@@ -1,0 +1,194 @@
+"""fdikit.codegen's episode rule (issue 29 after issues 27/28): the generated Decision gives the
+Python streaming path's events exactly -- one episode per announced name (two channels of one
+name: one onset, one cleared), groups whose type revisions are change events with the name they
+replace, the component's own name never replacing a specific one -- and its state (the current
+name, each name's previous on/off) crosses between C and Python checkpoints."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fdikit import Signals
+from fdikit.codegen import (
+    CMonitor,
+    c_to_py_state,
+    compile_shared,
+    driver_source,
+    find_compiler,
+    py_to_c_state,
+    run_driver,
+    subset_monitor,
+)
+from fdikit.detect import Hold
+from fdikit.monitor import Decision, Monitor
+from fdikit.residuals import FaultDetectionFilter, FilterDesign
+
+from .test_codegen import DT, _build
+
+pytestmark = pytest.mark.skipif(find_compiler() is None, reason="no C compiler (cc, gcc or clang) on PATH")
+
+CH = ["a", "b", "c", "d", "e", "f"]
+NAMES = {"a:alarm": "x:bias", "b:alarm": "x:gain", "c:alarm": "x", "d:alarm": "y", "e:alarm": "y",
+         "f:alarm": "z:drift"}
+
+
+def _monitor(groups=True):
+    """Six inputs passed through as residuals, a signed hold each (Z = 1), a decision with a group
+    (``x``: its own name and two types), a name of two channels (``y``) and a size channel."""
+    n = len(CH)
+    d = FilterDesign(np.zeros((0, 0)), np.zeros((0, 0)), np.zeros((0, n)), np.zeros((n, 0)), np.zeros((n, 0)),
+                     np.eye(n), DT, [], CH, [f"r{c}" for c in CH])
+    hold = Hold([f"r{c}" for c in CH], 0.5, Z=1, absolute=False)
+    alarms = [f"{c}:alarm" for c in CH]
+    names = {f"r{c}:alarm": NAMES[f"{c}:alarm"] for c in CH}
+    dec = Decision([f"r{a}" for a in alarms], 0.5, names, clear_after=0.1,
+                   size_channels={"x:gain": "rb"},
+                   groups={"x": ["x", "x:bias", "x:gain"]} if groups else None)
+    return Monitor([FaultDetectionFilter(d)], [hold], dec, on_invalid="hold", dt=DT)
+
+
+def _scripted(T=800):
+    """Alarms on at chosen samples (values 1.0 + channel / 10: the size channel of x:gain reads 1.1)."""
+    x = np.zeros((T, len(CH)))
+    on = {"d": [(100, 150)], "e": [(140, 200)],                       # one name, overlapping: one episode
+          "c": [(300, 320), (360, 365)], "a": [(310, 355), (375, 420)], "b": [(350, 370)],
+          "f": [(600, 610)]}
+    for c, spans in on.items():
+        for a, b in spans:
+            x[a:b, CH.index(c)] = 1.0 + CH.index(c) / 10
+    return np.arange(T) * DT, x
+
+
+def _random(seed, T=3000):
+    """Random bursts on every channel, a NaN sample and a gap."""
+    rng = np.random.default_rng(seed)
+    x = np.zeros((T, len(CH)))
+    for j in range(len(CH)):
+        for a in rng.integers(0, T - 50, size=25):
+            x[a:a + rng.integers(1, 40), j] = rng.uniform(0.6, 2.0)
+    x += rng.normal(scale=0.05, size=x.shape)
+    x[700, 2] = np.nan
+    t = np.arange(T) * DT
+    t[2000:] += 0.05
+    return t, x
+
+
+def _py(mon, t, x, k0=0):
+    if k0 == 0:
+        mon.reset(1)
+    out, ev = [], []
+    for k in range(k0, len(t)):
+        r, s, e = mon.step(float(t[k]), x[k][None], CH)
+        out.append(np.concatenate([r[0], s[0]]))
+        ev += [(e_.k, e_.kind, e_.hypothesis, e_.episode, e_.value, e_.size, e_.previous) for e_ in e]
+    return np.array(out), ev
+
+
+def _c(res):
+    return [(e["k"], e["kind"], e["hypothesis"], e["episode"], e["value"], e["size"], e["previous"])
+            for e in res["events"]]
+
+
+@pytest.fixture(scope="module")
+def built(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("episodes")
+    mon = _monitor()
+    return (mon, *_build(mon, tmp, "fdk_ep"))
+
+
+def test_one_name_one_episode_and_group_changes(built):
+    mon, _gen, c64, c32, _em = built
+    t, x = _scripted()
+    _out, py_ev = _py(mon, t, x)
+    got = [(k, kind, h, ep, prev) for k, kind, h, ep, _v, _s, prev in py_ev]
+    # y (channels d and e overlapping): one onset and one cleared
+    assert got == [(100, "onset", "y", 0, None), (209, "cleared", "y", 0, None),
+                   (300, "onset", "x", 1, None),
+                   (310, "change", "x:bias", 1, "x"),        # a type replaces the component's own name
+                   (350, "change", "x:gain", 1, "x:bias"),   # (x turning on again at 360: no change)
+                   (375, "change", "x:bias", 1, "x:gain"),
+                   (429, "cleared", "x:bias", 1, None),
+                   (600, "onset", "z:drift", 2, None), (619, "cleared", "z:drift", 2, None)]
+    assert py_ev[4][5] == 1.1 and py_ev[3][5] is None   # the size channel of x:gain (rb), none for x:bias
+    res = c64.run(t, x)
+    assert _c(res) == py_ev
+    assert [e[:4] + e[6:] for e in _c(c32.run(t, x))] == [e[:4] + e[6:] for e in py_ev]
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_random_bursts_c_equals_python(built, seed):
+    mon, _gen, c64, _c32, _em = built
+    t, x = _random(seed)
+    py_out, py_ev = _py(mon, t, x)
+    res = c64.run(t, x)
+    assert np.array_equal(res["out"], py_out)
+    assert _c(res) == py_ev
+    kinds = {e[1] for e in py_ev}
+    assert kinds == {"onset", "cleared", "change"}
+    # the batch path gives the same events (its own implementation of the rule)
+    b = mon.run(Signals(t, x[None], CH, check=False))
+    batch = sorted((e.k, e.kind, e.hypothesis, e.episode, e.previous)
+                   for e in (*b.events, *b.cleared, *b.changes))
+    assert batch == sorted(e[:4] + e[6:] for e in py_ev)
+
+
+def test_simple_decision_without_groups_unchanged(tmp_path):
+    """Without groups (and one channel per name) the rule is the per-channel one: no change events."""
+    mon = Monitor(_monitor().generators, _monitor().processors,
+                  Decision([f"r{c}:alarm" for c in CH], 0.5, {f"r{c}:alarm": c for c in CH}, clear_after=0.1),
+                  on_invalid="hold", dt=DT)
+    assert mon.decision._simple
+    _gen, c64, _c32, _em = _build(mon, tmp_path, "fdk_simple", f32=False)
+    t, x = _random(3)
+    _out, py_ev = _py(mon, t, x)
+    assert _c(c64.run(t, x)) == py_ev and {e[1] for e in py_ev} == {"onset", "cleared"}
+
+
+@pytest.mark.parametrize("cut", [315, 355, 1234])
+def test_checkpoint_with_group_state_crosses(built, cut):
+    """Cut inside an open episode renamed by a change: the current name and the names' on/off
+    carry over C -> Python and Python -> C, and the continuation's events are the same."""
+    mon, _gen, c64, _c32, em = built
+    t, x = _scripted(1500) if cut < 1000 else _random(4)
+    full_out, full_ev = _py(mon, t, x)
+    c64.run(t[:cut], x[:cut])
+    st = c_to_py_state(c64.layout, c64.checkpoint(), mon, em)
+    _py(mon, t[:cut], x[:cut])
+    py_state = mon.state()
+    for key in ("active", "below", "id", "count", "current", "prev_on"):
+        assert np.array_equal(st["episodes"][key], py_state["episodes"][key]), key
+    if cut < 1000:      # the open x episode (unit 0) names x:bias (315) or x:gain (355), not its onset's x
+        assert st["episodes"]["active"][0, 0] and st["episodes"]["current"][0, 0] == {315: 0, 355: 1}[cut]
+    mon.reset(1)
+    mon.restore(st)
+    out, ev = _py(mon, t, x, k0=cut)
+    assert np.array_equal(out, full_out[cut:])
+    assert ev == [e for e in full_ev if e[0] >= cut]
+    _py(mon, t[:cut], x[:cut])
+    fresh = CMonitor(c64.lib._name, c64.layout)
+    fresh.restore(py_to_c_state(c64.layout, mon.state(), em))
+    res = fresh.run(t[cut:], x[cut:], reset=False)
+    assert _c(res) == [e for e in full_ev if e[0] >= cut]
+    assert np.array_equal(res["out"], full_out[cut:])
+
+
+def test_driver_program_reads_change_events(built, tmp_path):
+    mon, gen, _c64, _c32, _em = built
+    layout = gen["layout"]
+    cdir = Path(gen["files"][0]).parent
+    (tmp_path / "main.c").write_text(driver_source(layout))
+    exe = compile_shared([tmp_path / "main.c", cdir / f"{layout['name']}.c"], tmp_path / "drv", shared=False,
+                         extra=(f"-I{cdir}",))
+    t, x = _scripted()
+    _out, py_ev = _py(mon, t, x)
+    assert _c(run_driver(exe, layout, t, x)) == py_ev
+
+
+def test_subset_keeps_the_groups():
+    mon = _monitor()
+    sub = subset_monitor(mon, 1, alarms=["ra:alarm", "rc:alarm", "rd:alarm"])
+    assert sub.decision.groups == {"x": ["x", "x:bias"]}
+    assert subset_monitor(mon, 1, alarms=["rd:alarm"]).decision.groups is None
