@@ -78,3 +78,16 @@ def test_confirm_after_is_checked():
         _dec(-1.0)
     with pytest.raises(DataError, match="confirm_after"):
         _dec("soon")
+
+
+def test_an_unconfirmed_name_can_be_dropped():
+    a = _record()
+    t = np.arange(a.shape[1]) * DT
+    s = Signals(t, a, [f"r:{n}" for n in NAMES])
+    dec = Decision([f"r:{n}" for n in NAMES], names=HYP, groups=GROUPS, clear_after=0.5, confirm_after=0.5,
+                   unconfirmed="drop")
+    assert _onsets(dec.events(t, s)) == [(0, 120, "y:bias"), (1, 130, "x:bias"), (3, 300, "y:gain")]
+    batch, stream, _ = _both(dec, a, NAMES)
+    assert batch == stream
+    with pytest.raises(DataError, match="unconfirmed"):
+        Decision(["r:P:x"], confirm_after=1.0, unconfirmed="later")

@@ -118,7 +118,7 @@ _SCHEMA: dict[str, dict[str, type | tuple[type, ...]]] = {
                "nominal_log": (str, list), "accept_miscalibrated": bool},
     "decision": {"channels": list, "level": (int, float), "names": dict, "clear_level": (int, float),
                  "clear_after": (int, float), "sizes": dict, "processor": str, "groups": dict,
-                 "confirm_after": (int, float)},
+                 "confirm_after": (int, float), "unconfirmed": str},
 }
 #: Plausibility keys of a channel (monitor units), passed to :class:`fdikit.monitor.Plausibility`.
 PLAUSIBILITY_KEYS = ("min", "max", "max_rate", "spike")
@@ -633,6 +633,8 @@ def build_monitor(cfg: MonitorConfig) -> Monitor:
             dkw["groups"] = {str(g): list(m) for g, m in dec["groups"].items()}
         if "confirm_after" in dec:
             dkw["confirm_after"] = float(dec["confirm_after"])
+        if "unconfirmed" in dec:
+            dkw["unconfirmed"] = str(dec["unconfirmed"])
         _supported(Decision, list(dkw), "Decision")
         try:
             decision = Decision(list(dec["channels"]), float(dec.get("level", 0.5)),

@@ -51,7 +51,9 @@ class Decision:
     (``round(confirm_after / dt)``) from its rise: a specific hypothesis of its own group on
     confirms it at once (the onset then names the specific hypothesis), a specific hypothesis of
     another group on drops it until its alarm falls (the other component is announced by its own
-    name), and with neither it is announced when the wait ends. ``0`` (default): announced at once.
+    name), and with neither it is announced when the wait ends (``unconfirmed="announce"``) or
+    dropped until its alarm falls (``"drop"``: only the isolating tests name a component of a group).
+    ``0`` (default): announced at once.
 
     A cleared event says the fault is *not seen any more* (the records label it so), not that it
     is gone: the rule sees only the alarm, and a fault that persists while its residual decays
@@ -76,6 +78,8 @@ class Decision:
     confirm_after : float
         Seconds a group's own (unspecific) name waits for a specific hypothesis to confirm or
         contradict it (default 0: no wait; see *Isolated by the specific hypotheses*).
+    unconfirmed : {"announce", "drop"}
+        What a wait that ends with neither does to the unspecific name (default ``"announce"``).
 
     Examples
     --------
@@ -108,6 +112,7 @@ class Decision:
     size_channels: Mapping[str, str] | None = None
     groups: Mapping[str, Sequence[str]] | None = None
     confirm_after: float = 0.0
+    unconfirmed: str = "announce"
 
     def __post_init__(self):
         if isinstance(self.alarm_channels, str):
@@ -137,6 +142,8 @@ class Decision:
         if not (math.isfinite(cf) and cf >= 0):
             raise DataError(f"decision confirm_after must be >= 0 seconds, got {self.confirm_after!r}")
         self.confirm_after = cf
+        if self.unconfirmed not in ("announce", "drop"):
+            raise DataError(f"decision unconfirmed must be 'announce' or 'drop', got {self.unconfirmed!r}")
         if self.size_channels is not None:
             self.size_channels = {str(k): str(v) for k, v in dict(self.size_channels).items()}
             known = set(self.alarm_channels) | {self.names.get(c, c) for c in self.alarm_channels}
@@ -219,7 +226,7 @@ class Decision:
                     i = s + int(hit[0])
                     if o_own[i]:
                         gate[i:e] = True
-                elif s + n < e:
+                elif s + n < e and self.unconfirmed == "announce":
                     gate[s + n:e] = True
             on[:, mine] &= gate[:, None]
             low[:, mine] |= ~gate[:, None]
@@ -235,8 +242,9 @@ class Decision:
             prev = state[:, i]
             j = np.where(prev == -1, 0, prev)
             wait = raw & (j >= 0)
+            end = -2 if self.unconfirmed == "announce" else -3
             st = np.where(wait & o_own, -2, np.where(wait & o_oth, -3, np.where(
-                wait & (j >= n), -2, np.where(wait, j + 1, prev))))
+                wait & (j >= n), end, np.where(wait, j + 1, prev))))
             state[:, i] = np.where(raw, st, -1)
             gate = state[:, i] == -2
             on[:, mine] &= gate[:, None]
