@@ -23,25 +23,27 @@ member against the median of the others; affine fits on 0-30 s). A peer names th
 test alarms first and no type. (river is not installed here: the numba Page-Hinkley below is
 river's update rule, used unless ``river.drift.PageHinkley`` imports.)
 
-Measured (2026-12-03, full grid: 525 single-fault runs + 4 combinations + 3 artefacts, 292 s on a
-loaded 2-core machine; before the numba classifier the 300-run first version took 96 s):
-right component 417/456 of detected (91.4 %; the misses: steering faults named ``yaw_rate`` 26 and
-accelerometer faults named ``steering`` 11, both by the MHSSPT, whose first announcement opens the
-episode); right type 5 s after the first naming 315/417 (75.5 %), at the end of the run 342/417
-(82.0 %) -- bias 100 / 78, drift 102 / 104, gain 0 / 41 of 86, intermittent 92 / 98, stuck 21 / 21
-(a wheel gain of 1-3 % looks like a bias until the speed moves: on the held-out half it moves
-by ~1 m/s in 5 s, so the regression has no evidence yet; late in the run 21 wheel biases are
-typed gain as the speed falls at 55-58 s); <= 1 wrong announcement after the onset in 502/525
-(95.6 %); 0 announcements before an onset and 0 on the fault-free minute; lateral accelerometer
-bias 0.5 m/s^2 detected in 6/6. Undetected: accelerometer gains (3/18) and steering gains (0/18):
-on a straight road the signals they scale are near zero. Peers: PH raw names the right signal for
-the yaw rate, the accelerometer and the steering but no wheel (the raw wheel speeds move with the
-car's speed more than with any fault); PH physics, tuned to zero alarms on 0-30 s, alarms on the
-held-out nominal half (3 of its 7 checks) and so before every onset. A peer wins (median delay or
-more detections): yaw drift (PH raw 6.65 s vs 7.12 s), yaw gain (17 vs 13 detected), steering
-bias / drift / intermittent / stuck (more detected: 18/17/15 vs 12/10/12; the steering's peer
-check threshold is set by the steering model's error). The artefacts give no announcement: the
-spike frame 2 held samples, each clock jump one gap and one break.
+Measured (2026-12-03, full grid, after the MHSSPT's sensor names wait for the peer checks,
+``Decision.confirm_after`` = 3 s with ``unconfirmed = "drop"``; 139 s on a 2-core machine):
+right component 445/452 of detected (98.5 %; before 417/456, 91.4 %: steering faults named
+``yaw_rate`` 26 and accelerometer faults named ``steering`` 11 by the MHSSPT; the 7 misses left are
+wheel faults named at the axle), 0 wrong in the component matrix; right type 5 s after the first
+naming 345/445 (77.5 %), at the end of the run 362/445 (81.3 %; gain 35 of 86: a wheel gain of
+1-3 % looks like a bias until the speed moves); <= 1 wrong announcement after the onset in 521/525
+(99.2 %, before 95.6 %); 0 announcements before an onset and 0 on the fault-free minute; lateral
+accelerometer bias 0.5 m/s^2 detected in 6/6. Detected 452/525 (before 456: four runs whose only
+right name was an MHSSPT name no peer check confirmed). Median delay per type (half grid, before ->
+after): bias 0.40 -> 0.50 s, drift 4.28 -> 4.33, gain 0.48 -> 0.69, intermittent 0.33 -> 0.38
+(90 %: 0.48 -> 2.52), stuck 0.69 -> 0.69: the component is named when its peer check isolates it.
+Undetected: accelerometer gains (15/18) and steering gains (18/18): on a straight road the signals
+they scale are near zero. Peers: PH raw names the right signal for the yaw rate, the accelerometer
+and the steering but no wheel; PH physics, tuned to zero alarms on 0-30 s, alarms on the held-out
+nominal half and so before every onset. A peer wins (median delay or more detections): yaw bias
+(18 vs 15 detected), yaw drift (PH raw 5.40 s vs 7.59 s), yaw gain (18 vs 13), steering bias /
+drift / intermittent (18/17/15 vs 10/10/12 detected) and stuck (8.76 vs 11.28 s): the peer check's
+threshold on a low-passed residual is set by the steering model's slow error; a CUSUM on the peer
+residuals would accumulate the small persistent shifts (issue 27 note). The artefacts give no
+announcement: the spike frame 1 held sample, each clock jump one gap and one break.
 
 Run: ``PYTHONPATH=src python benchmarks/bench_sensor_faults.py [--quick] [--fraction F]``
 (``--quick``: one onset, the middle magnitude, one combination and the artefacts; ``--fraction``:
