@@ -133,7 +133,7 @@ def rav4_monitor(path: str | None = None, *, rate: float = 50.0, q_weight: float
                  band_hz: float = 3.0, h0_window: float = 0.2, warmup: float = 2.0,
                  level: float = 0.95, nuisance: tuple[str, ...] = (), settle: float = 0.04,
                  sensor_checks: bool = True, sensor_warmup: float = 5.0,
-                 peer_checks: bool = True) -> Rav4Monitor:
+                 peer_checks: bool = True, peer_cusum: bool = True) -> Rav4Monitor:
     """Design and calibrate the RAV4 lateral monitor on the first half of the real minute.
 
     Parameters
@@ -184,6 +184,11 @@ def rav4_monitor(path: str | None = None, *, rate: float = 50.0, q_weight: float
         gain, stuck, intermittent, spike), announced ``"wheel_rr:gain"``, ``"yaw_rate:stuck"`` ...
         (issue 27); of the issue-16 detectors only the steering stuck check stays (the others named
         a wheel from a sign and called every yaw-rate fault a drift). False: the issue-16 detectors.
+    peer_cusum : bool
+        With ``peer_checks``: a two-sided CUSUM on each isolated member's peer residual
+        (:class:`~fdikit.detect.PeerCUSUM`, thresholds from the calibration half) isolates small
+        persistent shifts the peer check's threshold misses; the fault-type stage reads the merged
+        isolation (issue 27).
 
     Examples
     --------
@@ -257,13 +262,17 @@ def rav4_monitor(path: str | None = None, *, rate: float = 50.0, q_weight: float
         if peer_checks:
             psig = Rav4PeerSignals(pre, chk.coef["steer"], rec["k_f"], rec["k_r"])
             sk = round(max(warmup, sensor_warmup) / dt)
-            pc, ftc, type_names = design_peer_stages(
+            pc, cu, ftc, type_names = design_peer_stages(
                 psig.run(Signals(raw.t[cal_t], raw.values[:, cal_t], raw.names, check=False)), dt, skip=sk,
                 warmup=sk,
-                isolated_by={f"sig:{f}": [f"P:{f}:alarm"] for f in _TYPED_BY_MHSSPT if f in faults})
+                isolated_by={f"sig:{f}": [f"P:{f}:alarm"] for f in _TYPED_BY_MHSSPT if f in faults},
+                cusum=peer_cusum)
             type_hold = Hold(list(type_names), 0.5, Z=max(1, int(hold)), absolute=False)
             gens["peer_signals"] = psig
-            procs.update(peer_check=pc, fault_type=ftc, type_hold=type_hold)
+            procs["peer_check"] = pc
+            if cu is not None:
+                procs["peer_cusum"] = cu
+            procs.update(fault_type=ftc, type_hold=type_hold)
             sensor_names.update(type_names)
             rec["peer_checks"] = {"thresholds": pc.thresholds, "coef": pc.coef, "sigma": ftc.sigma,
                                   "stuck_after": ftc.stuck_after}
