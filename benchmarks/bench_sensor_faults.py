@@ -23,26 +23,25 @@ member against the median of the others; affine fits on 0-30 s). A peer names th
 test alarms first and no type. (river is not installed here: the numba Page-Hinkley below is
 river's update rule, used unless ``river.drift.PageHinkley`` imports.)
 
-Measured (2026-12-03, full grid, after the MHSSPT's sensor names wait for the peer checks,
-``Decision.confirm_after`` = 3 s with ``unconfirmed = "drop"``; 139 s on a 2-core machine):
-right component 445/452 of detected (98.5 %; before 417/456, 91.4 %: steering faults named
-``yaw_rate`` 26 and accelerometer faults named ``steering`` 11 by the MHSSPT; the 7 misses left are
-wheel faults named at the axle), 0 wrong in the component matrix; right type 5 s after the first
-naming 345/445 (77.5 %), at the end of the run 362/445 (81.3 %; gain 35 of 86: a wheel gain of
-1-3 % looks like a bias until the speed moves); <= 1 wrong announcement after the onset in 521/525
-(99.2 %, before 95.6 %); 0 announcements before an onset and 0 on the fault-free minute; lateral
-accelerometer bias 0.5 m/s^2 detected in 6/6. Detected 452/525 (before 456: four runs whose only
-right name was an MHSSPT name no peer check confirmed). Median delay per type (half grid, before ->
-after): bias 0.40 -> 0.50 s, drift 4.28 -> 4.33, gain 0.48 -> 0.69, intermittent 0.33 -> 0.38
-(90 %: 0.48 -> 2.52), stuck 0.69 -> 0.69: the component is named when its peer check isolates it.
-Undetected: accelerometer gains (15/18) and steering gains (18/18): on a straight road the signals
-they scale are near zero. Peers: PH raw names the right signal for the yaw rate, the accelerometer
-and the steering but no wheel; PH physics, tuned to zero alarms on 0-30 s, alarms on the held-out
-nominal half and so before every onset. A peer wins (median delay or more detections): yaw bias
-(18 vs 15 detected), yaw drift (PH raw 5.40 s vs 7.59 s), yaw gain (18 vs 13), steering bias /
-drift / intermittent (18/17/15 vs 10/10/12 detected) and stuck (8.76 vs 11.28 s): the peer check's
-threshold on a low-passed residual is set by the steering model's slow error; a CUSUM on the peer
-residuals would accumulate the small persistent shifts (issue 27 note). The artefacts give no
+Measured (2026-12-03, full grid, 107 s on a 2-core machine), with the MHSSPT's sensor names
+waiting for the peer checks (``Decision.confirm_after`` = 3 s, ``unconfirmed = "drop"``) and a
+CUSUM on the yaw group's peer residuals (``PeerCUSUM``): right component 475/482 of detected
+(98.5 %; before both 417/456, 91.4 %: steering faults named ``yaw_rate`` 26 and accelerometer
+faults named ``steering`` 11 by the MHSSPT; the 7 misses left are wheel faults named at the axle);
+right type 5 s after the first naming 361/475 (76.0 %), at the end of the run 381/475 (80.2 %;
+gain 35 of 93: a wheel gain of 1-3 % looks like a bias until the speed moves); <= 1 wrong
+announcement after the onset in 521/525 (99.2 %, before 95.6 %); 0 announcements before an onset
+and 0 on the fault-free minute; lateral accelerometer bias 0.5 m/s^2 detected in 6/6. Detected
+482/525 (before 456; with the confirmation alone 452: four runs whose only right name was an
+unconfirmed MHSSPT name). The confirmation's delay (half grid, median before -> after): bias 0.40
+-> 0.50 s, drift 4.28 -> 4.33, gain 0.48 -> 0.69, intermittent 0.33 -> 0.38 (90 %: 0.48 -> 2.52),
+stuck 0.69 -> 0.69. Undetected: accelerometer gains (12/18) and steering gains (18/18): on a
+straight road the signals they scale are near zero. Peers: PH raw names the right signal for the
+yaw rate, the accelerometer and the steering but no wheel; PH physics, tuned to zero alarms on
+0-30 s, alarms on the held-out nominal half and so before every onset. A peer still wins (more
+detections; fdikit's median delay is shorter in each): yaw gain 18 vs 17, steering bias 18 vs 17,
+steering drift 17 vs 15; steering stuck: PH raw 1 of 3 at 8.76 s, fdikit 3 of 3 at 11.15 s (the
+stuck check waits for the longest nominal run of equal samples). The artefacts give no
 announcement: the spike frame 1 held sample, each clock jump one gap and one break.
 
 Run: ``PYTHONPATH=src python benchmarks/bench_sensor_faults.py [--quick] [--fraction F]``

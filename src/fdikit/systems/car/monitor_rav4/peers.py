@@ -130,8 +130,10 @@ class Rav4PeerSignals(ResidualGenerator):
         return Signals(signals.t, self._compute(u, y), self.output_names, check=False)
 
 
-#: the fault-type stage's isolation and statistic with the CUSUM (PeerCUSUM merges the peer check's)
-_CUSUM_CHANNELS = {"isolated": "cusum:{m}:isolated", "stat": "cusum:{m}:stat"}
+#: the fault-type stage's isolation with the CUSUM (PeerCUSUM merges the peer check's); its statistic
+#: stays the peer check's (the MHSSPT's isolated_by flags need it >= confirm: the merged one, grown by
+#: a CUSUM that a faulty peer moves, let the MHSSPT's "steering" type a yaw-rate drift)
+_CUSUM_CHANNELS = {"isolated": "cusum:{m}:isolated"}
 
 
 def design_peer_stages(sig: Signals, dt: float, *, skip: int, warmup: int, band_hz=None,
