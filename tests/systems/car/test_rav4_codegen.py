@@ -1,5 +1,5 @@
 """The RAV4 lateral monitor as C (issue 29) on the real minute: the chain up to the peer checks
-(``generate(..., stop_after="peer_check")``; the fault-type stage is refused by name) gives bitwise
+(``generate(..., stop_after="peer_check")``; the CUSUM stage after it is refused by name) gives bitwise
 the Python monitor's outputs, statuses and events, with injected faults, NaN samples and a gap;
 checkpoints cross between C and Python; the float32 variant's error is measured."""
 
@@ -82,7 +82,7 @@ def _py(mon, t, x, names):
 
 def test_stages_refused_by_name_without_stop_after(rav4_c, tmp_path):
     cfg, _res, _libs = rav4_c
-    with pytest.raises(DataError, match="FaultTypeClassifier"):
+    with pytest.raises(DataError, match="PeerCUSUM"):      # the first stage after the peer checks
         generate(cfg, tmp_path / "all")
     with pytest.raises(DataError, match="stop_after"):
         generate(cfg, tmp_path / "x", stop_after="nonsense")
