@@ -23,25 +23,26 @@ member against the median of the others; affine fits on 0-30 s). A peer names th
 test alarms first and no type. (river is not installed here: the numba Page-Hinkley below is
 river's update rule, used unless ``river.drift.PageHinkley`` imports.)
 
-Measured (2026-12-03, full grid: 525 single-fault runs + 4 combinations + 3 artefacts, 292 s on a
-loaded 2-core machine; before the numba classifier the 300-run first version took 96 s):
-right component 417/456 of detected (91.4 %; the misses: steering faults named ``yaw_rate`` 26 and
-accelerometer faults named ``steering`` 11, both by the MHSSPT, whose first announcement opens the
-episode); right type 5 s after the first naming 315/417 (75.5 %), at the end of the run 342/417
-(82.0 %) -- bias 100 / 78, drift 102 / 104, gain 0 / 41 of 86, intermittent 92 / 98, stuck 21 / 21
-(a wheel gain of 1-3 % looks like a bias until the speed moves: on the held-out half it moves
-by ~1 m/s in 5 s, so the regression has no evidence yet; late in the run 21 wheel biases are
-typed gain as the speed falls at 55-58 s); <= 1 wrong announcement after the onset in 502/525
-(95.6 %); 0 announcements before an onset and 0 on the fault-free minute; lateral accelerometer
-bias 0.5 m/s^2 detected in 6/6. Undetected: accelerometer gains (3/18) and steering gains (0/18):
-on a straight road the signals they scale are near zero. Peers: PH raw names the right signal for
-the yaw rate, the accelerometer and the steering but no wheel (the raw wheel speeds move with the
-car's speed more than with any fault); PH physics, tuned to zero alarms on 0-30 s, alarms on the
-held-out nominal half (3 of its 7 checks) and so before every onset. A peer wins (median delay or
-more detections): yaw drift (PH raw 6.65 s vs 7.12 s), yaw gain (17 vs 13 detected), steering
-bias / drift / intermittent / stuck (more detected: 18/17/15 vs 12/10/12; the steering's peer
-check threshold is set by the steering model's error). The artefacts give no announcement: the
-spike frame 2 held samples, each clock jump one gap and one break.
+Measured (2026-12-03, full grid, 107 s on a 2-core machine), with the MHSSPT's sensor names
+waiting for the peer checks (``Decision.confirm_after`` = 3 s, ``unconfirmed = "drop"``) and a
+CUSUM on the yaw group's peer residuals (``PeerCUSUM``): right component 475/482 of detected
+(98.5 %; before both 417/456, 91.4 %: steering faults named ``yaw_rate`` 26 and accelerometer
+faults named ``steering`` 11 by the MHSSPT; the 7 misses left are wheel faults named at the axle);
+right type 5 s after the first naming 361/475 (76.0 %), at the end of the run 381/475 (80.2 %;
+gain 35 of 93: a wheel gain of 1-3 % looks like a bias until the speed moves); <= 1 wrong
+announcement after the onset in 521/525 (99.2 %, before 95.6 %); 0 announcements before an onset
+and 0 on the fault-free minute; lateral accelerometer bias 0.5 m/s^2 detected in 6/6. Detected
+482/525 (before 456; with the confirmation alone 452: four runs whose only right name was an
+unconfirmed MHSSPT name). The confirmation's delay (half grid, median before -> after): bias 0.40
+-> 0.50 s, drift 4.28 -> 4.33, gain 0.48 -> 0.69, intermittent 0.33 -> 0.38 (90 %: 0.48 -> 2.52),
+stuck 0.69 -> 0.69. Undetected: accelerometer gains (12/18) and steering gains (18/18): on a
+straight road the signals they scale are near zero. Peers: PH raw names the right signal for the
+yaw rate, the accelerometer and the steering but no wheel; PH physics, tuned to zero alarms on
+0-30 s, alarms on the held-out nominal half and so before every onset. A peer still wins (more
+detections; fdikit's median delay is shorter in each): yaw gain 18 vs 17, steering bias 18 vs 17,
+steering drift 17 vs 15; steering stuck: PH raw 1 of 3 at 8.76 s, fdikit 3 of 3 at 11.15 s (the
+stuck check waits for the longest nominal run of equal samples). The artefacts give no
+announcement: the spike frame 1 held sample, each clock jump one gap and one break.
 
 Run: ``PYTHONPATH=src python benchmarks/bench_sensor_faults.py [--quick] [--fraction F]``
 (``--quick``: one onset, the middle magnitude, one combination and the artefacts; ``--fraction``:

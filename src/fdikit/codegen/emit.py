@@ -86,6 +86,10 @@ def emit_monitor(mon: Any, *, name: str = "fdk_monitor", precision: str = "doubl
     R, S = len(mon.residual_names), len(mon.stat_names)
     P = R + S
     dec = mon.decision
+    if dec is not None and float(getattr(dec, "confirm_after", 0.0) or 0.0) > 0.0:
+        raise DataError(f"stage Decision cannot be generated with confirm_after = {dec.confirm_after:g} s "
+                        "(the wait of an unspecific name for its peer evidence has no C emitter); generate "
+                        "a decision without it, or the stages before it with stop_after=")
     A = len(dec.alarm_channels) if dec is not None else 0
     n_warm = mon._warm_samples(dt)
     n_clear = dec.clear_samples(dt) if dec is not None else 1

@@ -14,6 +14,7 @@ from .calibrated_limits import (
     held_out_limit,
     predictive_interval,
 )
+from .cusum import PeerCUSUM, design_peer_cusum
 from .directional import DirectionalGLRT, directional_statistic
 from .features import FeatureNorms
 from .glrt import GLRT, ThresholdDesign, TimeGated, design_threshold, glrt_statistic
@@ -66,6 +67,7 @@ __all__ = [
     "IntermittentDetector",
     "LineMeanGaussian",
     "MHSSPTCalibration",
+    "PeerCUSUM",
     "PeerCheck",
     "StuckDetector",
     "TestBank",
@@ -88,6 +90,7 @@ __all__ = [
     "design_intermittent",
     "design_mhsspt",
     "design_peer_check",
+    "design_peer_cusum",
     "design_stuck",
     "design_threshold",
     "detection_time",

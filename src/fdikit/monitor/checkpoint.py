@@ -32,7 +32,7 @@ class _Checkpointing:
             "quiet": self._quiet,
             "episodes": {"active": self._active.copy(), "below": self._below.copy(),
                          "id": self._ep_id.copy(), "count": self._n_ep.copy(), "current": self._cur.copy(),
-                         "prev_on": self._prev_on.copy()},
+                         "prev_on": self._prev_on.copy(), "confirm": self._confirm.copy()},
             "plausibility": None if self._checker is None else self._checker.state(),
             "runs": self._runs,
             "generators": [g.get_state() for g in self.generators],
@@ -77,6 +77,8 @@ class _Checkpointing:
             if "current" in ep:      # (a checkpoint before issue 27: no group names an episode)
                 self._cur = np.array(ep["current"], np.int64).reshape(self._runs, A)
                 self._prev_on = np.array(ep["prev_on"], bool).reshape(self._runs, self._prev_on.shape[1])
+            if "confirm" in ep:      # (a checkpoint before Decision.confirm_after: nothing waits)
+                self._confirm = np.array(ep["confirm"], np.int64).reshape(self._runs, self._confirm.shape[1])
         elif state.get("on") is not None:  # a checkpoint of the rising-edge rule: open = on
             self._active = np.array(state["on"], bool).reshape(self._runs, A)
         if self._checker is not None:

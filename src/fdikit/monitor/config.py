@@ -59,6 +59,8 @@ Schema (every key is checked: an unknown key or a wrong type is an error naming 
     sizes = { "r:pos2:alarm" = "r:pos2" }   # channel whose value is the episode's size estimate
     # groups = { pos2 = ["sensor:pos2:bias", "sensor:pos2:gain"] }   # alternatives of one component:
     #                             # one episode, a revision announced as a "change" event
+    # confirm_after = 2.0         # s a group's own (unspecific) name waits for its group's or
+    #                             # another group's specific names to confirm or contradict it
     # processor = "diagnosis"     # instead of channels: announce what this processor artifact
     #                             # decides (its `announce` and `size_channels`, e.g. a
     #                             # fdikit.isolate.DMatrixDecision: one diagnosis per episode)
@@ -115,7 +117,8 @@ _SCHEMA: dict[str, dict[str, type | tuple[type, ...]]] = {
                "disturbances": dict, "noise": dict, "alarm": dict, "structure": dict,
                "nominal_log": (str, list), "accept_miscalibrated": bool},
     "decision": {"channels": list, "level": (int, float), "names": dict, "clear_level": (int, float),
-                 "clear_after": (int, float), "sizes": dict, "processor": str, "groups": dict},
+                 "clear_after": (int, float), "sizes": dict, "processor": str, "groups": dict,
+                 "confirm_after": (int, float), "unconfirmed": str},
 }
 #: Plausibility keys of a channel (monitor units), passed to :class:`fdikit.monitor.Plausibility`.
 PLAUSIBILITY_KEYS = ("min", "max", "max_rate", "spike")
@@ -628,6 +631,10 @@ def build_monitor(cfg: MonitorConfig) -> Monitor:
                 dkw.pop("size_channels")   # sizes stay in the statistics until Decision reports them
         if dec.get("groups"):
             dkw["groups"] = {str(g): list(m) for g, m in dec["groups"].items()}
+        if "confirm_after" in dec:
+            dkw["confirm_after"] = float(dec["confirm_after"])
+        if "unconfirmed" in dec:
+            dkw["unconfirmed"] = str(dec["unconfirmed"])
         _supported(Decision, list(dkw), "Decision")
         try:
             decision = Decision(list(dec["channels"]), float(dec.get("level", 0.5)),

@@ -43,6 +43,18 @@ class Decision:
     open an episode but never replaces a more specific name. The cleared event names the latest
     hypothesis.
 
+    **Isolated by the specific hypotheses** (``confirm_after > 0``). A group's own name is the
+    unspecific guess of a test that names the component but not how (e.g. an MHSSPT hypothesis
+    ``"yaw_rate"``), while the group's specific hypotheses come from the tests that isolate it
+    (``"yaw_rate:bias"`` from a check of the sensor against its peers). With ``confirm_after`` the
+    unspecific name waits for that evidence, at most ``confirm_after`` seconds of judged samples
+    (``round(confirm_after / dt)``) from its rise: a specific hypothesis of its own group on
+    confirms it at once (the onset then names the specific hypothesis), a specific hypothesis of
+    another group on drops it until its alarm falls (the other component is announced by its own
+    name), and with neither it is announced when the wait ends (``unconfirmed="announce"``) or
+    dropped until its alarm falls (``"drop"``: only the isolating tests name a component of a group).
+    ``0`` (default): announced at once.
+
     A cleared event says the fault is *not seen any more* (the records label it so), not that it
     is gone: the rule sees only the alarm, and a fault that persists while its residual decays
     (a constant sensor bias that an observer's state absorbs) ends its episode the same way.
@@ -63,6 +75,11 @@ class Decision:
     groups : mapping str -> sequence of str, optional
         Component -> the hypotheses that are alternatives of it (one episode, revisions announced
         as changes); a hypothesis belongs to one group at most.
+    confirm_after : float
+        Seconds a group's own (unspecific) name waits for a specific hypothesis to confirm or
+        contradict it (default 0: no wait; see *Isolated by the specific hypotheses*).
+    unconfirmed : {"announce", "drop"}
+        What a wait that ends with neither does to the unspecific name (default ``"announce"``).
 
     Examples
     --------
@@ -77,6 +94,13 @@ class Decision:
     >>> d = Decision(["x:bias", "x:gain"], groups={"x": ["x:bias", "x:gain"]})
     >>> [(e.kind, e.hypothesis, e.previous, e.k) for e in d.events(s2.t, s2)]
     [('onset', 'x:bias', None, 10), ('change', 'x:gain', 'x:bias', 50)]
+    >>> g = np.zeros(300); g[10:] = 1                          # an unspecific "x" from sample 10,
+    >>> y = np.zeros(300); y[30:] = 1                          # the peer check isolates "y" at 30
+    >>> s3 = Signals(s.t, np.column_stack([g, y]), ["P:x", "y:bias"])
+    >>> d = Decision(["P:x", "y:bias"], names={"P:x": "x"}, groups={"x": ["x"], "y": ["y:bias"]},
+    ...              confirm_after=0.5)
+    >>> [(e.kind, e.hypothesis, e.k) for e in d.events(s3.t, s3)]
+    [('onset', 'y:bias', 30)]
     """
 
     alarm_channels: Sequence[str]
@@ -87,6 +111,8 @@ class Decision:
     clear_after: float = 1.0
     size_channels: Mapping[str, str] | None = None
     groups: Mapping[str, Sequence[str]] | None = None
+    confirm_after: float = 0.0
+    unconfirmed: str = "announce"
 
     def __post_init__(self):
         if isinstance(self.alarm_channels, str):
@@ -108,6 +134,16 @@ class Decision:
         if not (math.isfinite(ca) and ca >= 0):
             raise DataError(f"decision clear_after must be >= 0 seconds, got {self.clear_after!r}")
         self.clear_after = ca
+        try:
+            cf = float(self.confirm_after)
+        except (TypeError, ValueError):
+            raise DataError(f"decision confirm_after must be a number of seconds, "
+                            f"got {self.confirm_after!r}") from None
+        if not (math.isfinite(cf) and cf >= 0):
+            raise DataError(f"decision confirm_after must be >= 0 seconds, got {self.confirm_after!r}")
+        self.confirm_after = cf
+        if self.unconfirmed not in ("announce", "drop"):
+            raise DataError(f"decision unconfirmed must be 'announce' or 'drop', got {self.unconfirmed!r}")
         if self.size_channels is not None:
             self.size_channels = {str(k): str(v) for k, v in dict(self.size_channels).items()}
             known = set(self.alarm_channels) | {self.names.get(c, c) for c in self.alarm_channels}
@@ -147,6 +183,72 @@ class Decision:
         self._hyp_chans = [[[a for a in ch if self.hypothesis(self.alarm_channels[a]) == h] for h in hs]
                            for ch, hs in zip(self._unit_chans, self._unit_hyps)]
         self._simple = all(len(ch) == 1 for ch in self._unit_chans)
+        self._build_confirm(unit_of)
+
+    def _build_confirm(self, unit_of: dict[str, str]) -> None:
+        """The tentative names of ``confirm_after``: per group's own name its channels, the channels
+        of its group's specific hypotheses and those of every other group's (alarm indices)."""
+        self._tent: list[tuple[list[int], list[int], list[int]]] = []
+        if self.confirm_after <= 0 or not self.groups:
+            return
+        chan_h = [self.hypothesis(c) for c in self.alarm_channels]
+        spec = {a: unit_of[h] for a, h in enumerate(chan_h) if h in unit_of and unit_of[h] != h
+                and any(h in m for m in self.groups.values())}
+        for g in self.groups:
+            mine = [a for a, h in enumerate(chan_h) if h == g]
+            if mine:
+                self._tent.append((mine, [a for a, u in spec.items() if u == g],
+                                   [a for a, u in spec.items() if u != g]))
+        # the onset names a specific hypothesis before the group's own name when both are on
+        self._unit_chans = [sorted(ch, key=lambda a: chan_h[a] == self._unit_names[u])
+                            for u, ch in enumerate(self._unit_chans)]
+
+    def confirm_samples(self, dt: float) -> int:
+        """``confirm_after`` in samples of period ``dt`` (0: no wait)."""
+        return round(self.confirm_after / dt) if dt > 0 and self.confirm_after > 0 else 0
+
+    def _gate(self, on: np.ndarray, low: np.ndarray, n: int) -> None:
+        """Apply the wait of ``confirm_after`` (``n`` samples) in place to a record's judged rows
+        ``on`` / ``low`` (P, A): the same rule as :meth:`_gate_step` sample by sample."""
+        if not self._tent or n <= 0:
+            return
+        P = on.shape[0]
+        for mine, own, other in self._tent:
+            raw = on[:, mine].any(axis=1)
+            o_own = on[:, own].any(axis=1) if own else np.zeros(P, bool)
+            o_oth = on[:, other].any(axis=1) if other else np.zeros(P, bool)
+            gate = np.zeros(P, bool)
+            edges = np.flatnonzero(np.diff(np.r_[0, raw.astype(np.int8), 0]))
+            for s, e in zip(edges[::2], edges[1::2]):
+                w = min(s + n, e - 1)
+                hit = np.flatnonzero(o_own[s:w + 1] | o_oth[s:w + 1])
+                if hit.size:
+                    i = s + int(hit[0])
+                    if o_own[i]:
+                        gate[i:e] = True
+                elif s + n < e and self.unconfirmed == "announce":
+                    gate[s + n:e] = True
+            on[:, mine] &= gate[:, None]
+            low[:, mine] |= ~gate[:, None]
+
+    def _gate_step(self, on: np.ndarray, low: np.ndarray, state: np.ndarray, n: int) -> None:
+        """One judged sample of the ``confirm_after`` wait (``n`` samples), in place: ``on`` / ``low``
+        (runs, A); ``state`` (runs, n_tentative) int64: -1 idle, j >= 0 waited j samples, -2
+        announced, -3 dropped until the alarm falls."""
+        for i, (mine, own, other) in enumerate(self._tent):
+            raw = on[:, mine].any(axis=1)
+            o_own = on[:, own].any(axis=1) if own else np.zeros(raw.shape, bool)
+            o_oth = on[:, other].any(axis=1) if other else np.zeros(raw.shape, bool)
+            prev = state[:, i]
+            j = np.where(prev == -1, 0, prev)
+            wait = raw & (j >= 0)
+            end = -2 if self.unconfirmed == "announce" else -3
+            st = np.where(wait & o_own, -2, np.where(wait & o_oth, -3, np.where(
+                wait & (j >= n), end, np.where(wait, j + 1, prev))))
+            state[:, i] = np.where(raw, st, -1)
+            gate = state[:, i] == -2
+            on[:, mine] &= gate[:, None]
+            low[:, mine] |= ~gate[:, None]
 
     @property
     def low_level(self) -> float:
@@ -223,6 +325,7 @@ class Decision:
             with np.errstate(invalid="ignore"):
                 on = V >= self.level
                 low = V < self.low_level
+            self._gate(on, low, self.confirm_samples(dt))
             pos = np.arange(V.shape[0])
             for u, chans in enumerate(self._unit_chans):
                 if len(chans) == 1:

@@ -45,6 +45,8 @@ class _StreamingPath:
         H = sum(len(h) for h in d._unit_hyps) if d is not None else 0
         self._prev_on = np.zeros((self._runs, H), bool)      # per hypothesis, at the last judged sample
         self._n_ep = np.zeros(self._runs, np.int64)
+        # per tentative name of Decision.confirm_after: -1 idle, j >= 0 waited, -2 announced, -3 dropped
+        self._confirm = np.full((self._runs, len(d._tent) if d is not None else 0), -1, np.int64)
         self._abs_checker.reset(self._runs, self._dt)
         if self._checker is not None:
             self._checker.reset(self._runs, self._dt)
@@ -53,12 +55,13 @@ class _StreamingPath:
         """Fix the sample period of this record (and what follows from it)."""
         self._dt = dt
         if dt is None:
-            self._n_warm, self._n_clear, self._limit = 0, 1, math.inf
+            self._n_warm, self._n_clear, self._limit, self._n_confirm = 0, 1, math.inf, 0
             self._warm_left, self._reset_due, self._warm_min, self._quiet = 0, False, 0, -1
             return
         self._limit = self._gap_limit(dt)
         self._n_warm = self._warm_samples(dt)
         self._n_clear = self.decision.clear_samples(dt) if self.decision is not None else 1
+        self._n_confirm = self.decision.confirm_samples(dt) if self.decision is not None else 0
         # an explicit warm-up also covers the start of the record; by default, with a decision, the
         # start-up transient of the filters is a warm-up too, ended early once every alarm channel
         # has been quiet for clear_after
@@ -198,11 +201,15 @@ class _StreamingPath:
         v = pool[:, self._dec_idx]
         on = v >= d.level  # (NaN compares False: neither on nor below the clear level)
         act = self._active
+        gated = None
+        if d._tent and self._n_confirm > 0:
+            gated = v < d.low_level
+            d._gate_step(on, gated, self._confirm, self._n_confirm)
         if d._simple:
             on_u = on
             if not (on.any() or act.any()):
                 return []
-            low_u = v < d.low_level
+            low_u = v < d.low_level if gated is None else gated
         else:
             on_h = np.stack([on[:, chans].any(axis=1) for hc in d._hyp_chans for chans in hc], axis=1)
             rise = on_h & ~self._prev_on
@@ -210,7 +217,7 @@ class _StreamingPath:
             on_u = np.stack([on[:, chans].any(axis=1) for chans in d._unit_chans], axis=1)
             if not (on_u.any() or act.any()):
                 return []
-            low = v < d.low_level
+            low = v < d.low_level if gated is None else gated
             low_u = np.stack([low[:, chans].all(axis=1) for chans in d._unit_chans], axis=1)
         self._below = np.where(act & low_u, self._below + 1, 0)
         done = act & (self._below >= self._n_clear)

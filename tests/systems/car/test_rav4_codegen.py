@@ -84,6 +84,8 @@ def _py(mon, t, x, names):
 
 def test_stop_after_refuses_an_unknown_processor(rav4_c, tmp_path):
     cfg, _res, _libs = rav4_c
+    with pytest.raises(DataError, match="PeerCUSUM"):      # the first stage after the peer checks
+        generate(cfg, tmp_path / "all")
     with pytest.raises(DataError, match="stop_after"):
         generate(cfg, tmp_path / "x", stop_after="nonsense")
 

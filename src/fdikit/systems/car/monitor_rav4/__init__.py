@@ -131,7 +131,7 @@ designed monitor) and :mod:`.run` (:func:`run_rav4_log`: running and scoring).
 from __future__ import annotations
 
 from ....residuals.transforms import band_limited  # noqa: F401
-from .build import CLEAR_AFTER, Rav4Monitor, decision_for, design, rav4_monitor  # noqa: F401
+from .build import CLEAR_AFTER, CONFIRM_AFTER, Rav4Monitor, decision_for, design, rav4_monitor  # noqa: F401
 from .channels import (  # noqa: F401
     _RAW_U,
     _RAW_Y,

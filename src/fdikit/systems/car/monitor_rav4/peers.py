@@ -130,11 +130,19 @@ class Rav4PeerSignals(ResidualGenerator):
         return Signals(signals.t, self._compute(u, y), self.output_names, check=False)
 
 
+#: the fault-type stage's isolation with the CUSUM (PeerCUSUM merges the peer check's); its statistic
+#: stays the peer check's (the MHSSPT's isolated_by flags need it >= confirm: the merged one, grown by
+#: a CUSUM that a faulty peer moves, let the MHSSPT's "steering" type a yaw-rate drift)
+_CUSUM_CHANNELS = {"isolated": "cusum:{m}:isolated"}
+
+
 def design_peer_stages(sig: Signals, dt: float, *, skip: int, warmup: int, band_hz=None,
                        stuck_margin: float = 1.0, window_s: float = 30.0, lookback_s: float = 5.0,
                        clear_after_s: float = 5.0, pfa: float = 1.0, per=None, fit_skip=None,
                        margin: float = 0.0, block_s: float = 0.5, gain_crit: float = 25.0,
-                       isolated_by=None, confirm: float = 0.5, gain_margin: float = 1.5):
+                       isolated_by=None, confirm: float = 0.5, gain_margin: float = 1.5,
+                       cusum: bool = True, cusum_nu: float = 1.0, cusum_margin: float = 0.5,
+                       cusum_groups: tuple[str, ...] = ("yaw",)):
     """The peer check and the fault-type classifier designed on nominal :class:`Rav4PeerSignals`
     outputs ``sig`` (the calibration half).
 
@@ -152,11 +160,17 @@ def design_peer_stages(sig: Signals, dt: float, *, skip: int, warmup: int, band_
     member's peer statistic is at least ``confirm``. The merged :class:`~fdikit.detect.PeerCheck`
     holds the groups in the order of :data:`PEER_GROUPS`.
 
+    With ``cusum`` a :class:`~fdikit.detect.PeerCUSUM` (drift ``cusum_nu`` nominal standard
+    deviations, threshold the nominal maximum times ``1 + cusum_margin``) on the members of
+    ``cusum_groups`` (the yaw group: the wheels' residuals follow the speed, and a CUSUM tuned on
+    the calibration half alarms on the held-out half) isolates what the peer check's threshold
+    misses; the classifier reads its merged outputs.
+
     Returns
     -------
-    (PeerCheck, FaultTypeClassifier, dict alarm channel -> announced name)
+    (PeerCheck, PeerCUSUM or None, FaultTypeClassifier, dict alarm channel -> announced name)
     """
-    from ....detect import PeerCheck, design_peer_check
+    from ....detect import PeerCheck, design_peer_check, design_peer_cusum
     from ....isolate import FAULT_TYPES, FaultTypeClassifier
 
     band = {"wheels": 0.2, "yaw": 0.1, **(band_hz or {})}
@@ -201,6 +215,14 @@ def design_peer_stages(sig: Signals, dt: float, *, skip: int, warmup: int, band_
                               lookback=n(lookback_s), min_len=n(0.2), spike_max=n(0.2), burst_gap=n(0.5),
                               clear_after=n(clear_after_s), isolated_by=isolated_by, confirm=confirm,
                               block=blk, sigma_block=sig_blk,
-                              gain_crit=crit)
+                              gain_crit=crit,
+                              channels=_CUSUM_CHANNELS if cusum else None)
     names = {f"{m}:{t}": f"{s}:{t}" for m, s in PEER_SENSORS.items() for t in FAULT_TYPES}
-    return pc, ftc, names
+    cu = None
+    if cusum:
+        groups = {g: list(PEER_GROUPS[g]) for g in cusum_groups}
+        ann = [m for ms in groups.values() for m in ms if m in PEER_SENSORS]
+        rest = [m for g in PEER_GROUPS if g not in cusum_groups for m in PEER_GROUPS[g] if m in PEER_SENSORS]
+        cu = design_peer_cusum(nom, groups, skip=skip, nu=cusum_nu, margin=cusum_margin, warmup=warmup,
+                               passthrough=rest, announce=ann)
+    return pc, cu, ftc, names
