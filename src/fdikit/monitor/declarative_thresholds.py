@@ -77,6 +77,25 @@ def _claims(names: list[str], td: dict, alarm, basis: str) -> list[dict]:
     return out
 
 
+def _chi_bound(raw, W: np.ndarray, groups: dict[str, list[str]], feats, alarm, dt: float, exc: Exception,
+               basis: str) -> tuple[np.ndarray, dict, list[dict]]:
+    """Thresholds at the chi quantile of each whitened residual's dimension for the per-sample
+    probability of the target (Bonferroni over the residuals), their record and their claims: the
+    fallback when the nominal data cannot show the target (see :func:`simulated_thresholds`)."""
+    from scipy.stats import chi2
+
+    p_each = alarm.per_sample(dt) / len(groups)
+    dims = []
+    for g in feats.output_names:
+        ix = [raw.residual_names.index(c) for c in groups[g]]
+        dims.append(int(np.linalg.matrix_rank(W[np.ix_(ix, ix)])))
+    thr = np.array([np.sqrt(chi2.isf(p_each, k)) for k in dims])
+    td = {"method": "gaussian chi bound", "reason": str(exc), "per_sample_each": p_each, "dims": dims}
+    each = alarm.pfa / len(groups)
+    bound = {"ci": [[0.0, each]] * len(groups), "target": [each] * len(groups), "method": td["method"]}
+    return thr, td, _claims(feats.output_names, bound, alarm, basis)
+
+
 def simulated_thresholds(md, raw, groups: dict[str, list[str]], R: np.ndarray, Q: np.ndarray, alarm,
                          dt: float, *, nominal_hours: float | None, seed: int) -> dict[str, Any]:
     """Whitening and thresholds from simulated nominal operation of the discrete plant ``md``
@@ -122,15 +141,8 @@ def simulated_thresholds(md, raw, groups: dict[str, list[str]], R: np.ndarray, Q
         # chi quantile of the per-sample probability bounds the fraction of samples over it, and
         # an alarm needs ``hold`` of them, so the alarm onsets per unit time are bounded too
         # (conservative; Bonferroni over the residuals).
-        from scipy.stats import chi2
-
-        p_each = alarm.per_sample(dt) / len(groups)
-        dims = []
-        for g in feats.output_names:
-            ix = [raw.residual_names.index(c) for c in groups[g]]
-            dims.append(int(np.linalg.matrix_rank(W[np.ix_(ix, ix)])))
-        thr = np.array([np.sqrt(chi2.isf(p_each, k)) for k in dims])
-        td = {"method": "gaussian chi bound", "reason": str(exc), "per_sample_each": p_each, "dims": dims}
+        thr, td, claims = _chi_bound(raw, W, groups, feats, alarm, dt, exc, "model")
+        p_each = td["per_sample_each"]
         unit = {"hour": "expected false alarms per hour", "sample": "per sample"}.get(
             alarm.per, f"per run of {alarm.run_length} s")
         warnings.warn(f"design: the false-alarm target pfa = {alarm.pfa:g} {unit} (hold {alarm.hold}) "
@@ -139,9 +151,6 @@ def simulated_thresholds(md, raw, groups: dict[str, list[str]], R: np.ndarray, Q
                       f"Gaussian chi bound: thresholds {np.round(thr, 4).tolist()} at a per-sample "
                       f"probability {p_each:.3g} per residual (conservative; nominal_hours sets the "
                       "simulated data)", UserWarning, stacklevel=3)
-        each = alarm.pfa / len(groups)
-        bound = {"ci": [[0.0, each]] * len(groups), "target": [each] * len(groups), "method": td["method"]}
-        claims = _claims(feats.output_names, bound, alarm, "model")
     return {"white": white, "features": feats, "thr": thr, "td": td, "runs": runs, "duration": duration,
             "claims": claims}
 
@@ -265,22 +274,12 @@ def logged_thresholds(raw, groups: dict[str, list[str]], alarm, dt: float, nomin
         if not fallback:
             raise DataError(f"config: {source}: {why}. Give more or longer nominal logs, or a larger "
                             "target") from None
-        from scipy.stats import chi2
-
-        p_each = alarm.per_sample(dt) / len(groups)
-        dims = []
-        for g in feats.output_names:
-            ix = [raw.residual_names.index(c) for c in groups[g]]
-            dims.append(int(np.linalg.matrix_rank(W[np.ix_(ix, ix)])))
-        thr = np.array([np.sqrt(chi2.isf(p_each, k)) for k in dims])
-        td = {"method": "gaussian chi bound", "reason": str(exc), "per_sample_each": p_each, "dims": dims}
+        thr, td, claims = _chi_bound(raw, W, groups, feats, alarm, dt, exc, "nominal logs (Gaussian bound)")
+        p_each = td["per_sample_each"]
         warnings.warn(f"design: {why}. Falling back to the Gaussian chi bound of the whitened real "
                       f"residuals: thresholds {np.round(thr, 4).tolist()} at a per-sample probability "
                       f"{p_each:.3g} per residual; the held-out halves measure it (give more nominal "
                       "logs, [design].nominal_log, to set the thresholds on data)", UserWarning, stacklevel=3)
-        each = alarm.pfa / len(groups)
-        bound = {"ci": [[0.0, each]] * len(groups), "target": [each] * len(groups), "method": td["method"]}
-        claims = _claims(feats.output_names, bound, alarm, "nominal logs (Gaussian bound)")
     hold = Hold(feats.output_names, thr, Z=alarm.hold, absolute=True)
     alarms = [hold.run(f).values[0] for f in f_meas]     # (T_i, channels)
     for c in claims:
