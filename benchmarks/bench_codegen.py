@@ -14,7 +14,8 @@ log (``fdikit example-log`` or the example's own simulator), in the same run:
 * the equivalence: events equal, statistics bitwise equal (double), the float32 variant's
   largest error relative to each channel's largest magnitude, and whether its events agree.
 
-The RAV4 monitor (``rav4-lateral``: its whole chain, with the fault-type classifier and its hold)
+The RAV4 monitor (``rav4-lateral``: its whole chain, with the peer CUSUM, the fault-type classifier
+and its hold, and the decision's ``confirm_after``)
 runs on the real minute (``../shared/data/rav4-highway``) with injected faults
 (:data:`RAV4_FAULTS`); ``rav4-lateral-peer`` is its chain up to the peer checks
 (``stop_after="peer_check"``), the part generated before the classifier had an emitter. The load

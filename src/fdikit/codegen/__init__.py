@@ -8,8 +8,8 @@ recursion, no globals with state, only ``<math.h>`` and ``<stdint.h>``; double a
 * :class:`CMonitor` and :func:`compile_shared` are the equivalence harness (:mod:`.harness`);
 * :func:`register_emitter` adds the emitter of another stage class (:mod:`.registry`: system
   stages register from their own package, found by the plugin convention); the sensor checks
-  (:mod:`.sensor`), the scheduled blend (:mod:`.scheduled`), the directional GLRT, the D-matrix
-  decision, the parameter sensitivity, the tabulated MHSSPT and the fault-type classifier
+  and the peer CUSUM (:mod:`.sensor`), the scheduled blend (:mod:`.scheduled`), the directional
+  GLRT, the D-matrix decision, the parameter sensitivity, the tabulated MHSSPT and the fault-type classifier
   (:mod:`.fault_type`) register there; the episode rule is :mod:`.episodes`;
 * :func:`subset_monitor` cuts a monitor after a processor (``generate(..., stop_after=...)``).
 
@@ -39,7 +39,7 @@ from .registry import (
     registered_names,
 )
 from .scheduled import ScheduledFilterEmitter
-from .sensor import PeerCheckEmitter, StuckEmitter
+from .sensor import PeerCheckEmitter, PeerCUSUMEmitter, StuckEmitter
 from .stages import EMITTERS
 from .stages_dglrt import DirectionalGLRTEmitter
 from .stages_dmatrix import DMatrixDecisionEmitter
@@ -49,7 +49,8 @@ from .subset import subset_monitor
 
 __all__ = ["CFLAGS", "EMITTERS", "CMonitor", "DMatrixDecisionEmitter", "DirectionalGLRTEmitter",
            "FaultTypeEmitter",
-           "GeneratedSource", "ParameterSensitivityEmitter", "PeerCheckEmitter", "ScheduledFilterEmitter",
+           "GeneratedSource", "ParameterSensitivityEmitter", "PeerCUSUMEmitter", "PeerCheckEmitter",
+           "ScheduledFilterEmitter",
            "StuckEmitter",
            "TabulatedMHSSPTEmitter", "c_to_py_state", "class_path", "compile_shared", "config_digest",
            "driver_source", "emit_monitor", "emitter_for", "find_compiler", "generate", "generate_monitor",

@@ -86,10 +86,6 @@ def emit_monitor(mon: Any, *, name: str = "fdk_monitor", precision: str = "doubl
     R, S = len(mon.residual_names), len(mon.stat_names)
     P = R + S
     dec = mon.decision
-    if dec is not None and float(getattr(dec, "confirm_after", 0.0) or 0.0) > 0.0:
-        raise DataError(f"stage Decision cannot be generated with confirm_after = {dec.confirm_after:g} s "
-                        "(the wait of an unspecific name for its peer evidence has no C emitter); generate "
-                        "a decision without it, or the stages before it with stop_after=")
     A = len(dec.alarm_channels) if dec is not None else 0
     n_warm = mon._warm_samples(dt)
     n_clear = dec.clear_samples(dt) if dec is not None else 1
@@ -100,7 +96,7 @@ def emit_monitor(mon: Any, *, name: str = "fdk_monitor", precision: str = "doubl
     start = n_warm if mon.warmup else n_start
     col = {n: i for i, n in enumerate(mon._pool_names)}
     # the episode rule (None: no decision; its fields keep one element each)
-    epi = EpisodeCode(dec, col, n_clear) if dec is not None else None
+    epi = EpisodeCode(dec, col, n_clear, dec.confirm_samples(dt)) if dec is not None else None
     ep_fields = epi.fields() if epi is not None else [
         Field(n, "i64", 1) for n in ("active", "below", "ep_id", "cur", "prev_on")]
     fields = [*CORE_FIELDS, Field("last", "f64", max(P, 1)), *ep_fields]
@@ -306,7 +302,10 @@ def stage_digest(mon: Any) -> str:
     dec = mon.decision
     parts.append(None if dec is None else [dec.alarm_channels, dec.level, dec.names, dec.clear_level,
                                            dec.clear_after, dec.size_channels,
-                                           *([dec.groups] if dec.groups else [])])
+                                           *([dec.groups] if dec.groups else []),
+                                           # (appended only with a wait: other digests are unchanged)
+                                           *([dec.confirm_after, dec.unconfirmed] if dec.confirm_after > 0
+                                             else [])])
     parts.append([mon.dt, mon.max_gap, mon.warmup, mon.max_abs, mon.on_invalid, mon.validate])
     if mon.plausibility:   # (appended only with rules: the digest of a monitor without is unchanged)
         parts.append({k: v.to_dict() for k, v in sorted(mon.plausibility.items())})

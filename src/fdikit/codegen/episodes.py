@@ -1,6 +1,7 @@
 """The C of the monitor's episode rule (:class:`~fdikit.monitor.Decision`): one episode per
 announced name, groups of names sharing one episode with their revisions as change events, the
-event order of the Python streaming path, and the rule's state fields with their checkpoint
+event order of the Python streaming path, the wait of a group's unspecific name for its peer
+evidence (``Decision.confirm_after`` / ``unconfirmed``), and the rule's state fields with their checkpoint
 mapping to :meth:`Monitor.state` ``"episodes"``."""
 
 from __future__ import annotations
@@ -31,6 +32,8 @@ class EpisodeCode:
         Pool column of every channel name (the monitor's ``_pool_names``).
     n_clear : int
         ``clear_after`` in samples.
+    n_confirm : int
+        ``confirm_after`` in samples (0: no wait, as the streaming path).
 
     Notes
     -----
@@ -38,12 +41,18 @@ class EpisodeCode:
     of each name are tables of the generated code; the state per unit is ``active``, ``below``
     (judged samples below the clear level), ``ep_id`` and ``cur`` (the name the episode has now,
     an index within its unit), and per name ``prev_on`` (on at the last judged sample; kept only
-    when a unit has several channels, as in Python).
+    when a unit has several channels, as in Python). With ``confirm_after``, per tentative name
+    (a group's own name, ``Decision._tent``) ``confirm``: -1 idle, ``j >= 0`` waited ``j`` judged
+    samples, -2 announced, -3 dropped until its alarm falls (the streaming path's ``_confirm``).
     """
 
-    def __init__(self, dec: Any, col: dict[str, int], n_clear: int):
+    def __init__(self, dec: Any, col: dict[str, int], n_clear: int, n_confirm: int = 0):
         self.dec = dec
         self.n_clear = int(n_clear)
+        self.tent = list(getattr(dec, "_tent", []))
+        self.T = len(self.tent)
+        # (the streaming path waits only with tentative names and a wait of at least one sample)
+        self.n_confirm = int(n_confirm) if self.T else 0
         self.A = len(dec.alarm_channels)
         self.U = len(dec._unit_chans)
         self.H = sum(len(h) for h in dec._unit_hyps)
@@ -68,12 +77,14 @@ class EpisodeCode:
         """The rule's state arrays (after the monitor's core fields)."""
         U, H = max(self.U, 1), max(self.H, 1)
         return [Field("active", "i64", U), Field("below", "i64", U), Field("ep_id", "i64", U),
-                Field("cur", "i64", U), Field("prev_on", "i64", H)]
+                Field("cur", "i64", U), Field("prev_on", "i64", H),
+                *([Field("confirm", "i64", self.T)] if self.n_confirm > 0 else [])]
 
     def reset_code(self) -> str:
         return (f"    for (i = 0; i < {max(self.U, 1)}; ++i) "
                 "{ s->active[i] = 0; s->below[i] = 0; s->ep_id[i] = 0; s->cur[i] = 0; }\n"
-                f"    for (i = 0; i < {max(self.H, 1)}; ++i) s->prev_on[i] = 0;")
+                f"    for (i = 0; i < {max(self.H, 1)}; ++i) s->prev_on[i] = 0;"
+                + (f"\n    for (i = 0; i < {self.T}; ++i) s->confirm[i] = -1;" if self.n_confirm > 0 else ""))
 
     def to_py(self, arrays: dict[str, np.ndarray], n_ep: int) -> dict[str, np.ndarray]:
         """The C fields as :meth:`Monitor.state` ``"episodes"`` (one run)."""
@@ -83,7 +94,9 @@ class EpisodeCode:
                 "id": arrays["ep_id"][:U].astype(np.int64).reshape(1, U),
                 "count": np.array([n_ep], np.int64),
                 "current": arrays["cur"][:U].astype(np.int64).reshape(1, U),
-                "prev_on": arrays["prev_on"][:H].astype(bool).reshape(1, H)}
+                "prev_on": arrays["prev_on"][:H].astype(bool).reshape(1, H),
+                "confirm": (arrays["confirm"][:self.T].astype(np.int64) if "confirm" in arrays
+                            else np.full(self.T, -1, np.int64)).reshape(1, self.T)}
 
     def from_py(self, ep: dict[str, Any]) -> dict[str, np.ndarray]:
         """:meth:`Monitor.state` ``"episodes"`` as the C fields (a checkpoint from before issue 27,
@@ -92,6 +105,8 @@ class EpisodeCode:
         if "current" in ep:
             out["cur"] = np.ravel(ep["current"])
             out["prev_on"] = np.ravel(ep["prev_on"])
+        if self.n_confirm > 0:
+            out["confirm"] = np.ravel(ep["confirm"]) if "confirm" in ep else np.full(self.T, -1)
         return out
 
     # ------------------------------------------------------------------ code
@@ -114,7 +129,40 @@ class EpisodeCode:
                 _arr("FDK_EP_HOFF", h_off), _arr("FDK_EP_HCH", h_ch),
                 *([] if self.simple else [_arr("FDK_EP_OWN", self.own)]),
                 _arr("FDK_EP_ORDER", self.order), _arr("FDK_EP_SIZE", self.size_idx),
-                _arr("FDK_EP_DEC", self.dec_idx), ""]
+                _arr("FDK_EP_DEC", self.dec_idx), *self._confirm_tables(), ""]
+
+    def _confirm_tables(self) -> list[str]:
+        """Per tentative name its channels, those of its group's specific names and those of the
+        other groups' (offsets and alarm indices)."""
+        if self.n_confirm <= 0:
+            return []
+        out = []
+        for i, key in enumerate(("M", "O", "X")):
+            off, ch = [0], []
+            for t in self.tent:
+                ch += list(t[i])
+                off.append(len(ch))
+            out += [_arr(f"FDK_CF_{key}OFF", off), _arr(f"FDK_CF_{key}", ch)]
+        return out
+
+    def _confirm_code(self) -> list[str]:
+        """The wait of ``confirm_after`` at one judged sample (``Decision._gate_step``): gates
+        ``on`` and ``lw`` (below the clear level) of the tentative names' channels."""
+        end = -2 if self.dec.unconfirmed == "announce" else -3
+
+        def any_on(key, var):
+            return (f"        for (j = FDK_CF_{key}OFF[i]; j < FDK_CF_{key}OFF[i + 1]; ++j) "
+                    f"if (on[FDK_CF_{key}[j]]) {var} = 1;")
+        return [f"    for (i = 0; i < {self.T}; ++i) {{",
+                "        int raw = 0, o_own = 0, o_oth = 0;",
+                "        int64_t prev = s->confirm[i], w = prev == -1 ? 0 : prev, st = prev;",
+                any_on("M", "raw"), any_on("O", "o_own"), any_on("X", "o_oth"),
+                "        if (raw && w >= 0)",
+                f"            st = o_own ? -2 : o_oth ? -3 : w >= {self.n_confirm} ? {end} : w + 1;",
+                "        s->confirm[i] = raw ? st : -1;",
+                "        if (s->confirm[i] != -2)",
+                "            for (j = FDK_CF_MOFF[i]; j < FDK_CF_MOFF[i + 1]; ++j) {",
+                "                on[FDK_CF_M[j]] = 0; lw[FDK_CF_M[j]] = 1;", "            }", "    }"]
 
     def function(self, name: str) -> list[str]:
         """``fdk_decide``: the rule at one judged sample (``v`` the alarm channels' values)."""
@@ -133,6 +181,10 @@ class EpisodeCode:
         if not self.simple:
             c += [f"    int rise[{H}], chg[{A}], h;"]
         c += [f"    for (a = 0; a < {A}; ++a) on[a] = v[a] >= {lvl};"]
+        gate = self.n_confirm > 0
+        if gate:   # below the clear level per channel, gated with on
+            c[-1:-1] = [f"    int lw[{A}];"]
+            c += [f"    for (a = 0; a < {A}; ++a) lw[a] = v[a] < {low};", *self._confirm_code()]
         if not self.simple:   # per name: on, and turned on since the last judged sample
             c += [f"    for (h = 0; h < {H}; ++h) {{",
                   "        int o = 0;",
@@ -149,7 +201,8 @@ class EpisodeCode:
               f"    for (u = 0; u < {U}; ++u) {{",
               "        int lo = 1;",
               "        for (j = FDK_EP_UOFF[u]; j < FDK_EP_UOFF[u + 1]; ++j)",
-              f"            if (!(v[FDK_EP_UCH[j]] < {low})) lo = 0;",
+              ("            if (!lw[FDK_EP_UCH[j]]) lo = 0;" if gate else
+               f"            if (!(v[FDK_EP_UCH[j]] < {low})) lo = 0;"),
               "        s->below[u] = (s->active[u] && lo) ? s->below[u] + 1 : 0;",
               f"        done[u] = s->active[u] && s->below[u] >= {self.n_clear};",
               "        nw[u] = on_u[u] && !s->active[u];", "    }"]
@@ -193,5 +246,6 @@ class EpisodeCode:
     def layout(self) -> dict[str, Any]:
         """What the harness needs to read the events (plain data)."""
         return {"event_kinds": {str(k): v for k, v in EVENT_KINDS.items()},
-                "units": list(self.dec._unit_names), "n_units": self.U, "n_names": self.H}
+                "units": list(self.dec._unit_names), "n_units": self.U, "n_names": self.H,
+                "n_tentative": self.T if self.n_confirm > 0 else 0}
 

@@ -189,6 +189,10 @@ def c_to_py_state(layout: dict, buf: np.ndarray, mon: Any, emitters) -> dict[str
     U, H = int(layout.get("n_units", A)), int(layout.get("n_names", A))
     gens, procs = emitters
     last = a["last"][:R + S]
+    # the wait of Decision.confirm_after per tentative name (-1 idle where the C does not wait)
+    T = len(getattr(mon.decision, "_tent", ())) if mon.decision is not None else 0
+    confirm = (a["confirm"][:T].astype(np.int64) if "confirm" in a
+               else np.full(T, -1, np.int64)).reshape(1, T)
     return {"k": i["k"], "t_prev": float(a["t_prev"][0]) if i["has_t_prev"] else None, "held": i["held"],
             "held_t": i["held_t"], "missing": i["missing"], "dt": layout["dt"], "warm_left": i["warm_left"],
             "reset_due": bool(i["reset_due"]), "warm_min": i["warm_min"], "quiet": i["quiet"],
@@ -197,7 +201,7 @@ def c_to_py_state(layout: dict, buf: np.ndarray, mon: Any, emitters) -> dict[str
                          "id": a["ep_id"][:U].astype(np.int64).reshape(1, U),
                          "count": np.array([i["n_ep"]], np.int64),
                          "current": a["cur"][:U].astype(np.int64).reshape(1, U),
-                         "prev_on": a["prev_on"][:H].astype(bool).reshape(1, H)},
+                         "prev_on": a["prev_on"][:H].astype(bool).reshape(1, H), "confirm": confirm},
             "plausibility": None if not layout.get("plausibility") else
             plausibility_to_py(layout["plausibility"], a), "runs": 1,
             "generators": [e.to_py(a) for e in gens], "processors": [e.to_py(a) for e in procs],
@@ -223,7 +227,10 @@ def py_to_c_state(layout: dict, state: dict[str, Any], emitters) -> np.ndarray:
         "active": np.ravel(ep["active"]), "below": np.ravel(ep["below"]), "ep_id": np.ravel(ep["id"]),
         # (a checkpoint from before issue 27 has no names' state: zeros, as Python restores it)
         "cur": np.ravel(ep["current"]) if "current" in ep else None,
-        "prev_on": np.ravel(ep["prev_on"]) if "prev_on" in ep else None}
+        "prev_on": np.ravel(ep["prev_on"]) if "prev_on" in ep else None,
+        # (a checkpoint from before Decision.confirm_after: nothing waits, -1 as Python restores it)
+        "confirm": np.ravel(ep["confirm"]) if "confirm" in ep else
+        np.full(next((n for f, _k, n in layout["fields"] if f == "confirm"), 0), -1)}
     if layout.get("plausibility"):
         if state.get("plausibility") is None:
             raise DataError("the checkpoint has no plausibility state; the generated monitor has rules")

@@ -1,7 +1,7 @@
-"""C emitters of the sensor checks: :class:`~fdikit.detect.StuckDetector` and
-:class:`~fdikit.detect.PeerCheck`, with their warm-up and their ``resume`` rule (start again after
-a gap), in the Python stages' order of floating-point operations; registered in
-:mod:`.registry` when :mod:`fdikit.codegen` is imported."""
+"""C emitters of the sensor checks: :class:`~fdikit.detect.StuckDetector`,
+:class:`~fdikit.detect.PeerCheck` and :class:`~fdikit.detect.PeerCUSUM`, with their warm-up and
+their ``resume`` rule (start again after a gap), in the Python stages' order of floating-point
+operations; registered in :mod:`.registry` when :mod:`fdikit.codegen` is imported."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ import numpy as np
 from .registry import class_path, register_emitter
 from .stages import Field, StageEmitter, rl
 
-__all__ = ["MEDIAN_HELPER", "PeerCheckEmitter", "StuckEmitter", "median_code"]
+__all__ = ["MEDIAN_HELPER", "PeerCUSUMEmitter", "PeerCheckEmitter", "StuckEmitter", "median_code"]
 
 #: numpy's median of ``n`` values (finite): the middle of the sorted values, or the mean of the two
 #: middle ones, ``(a + b) / 2`` as ``np.mean`` forms it.
@@ -165,11 +165,76 @@ class PeerCheckEmitter(StageEmitter):
         return {f"{self.p}_z": np.ravel(state["_z"]), f"{self.p}_k": np.array([state["_k"]])}
 
 
+class PeerCUSUMEmitter(StageEmitter):
+    """:class:`~fdikit.detect.PeerCUSUM`: a two-sided CUSUM per member (nothing taken in during the
+    warm-up), normalised by its threshold, the group's largest isolated when >= 1, merged with the
+    peer check's statistic and isolation; started again on resume."""
+
+    kinds = ("PeerCUSUM",)
+    handles_resume = True
+
+    def __init__(self, obj: Any, prefix: str):
+        super().__init__(obj, prefix)
+        self.M = len(obj.members)
+
+    def fields(self):
+        return [Field(f"{self.p}_up", "real", self.M), Field(f"{self.p}_lo", "real", self.M),
+                Field(f"{self.p}_k", "i64", 1)]
+
+    def reset_code(self):
+        return (f"    {{ int i; for (i = 0; i < {self.M}; ++i) {{ {self.f('up')}[i] = FDK_R(0.0); "
+                f"{self.f('lo')}[i] = FDK_R(0.0); }} }}\n"
+                f"    {self.f('k')}[0] = 0;")
+
+    def resume_code(self):
+        return "    " + self.reset_code().replace("\n", "\n    ")
+
+    def step_code(self, inp, out):
+        o, M, f = self.obj, self.M, self.f
+        A = len(o._out)
+        up, lo, k = f("up"), f("lo"), f("k")
+        lines = ["    {", f"        fdk_real px[{len(inp)}], g[{M}], iso[{M}], x;", "        int i;"]
+        lines += [f"        px[{i}] = {v};" for i, v in enumerate(inp)]
+        lines += [f"        for (i = 0; i < {len(inp)}; ++i) if (!FDK_FINITE(px[i])) return FDK_ERR_STAT;",
+                  f"        {k}[0] += 1;", f"        if ({k}[0] > {int(o.warmup)}) {{"]
+        # np.maximum(0.0, x): 0.0 where 0.0 >= x, else x; (up + (e - mu)) - nu, (lo - (e - mu)) - nu
+        for j in range(M):
+            mu, nu = rl(o._mu[j]), rl(o._nu[j])
+            lines += [f"            x = {up}[{j}] + (px[{j}] - {mu}) - {nu};",
+                      f"            {up}[{j}] = (FDK_R(0.0) >= x) ? FDK_R(0.0) : x;",
+                      f"            x = {lo}[{j}] - (px[{j}] - {mu}) - {nu};",
+                      f"            {lo}[{j}] = (FDK_R(0.0) >= x) ? FDK_R(0.0) : x;"]
+        lines.append("        }")
+        lines += [f"        g[{j}] = (({up}[{j}] >= {lo}[{j}]) ? {up}[{j}] : {lo}[{j}]) / {rl(h)}; "
+                  f"iso[{j}] = FDK_R(0.0);" for j, h in enumerate(o._h)]
+        for gi in o._gidx:
+            lines += [f"        {{ int b = {gi[0]};"]
+            lines += [f"          if (g[{m}] > g[b]) b = {m};" for m in gi[1:]]
+            lines += ["          iso[b] = (g[b] >= FDK_R(1.0)) ? FDK_R(1.0) : FDK_R(0.0); }"]
+        for a, j in enumerate(o._oix):
+            pe, ip = f"px[{M + a}]", f"px[{M + A + a}]"
+            lines += [f"        {out[a]} = g[{j}];",
+                      f"        {out[A + a]} = (g[{j}] >= {pe}) ? g[{j}] : {pe};",
+                      f"        {out[2 * A + a]} = (iso[{j}] >= {ip}) ? iso[{j}] : {ip};"]
+        lines.append("    }")
+        return "\n".join(lines)
+
+    def to_py(self, arrays):
+        return {"_up": arrays[f"{self.p}_up"].astype(float).reshape(1, -1),
+                "_lo": arrays[f"{self.p}_lo"].astype(float).reshape(1, -1),
+                "_k": int(arrays[f"{self.p}_k"][0])}
+
+    def from_py(self, state):
+        return {f"{self.p}_up": np.ravel(state["_up"]), f"{self.p}_lo": np.ravel(state["_lo"]),
+                f"{self.p}_k": np.array([state["_k"]])}
+
+
 def _register() -> None:
-    from ..detect import PeerCheck, StuckDetector
+    from ..detect import PeerCheck, PeerCUSUM, StuckDetector
 
     register_emitter(class_path(StuckDetector), StuckEmitter)
     register_emitter(class_path(PeerCheck), PeerCheckEmitter)
+    register_emitter(class_path(PeerCUSUM), PeerCUSUMEmitter)
 
 
 _register()

@@ -1,6 +1,7 @@
 """The RAV4 lateral monitor as C (issue 29) on the real minute: the chain up to the peer checks
-(``generate(..., stop_after="peer_check")``) and the full chain with the fault-type classifier and
-its hold (the decision's groups: type revisions are change events) give bitwise the Python
+(``generate(..., stop_after="peer_check")``) and the full chain with the peer CUSUM, the fault-type
+classifier and its hold (the decision's groups: type revisions are change events; ``confirm_after``:
+the unspecific names wait for the peer evidence) give bitwise the Python
 monitor's outputs, statuses and events, with injected faults, NaN samples and a gap; checkpoints
 cross between C and Python; the float32 variant's error is measured."""
 
@@ -83,11 +84,28 @@ def _py(mon, t, x, names):
 
 
 def test_stop_after_refuses_an_unknown_processor(rav4_c, tmp_path):
-    cfg, _res, _libs = rav4_c
-    with pytest.raises(DataError, match="PeerCUSUM"):      # the first stage after the peer checks
-        generate(cfg, tmp_path / "all")
+    """The whole chain generates (PeerCUSUM and the decision's confirm_after have emitters); a stage
+    without an emitter (here a subclass of the CUSUM) is refused by name, an unknown stop_after too."""
+    import copy
+
+    from fdikit.detect import PeerCUSUM
+
+    cfg, res, _libs = rav4_c
     with pytest.raises(DataError, match="stop_after"):
         generate(cfg, tmp_path / "x", stop_after="nonsense")
+    mon = res["monitor"]
+
+    class OwnCUSUM(PeerCUSUM):
+        pass
+
+    full = generate(cfg, tmp_path / "all", precisions=("double",))["monitor"]
+    i = [type(p).__name__ for p in full.processors].index("PeerCUSUM")
+    own = copy.copy(full)
+    own.processors = list(full.processors)
+    own.processors[i] = OwnCUSUM.from_dict(full.processors[i].to_dict())
+    with pytest.raises(DataError, match="OwnCUSUM cannot be generated"):
+        emit_monitor(own)
+    assert mon.decision is None or mon.decision.confirm_after == 0.0
 
 
 @pytest.fixture(scope="module")
@@ -106,7 +124,8 @@ def test_rav4_full_chain_c_equals_python(rav4_full, spec):
     the name they replace included."""
     res, c64 = rav4_full
     mon = res["monitor"]
-    assert res["layout"]["stages"][-2:] == ["FaultTypeClassifier", "Hold"]
+    assert res["layout"]["stages"][-4:] == ["PeerCheck", "PeerCUSUM", "FaultTypeClassifier", "Hold"]
+    assert mon.decision.confirm_after > 0 and res["layout"]["n_tentative"] > 0
     assert res["seconds"] < 2.0
     t, x = _log(mon, spec, bad=True)
     names = c64.layout["inputs"]
@@ -121,8 +140,9 @@ def test_rav4_full_chain_c_equals_python(rav4_full, spec):
     assert [(e["k"], e["kind"], e["hypothesis"], e["episode"], e["value"], e["size"], e["previous"])
             for e in c["events"]] == ev
     kinds = {e[1] for e in ev}
-    # (on the gain log a type is revised within an episode: a change event)
-    assert kinds == ({"onset", "change", "cleared"} if spec.startswith("gain") else {"onset", "cleared"})
+    # (a type is revised within an episode: change events; since the peer CUSUM and confirm_after
+    # joined the chain, on both logs)
+    assert kinds == {"onset", "change", "cleared"}
 
 
 def test_rav4_full_chain_checkpoint_crosses(rav4_full):
@@ -133,7 +153,11 @@ def test_rav4_full_chain_checkpoint_crosses(rav4_full):
     names = c64.layout["inputs"]
     full = c64.run(t, x)
     cut = 2600                                       # the wheel's gain being typed
+    c64.run(t[:cut], x[:cut])
+    c_ep = c_to_py_state(c64.layout, c64.checkpoint(), mon, em)["episodes"]
     _py(mon, t[:cut], x[:cut], names)
+    for key, v in mon.state()["episodes"].items():  # (confirm: the wait of the unspecific names)
+        assert np.array_equal(c_ep[key], v), key
     fresh = CMonitor(c64.lib._name, c64.layout)
     fresh.restore(py_to_c_state(c64.layout, mon.state(), em))
     rest = fresh.run(t[cut:], x[cut:], reset=False)

@@ -1,0 +1,99 @@
+"""fdikit.codegen's PeerCUSUM emitter (issue 29): a scheduled filter bank into a peer check and a
+two-sided CUSUM on its residuals (groups, a member compared but not announced, a passthrough
+member, a warm-up), on random logs with shifts, NaN and huge samples and a gap (the CUSUM starts
+again on ``resume``): the C gives bitwise the Python streaming outputs, statuses and events; a NaN
+sample is refused without changing the state; checkpoints move between C and Python.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from fdikit.codegen import CMonitor, c_to_py_state, find_compiler, py_to_c_state
+from fdikit.detect import PeerCUSUM
+from fdikit.monitor import Decision, Monitor
+
+from .test_codegen import DT, _build, _c_events, _py_stream, _same
+from .test_sensor_codegen import _bank_monitor, _log
+
+pytestmark = pytest.mark.skipif(find_compiler() is None, reason="no C compiler (cc, gcc or clang) on PATH")
+
+
+def _cusum_monitor(seed=0, warmup=4):
+    """The sensor bank's peer check, then a PeerCUSUM (r3 compared only, r2 passed through)."""
+    base = _bank_monitor(seed)
+    gen, peers = base.generators[0], base.processors[2]
+    rng = np.random.default_rng(50 + seed)
+    members = ["r0", "r1", "r3", "r5", "r6"]
+    cus = PeerCUSUM({"a": ["r0", "r1", "r3"], "b": ["r5", "r6"]},
+                    {m: 0.05 * rng.normal() for m in members}, {m: 0.1 + 0.1 * rng.random() for m in members},
+                    {m: 2.0 + rng.random() for m in members}, warmup=warmup, announce=["r0", "r5"],
+                    passthrough=["r2"])
+    alarms = ["cusum:r0:isolated", "cusum:r2:isolated", "cusum:r5:isolated"]
+    dec = Decision(alarms, 0.5, {a: a.split(":")[1] for a in alarms}, clear_after=0.05,
+                   size_channels={"r0": "cusum:r0:stat"})
+    return Monitor([gen], [peers, cus], dec, on_invalid="hold", dt=DT)
+
+
+@pytest.fixture(scope="module")
+def built(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("peer_cusum_codegen")
+    return {w: (_cusum_monitor(warmup=w), *_build(_cusum_monitor(warmup=w), tmp / str(w), f"fdk_cus{w}"))
+            for w in (0, 4)}
+
+
+@pytest.mark.parametrize("warmup", [0, 4])
+@pytest.mark.parametrize("seed", [0, 1])
+def test_peer_cusum_c_equals_python(built, warmup, seed):
+    mon, _gen, c64, c32, _em = built[warmup]
+    t, x, names = _log(mon, seed)
+    py_out, py_status, py_ev = _py_stream(mon, t, x, names)
+    res = c64.run(t, x)
+    assert np.array_equal(res["status"], py_status)
+    assert np.array_equal(res["out"], py_out)
+    assert _c_events(res) == py_ev
+    cols = mon.residual_names + mon.stat_names
+    assert py_out[:, cols.index("cusum:r0")].max() > 1.0          # the CUSUM isolates
+    assert py_out[:, cols.index("cusum:r5:isolated")].max() == 1.0
+    assert len(py_ev) >= 2 and {1, 2} <= set(py_status.tolist())
+    r32 = c32.run(t, x)
+    scale = np.maximum(np.abs(py_out).max(axis=0), 1e-12)
+    assert np.max(np.abs(r32["out"] - py_out) / scale) < 1e-3
+
+
+def test_peer_cusum_nan_refused_and_checkpoints_cross(built):
+    mon, _gen, c64, _c32, em = built[4]
+    t, x, names = _log(mon, 2, gap=False)
+    cut = 400
+    c64.run(t[:cut], x[:cut])
+    before = c64.checkpoint()
+    bad = x[cut].copy()
+    bad[names.index("y0")] = np.nan
+    st, _o, ev = c64.step(t[cut], bad)
+    assert st == 1 and ev == []
+    fields = c64.layout["fields"]
+    offs = np.cumsum([0] + [f[2] for f in fields])
+    moved = np.flatnonzero(before != c64.checkpoint())
+    changed = {fields[np.searchsorted(offs, i, side="right") - 1][0] for i in moved}
+    assert changed <= {"k", "held", "held_t", "t_prev"}, changed
+    full_out, _s, full_ev = _py_stream(mon, t, x, names)
+    # C -> Python continues bitwise
+    c64.run(t[:cut], x[:cut])
+    ck = c64.checkpoint()
+    p_up = [f[0] for f in fields].index("p1_up")
+    assert np.any(ck[offs[p_up]:offs[p_up + 1]] != 0)               # the CUSUM state crosses
+    mon.reset(1)
+    mon.restore(c_to_py_state(c64.layout, ck, mon, em))
+    rest = np.array([np.concatenate([r[0], s[0]]) for r, s, _ in
+                     (mon.step(float(t[k]), x[k][None], names) for k in range(cut, len(t)))])
+    assert np.array_equal(rest, full_out[cut:])
+    # Python -> C continues bitwise
+    _py_stream(mon, t[:cut], x[:cut], names)
+    fresh = CMonitor(c64.lib._name, c64.layout)
+    fresh.restore(py_to_c_state(c64.layout, mon.state(), em))
+    back = c_to_py_state(c64.layout, fresh.checkpoint(), mon, em)
+    assert _same(back["processors"], mon.state()["processors"])
+    res = fresh.run(t[cut:], x[cut:], reset=False)
+    assert np.array_equal(res["out"], full_out[cut:])
+    assert _c_events(res) == [e for e in full_ev if e[0] >= cut]
