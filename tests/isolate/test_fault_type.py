@@ -163,3 +163,22 @@ def test_bad_revision_options():
         FaultTypeClassifier(["s"], {"s": 0.1}, 100, revise_after=-1)
     with pytest.raises(Exception, match="revise_conf"):
         FaultTypeClassifier(["s"], {"s": 0.1}, 100, revise_conf=1.5)
+
+
+def test_hold_while_isolated_keeps_the_episode():
+    # an isolation stage (e.g. a CUSUM) still names the sensor while its normalised residual is low:
+    # without the option the episode clears after clear_after samples and starts again (issue 27:
+    # a new episode, a fresh type, a flip); with it the episode lasts while the flag is on
+    T = 1200
+    k = np.arange(T)
+    rng = np.random.default_rng(0)
+    e = 0.01 * rng.standard_normal(T) + 0.05 * (k >= 200)
+    iso = (k >= 250).astype(float)
+    stat = np.full(T, 0.2)
+    sig = Signals(k * 0.02, np.column_stack([iso, stat, e, 5.0 + np.sin(k / 30)])[None],
+                  ["peer:s:isolated", "peer:s", "peer:s:e", "peer:s:ref"])
+    kw = {"lookback": 50, "block": 10, "clear_after": 100}
+    off = FaultTypeClassifier(["s"], {"s": 0.01}, 600, **kw).run(sig)["s:active"][0]
+    on = FaultTypeClassifier(["s"], {"s": 0.01}, 600, hold_while_isolated=True, **kw).run(sig)["s:active"][0]
+    assert off[250:].min() == 0.0
+    assert on[250:].min() == 1.0

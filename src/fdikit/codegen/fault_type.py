@@ -260,7 +260,8 @@ class FaultTypeEmitter(StageEmitter):
                   f"                {f('active')}[j] = 1;",
                   f"                {f('cand')}[j] = -1; {f('cnt')}[j] = -1; {f('left')}[j] = 0;",
                   "            }",
-                  f"            if ({f('active')}[j] && stat < {lit(o.release)} && !is_stuck)",
+                  f"            if ({f('active')}[j] && stat < {lit(o.release)} && !is_stuck"
+                  f"{' && !iso' if o.hold_while_isolated else ''})",
                   f"                {f('below')}[j] += 1;",
                   f"            else {f('below')}[j] = 0;",
                   f"            if ({f('below')}[j] >= {int(o.clear_after)}) {f('active')}[j] = 0;",

@@ -223,8 +223,8 @@ _RETURN = 3
 
 @njit(cache=True)
 def _run_kernel(V, ix, ixx, confirm, iraw, stuck, sigma, window, lookback, min_len, spike_max, burst_gap,
-                release, clear_after, prefer, block, sig_blk, gain_crit, revise_after, revise_conf, k, rb, xb,
-                sb, active, onset, typ, conf, below, zero, last, cand, cnt, left, out):
+                release, clear_after, prefer, block, sig_blk, gain_crit, revise_after, revise_conf, hold_iso,
+                k, rb, xb, sb, active, onset, typ, conf, below, zero, last, cand, cnt, left, out):
     """The classifier over samples V (R, T, inputs) from sample count k, state updated in place;
     outputs into out (R, T, outputs). Returns the new sample count."""
     R, T = V.shape[0], V.shape[1]
@@ -254,7 +254,7 @@ def _run_kernel(V, ix, ixx, confirm, iraw, stuck, sigma, window, lookback, min_l
                     onset[run, j] = max(k - 1 - lookback, 0)
                     active[run, j] = True
                     cand[run, j], cnt[run, j], left[run, j] = -1, -1, 0
-                if active[run, j] and stat < release and not is_stuck:
+                if active[run, j] and stat < release and not is_stuck and not (hold_iso and iso):
                     below[run, j] += 1
                 else:
                     below[run, j] = 0
@@ -341,6 +341,10 @@ class FaultTypeClassifier(ResidualProcessor):
         a bias that keeps growing); a frozen signal (stuck) is announced at once.
     revise_conf : float
         Confidence (0..1) the new type needs to replace the announced one.
+    hold_while_isolated : bool
+        The fault does not count towards clearing while an isolation flag is on (an isolation
+        stage that still names the sensor while its normalised residual is low, e.g. a CUSUM):
+        the episode, and the type announced for it, persist with the fault.
 
     Examples
     --------
@@ -365,7 +369,7 @@ class FaultTypeClassifier(ResidualProcessor):
                  spike_max: int = 10, burst_gap: int = 25, release: float = 0.5, clear_after: int = 250,
                  prefer: float = 6.0, block: int = 10, sigma_block: Mapping[str, float] | None = None,
                  gain_crit: float | Mapping[str, float] = 25.0, revise_after: int = 0,
-                 revise_conf: float = 0.0):
+                 revise_conf: float = 0.0, hold_while_isolated: bool = False):
         self.members = [str(m) for m in members]
         if not self.members:
             raise DataError("FaultTypeClassifier needs at least one member")
@@ -383,6 +387,7 @@ class FaultTypeClassifier(ResidualProcessor):
         self.release, self.prefer = float(release), float(prefer)
         self.block, self.revise_after = int(block), int(revise_after)
         self.revise_conf = float(revise_conf)
+        self.hold_while_isolated = bool(hold_while_isolated)
         if not 0.0 <= self.revise_conf <= 1.0:
             raise DataError(f"revise_conf must be a confidence in [0, 1], got {revise_conf!r}")
         gc = gain_crit if isinstance(gain_crit, Mapping) else {m: gain_crit for m in self.members}
@@ -458,7 +463,8 @@ class FaultTypeClassifier(ResidualProcessor):
         self._k = _run_kernel(v, self._ix, self._ixx, self.confirm, self._iraw, self._stuck, self._sigma,
                               self.window, self.lookback, self.min_len, self.spike_max, self.burst_gap,
                               self.release, self.clear_after, self.prefer, self.block, self._sig_blk,
-                              self._gain_crit, self.revise_after, self.revise_conf, self._k, self._rb,
+                              self._gain_crit, self.revise_after, self.revise_conf,
+                              self.hold_while_isolated, self._k, self._rb,
                               self._xb, self._sb, self._active, self._onset, self._type, self._conf,
                               self._below, self._zero, self._last, self._cand, self._cnt, self._left, out)
         return out
@@ -496,7 +502,7 @@ class FaultTypeClassifier(ResidualProcessor):
                 "burst_gap": self.burst_gap, "release": self.release, "clear_after": self.clear_after,
                 "prefer": self.prefer, "block": self.block, "sigma_block": self.sigma_block,
                 "gain_crit": self.gain_crit, "revise_after": self.revise_after,
-                "revise_conf": self.revise_conf}
+                "revise_conf": self.revise_conf, "hold_while_isolated": self.hold_while_isolated}
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> FaultTypeClassifier:
