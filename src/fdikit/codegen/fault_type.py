@@ -174,7 +174,7 @@ static void fdk_ftc_revise(int64_t *typ, double *conf, int64_t *cand, int64_t *c
     }
     *cnt = nt == *cand ? *cnt + 1 : 1;
     need = ((*left >> nt) & 1) ? 3 * after : after;
-    if (*cnt >= need && nc >= min_conf) {
+    if (*cnt >= need && (nc >= min_conf || nt >= 4)) {
         *left |= ((int64_t)1) << *typ; *typ = nt; *conf = nc; *cand = -1; *cnt = 0; return;
     }
     *cand = nt;

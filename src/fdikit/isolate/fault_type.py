@@ -203,7 +203,9 @@ def _revise(shown, conf, cand, cnt, left, nt, nc, after, min_conf):
     """The announced type's revision with hysteresis: ``(type, confidence, candidate, count, left)``
     from the announced ``shown`` (confidence ``conf``), the candidate type and the samples it has
     lasted, the bit mask of the types the episode left, and this sample's decision ``nt`` (``nc``).
-    ``cnt < 0``: the episode's first decision; ``after <= 0``: no hysteresis (the decision as is)."""
+    ``cnt < 0``: the episode's first decision; ``after <= 0``: no hysteresis (the decision as is).
+    ``min_conf`` applies to the fitted types (bias, drift, gain), not to the counted ones
+    (intermittent, spike: their confidences are not a softmax of fits)."""
     if after <= 0 or cnt < 0 or nt == shown:
         return nt, nc, -1, 0, left
     if shown == _DRIFT and nt == _BIAS:               # a drift is a bias that keeps growing
@@ -212,7 +214,7 @@ def _revise(shown, conf, cand, cnt, left, nt, nc, after, min_conf):
         return nt, nc, -1, 0, left | (1 << shown)
     cnt = cnt + 1 if nt == cand else 1
     need = _RETURN * after if (left >> nt) & 1 else after
-    if cnt >= need and nc >= min_conf:
+    if cnt >= need and (nc >= min_conf or nt >= _INTER):   # bursts are counted, not fitted
         return nt, nc, -1, 0, left | (1 << shown)
     return shown, conf, nt, cnt, left
 
@@ -336,9 +338,9 @@ class FaultTypeClassifier(ResidualProcessor):
     revise_after : int
         Hysteresis of the announced type (0: none, the type is each sample's decision): within one
         episode the type first decided is replaced only by a type decided for ``revise_after``
-        samples in a row with a confidence of at least ``revise_conf``; a type the episode left
-        comes back only after three times as long; a drift never falls back to a bias (a drift is
-        a bias that keeps growing); a frozen signal (stuck) is announced at once.
+        samples in a row (bias, drift, gain: with a confidence of at least ``revise_conf``); a
+        type the episode left comes back only after three times as long; a drift never falls back
+        to a bias (a drift is a bias that keeps growing); a frozen signal (stuck) is announced at once.
     revise_conf : float
         Confidence (0..1) the new type needs to replace the announced one.
     hold_while_isolated : bool
