@@ -168,11 +168,11 @@ static void fdk_ftc_revise(int64_t *typ, double *conf, int64_t *cand, int64_t *c
     if (after <= 0 || *cnt < 0 || nt == *typ) {
         *typ = nt; *conf = nc; *cand = -1; *cnt = 0; return;
     }
-    if (*typ == 1 && nt == 0) { *cand = -1; *cnt = 0; return; }
+    *cnt += 1;
+    if (*typ == 1 && nt == 0) { *cand = nt; return; }
     if (nt == 3) {
         *left |= ((int64_t)1) << *typ; *typ = nt; *conf = nc; *cand = -1; *cnt = 0; return;
     }
-    *cnt = nt == *cand ? *cnt + 1 : 1;
     need = ((*left >> nt) & 1) ? 3 * after : after;
     if (*cnt >= need && (nc >= min_conf || nt >= 4)) {
         *left |= ((int64_t)1) << *typ; *typ = nt; *conf = nc; *cand = -1; *cnt = 0; return;

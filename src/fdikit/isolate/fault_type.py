@@ -38,8 +38,9 @@ of it, so that evidence grows until then):
   is the default explanation); the confidence is the softmax of ``S / 2`` over the three.
 
 With ``revise_after`` the announced type has hysteresis (issue 27: no flapping between types
-while one fault persists): a new type must win for ``revise_after`` samples in a row (three
-times as long for a type the episode already left), and a drift never falls back to a bias.
+while one fault persists): the announced type is replaced only after it has lost ``revise_after``
+samples in a row (three times as long for a return to a type the episode already left), and a
+drift never falls back to a bias.
 
 The fault stays active -- its episode does not clear -- while the normalised residual stays above
 ``release`` or the signal stays frozen; it ends after ``clear_after`` samples below. Outputs, per
@@ -201,18 +202,19 @@ def _gain_test(r, x, block, sig_blk):
 @njit(cache=True)
 def _revise(shown, conf, cand, cnt, left, nt, nc, after, min_conf):
     """The announced type's revision with hysteresis: ``(type, confidence, candidate, count, left)``
-    from the announced ``shown`` (confidence ``conf``), the candidate type and the samples it has
-    lasted, the bit mask of the types the episode left, and this sample's decision ``nt`` (``nc``).
+    from the announced ``shown`` (confidence ``conf``), the latest other decision and the samples
+    in a row the announced type has lost (the new decision replaces it after ``after`` of them),
+    the bit mask of the types the episode left, and this sample's decision ``nt`` (``nc``).
     ``cnt < 0``: the episode's first decision; ``after <= 0``: no hysteresis (the decision as is).
     ``min_conf`` applies to the fitted types (bias, drift, gain), not to the counted ones
     (intermittent, spike: their confidences are not a softmax of fits)."""
     if after <= 0 or cnt < 0 or nt == shown:
         return nt, nc, -1, 0, left
+    cnt += 1                                          # samples the announced type has lost in a row
     if shown == _DRIFT and nt == _BIAS:               # a drift is a bias that keeps growing
-        return shown, conf, -1, 0, left
+        return shown, conf, nt, cnt, left
     if nt == _STUCK:                                  # a frozen signal is a fact, not a fit
         return nt, nc, -1, 0, left | (1 << shown)
-    cnt = cnt + 1 if nt == cand else 1
     need = _RETURN * after if (left >> nt) & 1 else after
     if cnt >= need and (nc >= min_conf or nt >= _INTER):   # bursts are counted, not fitted
         return nt, nc, -1, 0, left | (1 << shown)
@@ -337,10 +339,11 @@ class FaultTypeClassifier(ResidualProcessor):
         the block-mean noise variance) above which the fault is a gain. Per member, or one for all.
     revise_after : int
         Hysteresis of the announced type (0: none, the type is each sample's decision): within one
-        episode the type first decided is replaced only by a type decided for ``revise_after``
-        samples in a row (bias, drift, gain: with a confidence of at least ``revise_conf``); a
-        type the episode left comes back only after three times as long; a drift never falls back
-        to a bias (a drift is a bias that keeps growing); a frozen signal (stuck) is announced at once.
+        episode the type first decided is replaced only after it has lost ``revise_after`` samples
+        in a row, by the decision then (bias, drift, gain: with a confidence of at least
+        ``revise_conf``); a type the episode left comes back only after three times as long; a
+        drift never falls back to a bias (a drift is a bias that keeps growing); a frozen signal
+        (stuck) is announced at once.
     revise_conf : float
         Confidence (0..1) the new type needs to replace the announced one.
     hold_while_isolated : bool
