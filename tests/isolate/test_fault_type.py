@@ -183,3 +183,17 @@ def test_hold_while_isolated_keeps_the_episode():
     on = FaultTypeClassifier(["s"], {"s": 0.01}, 600, hold_while_isolated=True, **kw).run(sig)["s:active"][0]
     assert off[250:].min() == 0.0
     assert on[250:].min() == 1.0
+
+
+def test_a_state_from_before_the_hysteresis_restores():
+    sig = _persisting("gain", 0, T=1500)
+    ftc = FaultTypeClassifier(["s"], {"s": 0.023}, 1500, lookback=100, block=10, revise_after=50)
+    x = sig.values[:, :, sig.index(ftc.input_names)]
+    for k in range(1200):
+        ftc.step(x[:, k])
+    old = {k: v for k, v in ftc.get_state().items() if k not in ("_cand", "_cnt", "_left")}
+    ftc2 = FaultTypeClassifier(["s"], {"s": 0.023}, 1500, lookback=100, block=10, revise_after=50)
+    ftc2.set_state(old)
+    assert ftc2._active.any() and np.array_equal(ftc2._cnt, np.zeros((1, 1), np.int64))
+    with pytest.raises(Exception, match="state has keys"):
+        ftc2.set_state({**old, "_cand": ftc.get_state()["_cand"]})

@@ -458,6 +458,15 @@ class FaultTypeClassifier(ResidualProcessor):
         self._cnt = np.zeros((R, M), np.int64)
         self._left = np.zeros((R, M), np.int64)
 
+    def set_state(self, state: dict[str, Any]) -> None:
+        """Restore a state of :meth:`get_state`; one saved before the type's hysteresis (no
+        ``_cand``, ``_cnt``, ``_left``) continues with the announced type as the episode's first."""
+        if isinstance(state, dict) and "_type" in state and not {"_cand", "_cnt", "_left"} & set(state):
+            shape = np.shape(state["_type"])
+            state = {**state, "_cand": np.full(shape, -1, np.int64), "_cnt": np.zeros(shape, np.int64),
+                     "_left": np.zeros(shape, np.int64)}
+        super().set_state(state)
+
     def resume(self, n_held: int) -> None:
         """After held samples: start again (the window would span the gap)."""
         self.reset(self._R)
