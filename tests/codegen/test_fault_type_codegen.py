@@ -35,13 +35,14 @@ pytestmark = pytest.mark.skipif(find_compiler() is None, reason="no C compiler (
 M = ["a", "b", "c"]
 
 
-def _monitor():
+def _monitor(revise_after=0):
     """The classifier's inputs passed through as residuals, its types held and announced, one
-    group per sensor."""
+    group per sensor (``revise_after``: the announced type's hysteresis, issue 27)."""
     ftc = FaultTypeClassifier(M, {m: 0.1 for m in M}, 300, raw={"a": "raw:a", "c": "raw:c"},
                               stuck_after={"a": 40, "c": 30}, isolated_by={"b": ["ext:b"]}, confirm=0.5,
                               lookback=30, min_len=5, spike_max=8, burst_gap=20, clear_after=150, block=10,
-                              gain_crit={"a": 20.0, "b": 25.0, "c": 30.0})
+                              gain_crit={"a": 20.0, "b": 25.0, "c": 30.0}, revise_after=revise_after,
+                              revise_conf=0.3 if revise_after else 0.0, hold_while_isolated=revise_after > 0)
     ins = ftc.input_names
     n = len(ins)
     d = FilterDesign(np.zeros((0, 0)), np.zeros((0, 0)), np.zeros((0, n)), np.zeros((n, 0)), np.zeros((n, 0)),
@@ -113,9 +114,9 @@ def _c(res):
             for e in res["events"]]
 
 
-@pytest.fixture(scope="module")
-def built(tmp_path_factory):
-    mon = _monitor()
+@pytest.fixture(scope="module", params=[0, 20], ids=["no_hysteresis", "hysteresis"])
+def built(tmp_path_factory, request):
+    mon = _monitor(request.param)
     return (mon, *_build(mon, tmp_path_factory.mktemp("ftc"), "fdk_ftc"))
 
 

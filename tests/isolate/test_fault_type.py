@@ -1,6 +1,8 @@
 """FaultTypeClassifier (issue 27): a gain is told from a bias by the regression of the residual on
 the signal, once the signal has moved; the compiled loop gives the same numbers batch and streaming."""
 
+import itertools
+
 import numpy as np
 import pytest
 
@@ -74,3 +76,124 @@ def test_gain_of_a_sensor_with_an_offset_is_a_gain():
                   ["peer:s:isolated", "peer:s", "peer:s:e", "peer:s:ref"])
     out = FaultTypeClassifier(["s"], {"s": 0.002}, 1500, lookback=100, block=10).run(sig)
     assert out["s:gain"][0, -1] == 1.0, {n: out[n][0, -1] for n in out.names}
+
+
+def _persisting(kind, seed, T=5000):
+    """One fault from sample 1000 that persists to the end: a ramp (drift) or a x1.01 gain of a
+    signal far from zero, on a coloured residual (AR(1), 0.9)."""
+    rng = np.random.default_rng(seed)
+    k = np.arange(T)
+    ref = 20.0 + 2.0 * np.sin(k / 150.0)
+    w = 0.01 * rng.standard_normal(T)
+    e = np.zeros(T)
+    for i in range(1, T):
+        e[i] = 0.9 * e[i - 1] + w[i]
+    on = k >= 1000
+    e = e + (0.01 * ref * on if kind == "gain" else 0.0002 * (k - 1000) * on)
+    stat = np.abs(e) / 0.1
+    iso = (stat >= 1) & (k >= 1050)
+    return Signals(k * 0.02, np.column_stack([iso, stat, e, ref])[None],
+                   ["peer:s:isolated", "peer:s", "peer:s:e", "peer:s:ref"])
+
+
+def _types(out):
+    """The announced type per active sample, and its changes."""
+    from fdikit.isolate import FAULT_TYPES
+
+    ty = np.argmax(np.stack([out[f"s:{t}"][0] for t in FAULT_TYPES]), 0)
+    seq = [FAULT_TYPES[t] for t, a in zip(ty, out["s:active"][0] > 0, strict=True) if a]
+    return seq, [(a, b) for a, b in itertools.pairwise(seq) if a != b]
+
+
+@pytest.mark.parametrize(("kind", "seed"),
+                         [("drift", 1), ("drift", 2), ("gain", 0), ("gain", 1), ("gain", 2)])
+def test_a_persisting_fault_type_does_not_flap(kind, seed):
+    # issue 27: without hysteresis the type flips back and forth while one fault persists
+    sig = _persisting(kind, seed)
+    kw = {"lookback": 100, "block": 10}
+    _seq0, ch0 = _types(FaultTypeClassifier(["s"], {"s": 0.023}, 1500, **kw).run(sig))
+    assert len(ch0) >= 3                                 # the flapping this guards against
+    seq, ch = _types(FaultTypeClassifier(["s"], {"s": 0.023}, 1500, revise_after=100, revise_conf=0.5,
+                                         **kw).run(sig))
+    assert len(ch) <= 2 and seq[-1] == kind, ch          # a revision or two, to the right type
+    assert ("drift", "bias") not in ch
+    assert len({b for _a, b in ch} | {ch[0][0]} if ch else set()) == len(ch) + bool(ch)   # no return
+
+
+def test_hysteresis_batch_equals_streaming_and_round_trip():
+    sig = _persisting("drift", 1, T=2500)
+    ftc = FaultTypeClassifier(["s"], {"s": 0.023}, 1500, lookback=100, block=10, revise_after=50,
+                              revise_conf=0.4)
+    out = ftc.run(sig)
+    ftc.reset(1)
+    x = sig.values[:, :, sig.index(ftc.input_names)]
+    st = np.stack([ftc.step(x[:, k]) for k in range(sig.n_samples)], axis=1)
+    assert np.array_equal(out.values, st)
+    assert np.array_equal(FaultTypeClassifier.from_dict(ftc.to_dict()).run(sig).values, out.values)
+
+
+def test_revision_rule():
+    from fdikit.isolate.fault_type import _BIAS, _DRIFT, _GAIN, _STUCK, _revise
+
+    # the episode's first decision is announced as is; then a new type must last `after` samples
+    assert _revise(0, 0.0, 0, -1, 0, _GAIN, 0.7, 3, 0.5) == (_GAIN, 0.7, -1, 0, 0)
+    st = (_BIAS, 0.6, -1, 0, 0)
+    for _ in range(2):
+        st = _revise(*st, _GAIN, 0.9, 3, 0.5)
+        assert st[0] == _BIAS
+    st = _revise(*st, _GAIN, 0.9, 3, 0.5)
+    assert st[:2] == (_GAIN, 0.9) and st[4] == 1 << _BIAS
+    # back to a type it left: three times as long
+    for _ in range(8):
+        st = _revise(*st, _BIAS, 0.9, 3, 0.5)
+        assert st[0] == _GAIN
+    assert _revise(*st, _BIAS, 0.9, 3, 0.5)[0] == _BIAS
+    # too little confidence never revises; a drift never falls back to a bias; stuck at once
+    st = (_BIAS, 0.6, -1, 0, 0)
+    for _ in range(10):
+        st = _revise(*st, _GAIN, 0.4, 3, 0.5)
+    assert st[0] == _BIAS
+    assert _revise(_DRIFT, 0.8, -1, 0, 0, _BIAS, 1.0, 1, 0.0)[0] == _DRIFT
+    assert _revise(_BIAS, 0.8, -1, 0, 0, _STUCK, 0.5, 100, 0.9)[0] == _STUCK
+    # revise_after = 0: each sample's decision (the classifier before issue 27's hysteresis)
+    assert _revise(_DRIFT, 0.8, -1, 5, 0, _BIAS, 0.6, 0, 0.0) == (_BIAS, 0.6, -1, 0, 0)
+
+
+def test_bad_revision_options():
+    with pytest.raises(Exception, match="revise_after"):
+        FaultTypeClassifier(["s"], {"s": 0.1}, 100, revise_after=-1)
+    with pytest.raises(Exception, match="revise_conf"):
+        FaultTypeClassifier(["s"], {"s": 0.1}, 100, revise_conf=1.5)
+
+
+def test_hold_while_isolated_keeps_the_episode():
+    # an isolation stage (e.g. a CUSUM) still names the sensor while its normalised residual is low:
+    # without the option the episode clears after clear_after samples and starts again (issue 27:
+    # a new episode, a fresh type, a flip); with it the episode lasts while the flag is on
+    T = 1200
+    k = np.arange(T)
+    rng = np.random.default_rng(0)
+    e = 0.01 * rng.standard_normal(T) + 0.05 * (k >= 200)
+    iso = (k >= 250).astype(float)
+    stat = np.full(T, 0.2)
+    sig = Signals(k * 0.02, np.column_stack([iso, stat, e, 5.0 + np.sin(k / 30)])[None],
+                  ["peer:s:isolated", "peer:s", "peer:s:e", "peer:s:ref"])
+    kw = {"lookback": 50, "block": 10, "clear_after": 100}
+    off = FaultTypeClassifier(["s"], {"s": 0.01}, 600, **kw).run(sig)["s:active"][0]
+    on = FaultTypeClassifier(["s"], {"s": 0.01}, 600, hold_while_isolated=True, **kw).run(sig)["s:active"][0]
+    assert off[250:].min() == 0.0
+    assert on[250:].min() == 1.0
+
+
+def test_a_state_from_before_the_hysteresis_restores():
+    sig = _persisting("gain", 0, T=1500)
+    ftc = FaultTypeClassifier(["s"], {"s": 0.023}, 1500, lookback=100, block=10, revise_after=50)
+    x = sig.values[:, :, sig.index(ftc.input_names)]
+    for k in range(1200):
+        ftc.step(x[:, k])
+    old = {k: v for k, v in ftc.get_state().items() if k not in ("_cand", "_cnt", "_left")}
+    ftc2 = FaultTypeClassifier(["s"], {"s": 0.023}, 1500, lookback=100, block=10, revise_after=50)
+    ftc2.set_state(old)
+    assert ftc2._active.any() and np.array_equal(ftc2._cnt, np.zeros((1, 1), np.int64))
+    with pytest.raises(Exception, match="state has keys"):
+        ftc2.set_state({**old, "_cand": ftc.get_state()["_cand"]})

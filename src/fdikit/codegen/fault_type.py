@@ -159,6 +159,26 @@ static void fdk_ftc_classify(const double *rb, const double *xb, const double *s
     if (best == 0 && fg < gain_crit) c = 0.5 < c ? 0.5 : c;
     *typ = best; *conf = c;
 }
+
+/* _revise: the announced type's hysteresis (type, conf, cand, cnt, left updated from nt, nc) */
+static void fdk_ftc_revise(int64_t *typ, double *conf, int64_t *cand, int64_t *cnt, int64_t *left, int64_t nt,
+                           double nc, int64_t after, double min_conf)
+{
+    int64_t need;
+    if (after <= 0 || *cnt < 0 || nt == *typ) {
+        *typ = nt; *conf = nc; *cand = -1; *cnt = 0; return;
+    }
+    *cnt += 1;
+    if (*typ == 1 && nt == 0) { *cand = nt; return; }
+    if (nt == 3) {
+        *left |= ((int64_t)1) << *typ; *typ = nt; *conf = nc; *cand = -1; *cnt = 0; return;
+    }
+    need = ((*left >> nt) & 1) ? 3 * after : after;
+    if (*cnt >= need && (nc >= min_conf || nt >= 4)) {
+        *left |= ((int64_t)1) << *typ; *typ = nt; *conf = nc; *cand = -1; *cnt = 0; return;
+    }
+    *cand = nt;
+}
 """
 
 
@@ -180,7 +200,8 @@ class FaultTypeEmitter(StageEmitter):
         MW, M = self.M * self.W, self.M
         return ([Field(f"{self.p}_{n}", "f64", MW) for n in ("rb", "xb", "sb")]
                 + [Field(f"{self.p}_k", "i64", 1)]
-                + [Field(f"{self.p}_{n}", "i64", M) for n in ("active", "onset", "type", "below", "zero")]
+                + [Field(f"{self.p}_{n}", "i64", M) for n in ("active", "onset", "type", "below", "zero",
+                                                                  "cand", "cnt", "left")]
                 + [Field(f"{self.p}_{n}", "f64", M) for n in ("conf", "last")])
 
     def reset_code(self):
@@ -189,6 +210,7 @@ class FaultTypeEmitter(StageEmitter):
                 f"{f('sb')}[i] = 0.0; }}\n"
                 f"      for (i = 0; i < {M}; ++i) {{ {f('active')}[i] = 0; {f('onset')}[i] = 0; "
                 f"{f('type')}[i] = 0; {f('below')}[i] = 0;\n"
+                f"          {f('cand')}[i] = 0; {f('cnt')}[i] = 0; {f('left')}[i] = 0;\n"
                 f"          {f('zero')}[i] = 0; {f('conf')}[i] = 0.0; {f('last')}[i] = NAN; }}\n"
                 f"      {f('k')}[0] = 0; }}")
 
@@ -235,15 +257,19 @@ class FaultTypeEmitter(StageEmitter):
                   f"&& v[IX[4 * j + 1]] >= {lit(o.confirm)}) iso = 1;",
                   f"            if (!{f('active')}[j] && (iso || is_stuck)) {{",
                   f"                {f('onset')}[j] = k - 1 - {lb} > 0 ? k - 1 - {lb} : 0;",
-                  f"                {f('active')}[j] = 1;", "            }",
-                  f"            if ({f('active')}[j] && stat < {lit(o.release)} && !is_stuck)",
+                  f"                {f('active')}[j] = 1;",
+                  f"                {f('cand')}[j] = -1; {f('cnt')}[j] = -1; {f('left')}[j] = 0;",
+                  "            }",
+                  f"            if ({f('active')}[j] && stat < {lit(o.release)} && !is_stuck"
+                  f"{' && !iso' if o.hold_while_isolated else ''})",
                   f"                {f('below')}[j] += 1;",
                   f"            else {f('below')}[j] = 0;",
                   f"            if ({f('below')}[j] >= {int(o.clear_after)}) {f('active')}[j] = 0;",
                   f"            if ({f('active')}[j]) {{",
+                  "                int64_t nt; double nc;",
                   "                if (is_stuck) {",
                   f"                    double z = (double){f('zero')}[j];",
-                  f"                    {f('type')}[j] = 3; {f('conf')}[j] = z / (z + (double)STUCK[j]);",
+                  "                    nt = 3; nc = z / (z + (double)STUCK[j]);",
                   "                } else {",
                   f"                    int64_t n = k - {f('onset')}[j] < {W} ? k - {f('onset')}[j] : {W};",
                   f"                    int64_t k0 = {f('onset')}[j] > k - {W} ? {f('onset')}[j] : k - {W};",
@@ -252,8 +278,12 @@ class FaultTypeEmitter(StageEmitter):
                   f"                                     SIGMA[j], {int(o.min_len)}, {lit(o.prefer)}, "
                   f"{lit(o.release)}, {int(o.burst_gap)}, {int(o.spike_max)},",
                   f"                                     {int(o.block)}, SIGBLK[j], GAINC[j], rm, xm, "
-                  f"&{f('type')}[j], &{f('conf')}[j]);",
-                  "                }", "            }", "        }"]
+                  "&nt, &nc);",
+                  "                }",
+                  f"                fdk_ftc_revise(&{f('type')}[j], &{f('conf')}[j], &{f('cand')}[j], "
+                  f"&{f('cnt')}[j], &{f('left')}[j], nt, nc,",
+                  f"                               {int(o.revise_after)}, {lit(o.revise_conf)});",
+                  "            }", "        }"]
         nt = 6
         for j in range(M):
             a = f"{f('active')}[{j}]"
@@ -268,7 +298,7 @@ class FaultTypeEmitter(StageEmitter):
     def to_py(self, arrays):
         M, W = self.M, self.W
         a = {n: arrays[f"{self.p}_{n}"] for n in ("rb", "xb", "sb", "k", "active", "onset", "type", "conf",
-                                                  "below", "zero", "last")}
+                                                  "below", "zero", "last", "cand", "cnt", "left")}
         return {"_rb": a["rb"].astype(float).reshape(1, M, W), "_xb": a["xb"].astype(float).reshape(1, M, W),
                 "_sb": a["sb"].astype(float).reshape(1, M, W), "_k": int(a["k"][0]),
                 "_active": a["active"].astype(bool).reshape(1, M),
@@ -277,12 +307,14 @@ class FaultTypeEmitter(StageEmitter):
                 "_conf": a["conf"].astype(float).reshape(1, M),
                 "_below": a["below"].astype(np.int64).reshape(1, M),
                 "_zero": a["zero"].astype(np.int64).reshape(1, M),
-                "_last": a["last"].astype(float).reshape(1, M)}
+                "_last": a["last"].astype(float).reshape(1, M),
+                **{f"_{n}": a[n].astype(np.int64).reshape(1, M) for n in ("cand", "cnt", "left")}}
 
     def from_py(self, state):
         real = ("rb", "xb", "sb", "conf", "last")
         out = {f"{self.p}_{n}": np.ravel(state[f"_{n}"]).astype(float if n in real else np.int64)
-               for n in ("rb", "xb", "sb", "active", "onset", "type", "conf", "below", "zero", "last")}
+               for n in ("rb", "xb", "sb", "active", "onset", "type", "conf", "below", "zero", "last",
+                         "cand", "cnt", "left")}
         return out | {f"{self.p}_k": np.array([state["_k"]])}
 
 

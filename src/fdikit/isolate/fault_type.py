@@ -37,6 +37,11 @@ of it, so that evidence grows until then):
   x^2)``. Drift wins over bias only when its statistic exceeds the bias one by ``prefer`` (a step
   is the default explanation); the confidence is the softmax of ``S / 2`` over the three.
 
+With ``revise_after`` the announced type has hysteresis (issue 27: no flapping between types
+while one fault persists): the announced type is replaced only after it has lost ``revise_after``
+samples in a row (three times as long for a return to a type the episode already left), and a
+drift never falls back to a bias.
+
 The fault stays active -- its episode does not clear -- while the normalised residual stays above
 ``release`` or the signal stays frozen; it ends after ``clear_after`` samples below. Outputs, per
 member ``m``: ``m:<type>`` for each of :data:`FAULT_TYPES` (1 while active with that type),
@@ -195,9 +200,35 @@ def _gain_test(r, x, block, sig_blk):
 
 
 @njit(cache=True)
+def _revise(shown, conf, cand, cnt, left, nt, nc, after, min_conf):
+    """The announced type's revision with hysteresis: ``(type, confidence, candidate, count, left)``
+    from the announced ``shown`` (confidence ``conf``), the latest other decision and the samples
+    in a row the announced type has lost (the new decision replaces it after ``after`` of them),
+    the bit mask of the types the episode left, and this sample's decision ``nt`` (``nc``).
+    ``cnt < 0``: the episode's first decision; ``after <= 0``: no hysteresis (the decision as is).
+    ``min_conf`` applies to the fitted types (bias, drift, gain), not to the counted ones
+    (intermittent, spike: their confidences are not a softmax of fits)."""
+    if after <= 0 or cnt < 0 or nt == shown:
+        return nt, nc, -1, 0, left
+    cnt += 1                                          # samples the announced type has lost in a row
+    if shown == _DRIFT and nt == _BIAS:               # a drift is a bias that keeps growing
+        return shown, conf, nt, cnt, left
+    if nt == _STUCK:                                  # a frozen signal is a fact, not a fit
+        return nt, nc, -1, 0, left | (1 << shown)
+    need = _RETURN * after if (left >> nt) & 1 else after
+    if cnt >= need and (nc >= min_conf or nt >= _INTER):   # bursts are counted, not fitted
+        return nt, nc, -1, 0, left | (1 << shown)
+    return shown, conf, nt, cnt, left
+
+
+#: how many times longer than ``revise_after`` a type the episode left must win to come back
+_RETURN = 3
+
+
+@njit(cache=True)
 def _run_kernel(V, ix, ixx, confirm, iraw, stuck, sigma, window, lookback, min_len, spike_max, burst_gap,
-                release, clear_after, prefer, block, sig_blk, gain_crit, k, rb, xb, sb, active, onset, typ,
-                conf, below, zero, last, out):
+                release, clear_after, prefer, block, sig_blk, gain_crit, revise_after, revise_conf, hold_iso,
+                k, rb, xb, sb, active, onset, typ, conf, below, zero, last, cand, cnt, left, out):
     """The classifier over samples V (R, T, inputs) from sample count k, state updated in place;
     outputs into out (R, T, outputs). Returns the new sample count."""
     R, T = V.shape[0], V.shape[1]
@@ -226,7 +257,8 @@ def _run_kernel(V, ix, ixx, confirm, iraw, stuck, sigma, window, lookback, min_l
                 if not active[run, j] and (iso or is_stuck):
                     onset[run, j] = max(k - 1 - lookback, 0)
                     active[run, j] = True
-                if active[run, j] and stat < release and not is_stuck:
+                    cand[run, j], cnt[run, j], left[run, j] = -1, -1, 0
+                if active[run, j] and stat < release and not is_stuck and not (hold_iso and iso):
                     below[run, j] += 1
                 else:
                     below[run, j] = 0
@@ -235,16 +267,18 @@ def _run_kernel(V, ix, ixx, confirm, iraw, stuck, sigma, window, lookback, min_l
                 if active[run, j]:
                     if is_stuck:
                         z = float(zero[run, j])
-                        typ[run, j], conf[run, j] = _STUCK, z / (z + stuck[j])
+                        nt, nc = _STUCK, z / (z + stuck[j])
                     else:
                         n = min(W, k - onset[run, j])
                         k0 = max(onset[run, j], k - W)
                         for i in range(n):
                             q = (k0 + i) % W
                             r_seg[i], x_seg[i], s_seg[i] = rb[run, j, q], xb[run, j, q], sb[run, j, q]
-                        typ[run, j], conf[run, j] = _classify(r_seg[:n], x_seg[:n], s_seg[:n], sigma[j],
-                                                              min_len, prefer, release, burst_gap, spike_max,
-                                                              block, sig_blk[j], gain_crit[j])
+                        nt, nc = _classify(r_seg[:n], x_seg[:n], s_seg[:n], sigma[j], min_len, prefer,
+                                           release, burst_gap, spike_max, block, sig_blk[j], gain_crit[j])
+                    typ[run, j], conf[run, j], cand[run, j], cnt[run, j], left[run, j] = _revise(
+                        typ[run, j], conf[run, j], cand[run, j], cnt[run, j], left[run, j], nt, nc,
+                        revise_after, revise_conf)
                 for i in range(NT):
                     out[run, kk, j * NT + i] = 1.0 if (active[run, j] and typ[run, j] == i) else 0.0
                 out[run, kk, M * NT + j] = conf[run, j] if active[run, j] else 0.0
@@ -303,6 +337,19 @@ class FaultTypeClassifier(ResidualProcessor):
     gain_crit : float or mapping str -> float
         Level of the gain test's F statistic (the slope of the residual on the signal, in units of
         the block-mean noise variance) above which the fault is a gain. Per member, or one for all.
+    revise_after : int
+        Hysteresis of the announced type (0: none, the type is each sample's decision): within one
+        episode the type first decided is replaced only after it has lost ``revise_after`` samples
+        in a row, by the decision then (bias, drift, gain: with a confidence of at least
+        ``revise_conf``); a type the episode left comes back only after three times as long; a
+        drift never falls back to a bias (a drift is a bias that keeps growing); a frozen signal
+        (stuck) is announced at once.
+    revise_conf : float
+        Confidence (0..1) the new type needs to replace the announced one.
+    hold_while_isolated : bool
+        The fault does not count towards clearing while an isolation flag is on (an isolation
+        stage that still names the sensor while its normalised residual is low, e.g. a CUSUM):
+        the episode, and the type announced for it, persist with the fault.
 
     Examples
     --------
@@ -317,7 +364,7 @@ class FaultTypeClassifier(ResidualProcessor):
     """
 
     _state_attrs = ("_rb", "_xb", "_sb", "_k", "_active", "_onset", "_type", "_conf", "_below", "_zero",
-                    "_last")
+                    "_last", "_cand", "_cnt", "_left")
 
     def __init__(self, members: Sequence[str], sigma: Mapping[str, float], window: int, *,
                  channels: Mapping[str, str] | None = None,
@@ -326,7 +373,8 @@ class FaultTypeClassifier(ResidualProcessor):
                  stuck_after: Mapping[str, int] | None = None, lookback: int = 50, min_len: int = 10,
                  spike_max: int = 10, burst_gap: int = 25, release: float = 0.5, clear_after: int = 250,
                  prefer: float = 6.0, block: int = 10, sigma_block: Mapping[str, float] | None = None,
-                 gain_crit: float | Mapping[str, float] = 25.0):
+                 gain_crit: float | Mapping[str, float] = 25.0, revise_after: int = 0,
+                 revise_conf: float = 0.0, hold_while_isolated: bool = False):
         self.members = [str(m) for m in members]
         if not self.members:
             raise DataError("FaultTypeClassifier needs at least one member")
@@ -335,13 +383,18 @@ class FaultTypeClassifier(ResidualProcessor):
             raise DataError(f"sigma must be finite and > 0 per member, got {self.sigma}")
         for what, v, lo in (("window", window, 2), ("lookback", lookback, 0), ("min_len", min_len, 1),
                             ("spike_max", spike_max, 1), ("burst_gap", burst_gap, 1),
-                            ("clear_after", clear_after, 1), ("block", block, 1)):
+                            ("clear_after", clear_after, 1), ("block", block, 1),
+                            ("revise_after", revise_after, 0)):
             if isinstance(v, bool) or int(v) != v or v < lo:
                 raise DataError(f"{what} must be an integer >= {lo} (samples), got {v!r}")
         self.window, self.lookback, self.min_len = int(window), int(lookback), int(min_len)
         self.spike_max, self.burst_gap, self.clear_after = int(spike_max), int(burst_gap), int(clear_after)
         self.release, self.prefer = float(release), float(prefer)
-        self.block = int(block)
+        self.block, self.revise_after = int(block), int(revise_after)
+        self.revise_conf = float(revise_conf)
+        self.hold_while_isolated = bool(hold_while_isolated)
+        if not 0.0 <= self.revise_conf <= 1.0:
+            raise DataError(f"revise_conf must be a confidence in [0, 1], got {revise_conf!r}")
         gc = gain_crit if isinstance(gain_crit, Mapping) else {m: gain_crit for m in self.members}
         self.gain_crit = {m: float(gc[m]) for m in self.members}
         if any(not (np.isfinite(v) and v > 0) for v in self.gain_crit.values()):
@@ -401,6 +454,18 @@ class FaultTypeClassifier(ResidualProcessor):
         self._below = np.zeros((R, M), np.int64)
         self._zero = np.zeros((R, M), np.int64)
         self._last = np.full((R, M), np.nan)
+        self._cand = np.zeros((R, M), np.int64)
+        self._cnt = np.zeros((R, M), np.int64)
+        self._left = np.zeros((R, M), np.int64)
+
+    def set_state(self, state: dict[str, Any]) -> None:
+        """Restore a state of :meth:`get_state`; one saved before the type's hysteresis (no
+        ``_cand``, ``_cnt``, ``_left``) continues with the announced type as the episode's first."""
+        if isinstance(state, dict) and "_type" in state and not {"_cand", "_cnt", "_left"} & set(state):
+            shape = np.shape(state["_type"])
+            state = {**state, "_cand": np.full(shape, -1, np.int64), "_cnt": np.zeros(shape, np.int64),
+                     "_left": np.zeros(shape, np.int64)}
+        super().set_state(state)
 
     def resume(self, n_held: int) -> None:
         """After held samples: start again (the window would span the gap)."""
@@ -412,8 +477,10 @@ class FaultTypeClassifier(ResidualProcessor):
         self._k = _run_kernel(v, self._ix, self._ixx, self.confirm, self._iraw, self._stuck, self._sigma,
                               self.window, self.lookback, self.min_len, self.spike_max, self.burst_gap,
                               self.release, self.clear_after, self.prefer, self.block, self._sig_blk,
-                              self._gain_crit, self._k, self._rb, self._xb, self._sb, self._active,
-                              self._onset, self._type, self._conf, self._below, self._zero, self._last, out)
+                              self._gain_crit, self.revise_after, self.revise_conf,
+                              self.hold_while_isolated, self._k, self._rb,
+                              self._xb, self._sb, self._active, self._onset, self._type, self._conf,
+                              self._below, self._zero, self._last, self._cand, self._cnt, self._left, out)
         return out
 
     def _check(self, v: np.ndarray, k: int) -> None:
@@ -448,7 +515,8 @@ class FaultTypeClassifier(ResidualProcessor):
                 "lookback": self.lookback, "min_len": self.min_len, "spike_max": self.spike_max,
                 "burst_gap": self.burst_gap, "release": self.release, "clear_after": self.clear_after,
                 "prefer": self.prefer, "block": self.block, "sigma_block": self.sigma_block,
-                "gain_crit": self.gain_crit}
+                "gain_crit": self.gain_crit, "revise_after": self.revise_after,
+                "revise_conf": self.revise_conf, "hold_while_isolated": self.hold_while_isolated}
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> FaultTypeClassifier:

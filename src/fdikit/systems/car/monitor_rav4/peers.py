@@ -142,7 +142,8 @@ def design_peer_stages(sig: Signals, dt: float, *, skip: int, warmup: int, band_
                        margin: float = 0.0, block_s: float = 0.5, gain_crit: float = 25.0,
                        isolated_by=None, confirm: float = 0.5, gain_margin: float = 1.5,
                        cusum: bool = True, cusum_nu: float = 1.0, cusum_margin: float = 0.5,
-                       cusum_groups: tuple[str, ...] = ("yaw",)):
+                       cusum_groups: tuple[str, ...] = ("yaw",), revise_after_s: float = 1.0,
+                       revise_conf: float = 0.6):
     """The peer check and the fault-type classifier designed on nominal :class:`Rav4PeerSignals`
     outputs ``sig`` (the calibration half).
 
@@ -165,6 +166,11 @@ def design_peer_stages(sig: Signals, dt: float, *, skip: int, warmup: int, band_
     ``cusum_groups`` (the yaw group: the wheels' residuals follow the speed, and a CUSUM tuned on
     the calibration half alarms on the held-out half) isolates what the peer check's threshold
     misses; the classifier reads its merged outputs.
+
+    The announced type has hysteresis (issue 27): a revised type must win for ``revise_after_s``
+    seconds in a row with a confidence of at least ``revise_conf``, and a drift never falls back to
+    a bias (:class:`~fdikit.isolate.FaultTypeClassifier`'s ``revise_after``; 0 s: none); and the
+    classifier's episode does not clear while the sensor is isolated (``hold_while_isolated``).
 
     Returns
     -------
@@ -215,7 +221,8 @@ def design_peer_stages(sig: Signals, dt: float, *, skip: int, warmup: int, band_
                               lookback=n(lookback_s), min_len=n(0.2), spike_max=n(0.2), burst_gap=n(0.5),
                               clear_after=n(clear_after_s), isolated_by=isolated_by, confirm=confirm,
                               block=blk, sigma_block=sig_blk,
-                              gain_crit=crit,
+                              gain_crit=crit, revise_after=n(revise_after_s) if revise_after_s > 0 else 0,
+                              revise_conf=revise_conf, hold_while_isolated=revise_after_s > 0,
                               channels=_CUSUM_CHANNELS if cusum else None)
     names = {f"{m}:{t}": f"{s}:{t}" for m, s in PEER_SENSORS.items() for t in FAULT_TYPES}
     cu = None
