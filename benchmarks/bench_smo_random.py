@@ -180,6 +180,7 @@ def main(n_systems: int = 40, large: tuple[int, ...] = (30, 60), noise_systems: 
     noise = {str(s): [] for s in NOISE_LEVELS}
     noise_crashes = []
     square = []
+    flagged = [0, 0]  # samples after 0.1 s called not sliding (default gains, every shape), all samples
     for seed, kind in kinds(n_systems)[first:]:
         silent0 = dict(silent)
         A, M, C, Q = random_system(seed, kind)
@@ -217,6 +218,8 @@ def main(n_systems: int = 40, large: tuple[int, ...] = (30, 60), noise_systems: 
             err = np.minimum(np.linalg.norm(fh - f, axis=1), np.linalg.norm(fh - fprev, axis=1))
             bad = (err > 0.05) & (t >= 0.1) & (st == SLIDING)
             silent["default"] += int(bad.sum())
+            flagged[0] += int(np.sum(st[t >= 0.1] != SLIDING))
+            flagged[1] += int(np.sum(t >= 0.1))
             if name.startswith("square"):
                 square.append(int(bad.sum()))
         row["rmse_ratio"] = ratios
@@ -333,6 +336,7 @@ def main(n_systems: int = 40, large: tuple[int, ...] = (30, 60), noise_systems: 
         "median_rmse_ratio_per_shape": {k: float(np.median([r["rmse_ratio"][k] for r in ok_rows]))
                                         for k in shapes},
         "silent_saturation_samples_default_gains": silent["default"],
+        "not_sliding_fraction_default_gains": flagged[0] / max(flagged[1], 1),
         "silent_saturation_samples_undersized_gains": silent["undersized"],
         "undersized_systems_flagged_saturated": flagged_undersized,
         "l2_bound_checks": len(bound_checks),
