@@ -273,11 +273,12 @@ def chk_outside(lo, hi, *, margin=0.05):
 
 
 def chk_gap(lo, hi):
-    """Gap [lo, hi): gridded samples strictly inside are invalid, with a reason; outside unchanged."""
+    """Gap [lo, hi): gridded samples strictly inside are invalid, with a reason; outside unchanged.
+    The causal grid holds the last sample for max_gap = 3 source periods (0.03 s at 100 Hz) first."""
 
     def chk(s, ref, reader):
         chk_outside(lo, hi)(s, ref, reader)
-        inside = (s.t > lo + 0.02) & (s.t < hi - 0.02)
+        inside = (s.t > lo + 0.035) & (s.t < hi - 0.02)
         if reader == "csv":
             assert not inside.any()  # the file's own stamps: no sample in the gap at all
             return
@@ -288,12 +289,13 @@ def chk_gap(lo, hi):
     return chk
 
 
-def chk_invalid(lo, hi, col):
-    """Channel ``col`` invalid on [lo, hi) (and nowhere far outside); others unchanged."""
+def chk_invalid(lo, hi, col, *, held=False):
+    """Channel ``col`` invalid on [lo, hi) (and nowhere far outside); others unchanged. ``held``:
+    the cells are empty (no samples), so the causal grid holds the last one for 3 periods first."""
 
     def chk(s, ref, reader):
         c = s.names.index(col)
-        m = (s.t >= lo + 0.015) & (s.t < hi - 0.015)
+        m = (s.t >= lo + (0.035 if held else 0.015)) & (s.t < hi - 0.015)
         assert m.any() and not s.valid[0, m, c].any(), "a bad cell was not flagged"
         far = (s.t < lo - 0.05) | (s.t > hi + 0.05)
         assert s.valid[0, far, c].all(), "good samples flagged"
@@ -367,7 +369,7 @@ ARTEFACT_TABLE = [
     ("gap_10_periods", a_gap(3.0, 3.1), {}, chk_gap(3.0, 3.1)),
     ("jump_1000s", a_rows(_big_jump), {}, chk_any),
     # NaN blocks and bad values
-    ("nan_block_empty_1s", a_cells(2.0, 3.0, 1, ""), {}, chk_invalid(2.0, 3.0, "x")),
+    ("nan_block_empty_1s", a_cells(2.0, 3.0, 1, ""), {}, chk_invalid(2.0, 3.0, "x", held=True)),
     ("nan_block_text_1s", a_cells(2.0, 3.0, 2, "nan"), {}, chk_invalid(2.0, 3.0, "y")),
     ("nan_single", a_cells(2.0, 2.01, 3, "NaN"), {}, chk_outside(1.98, 2.02)),
     ("na_texts", a_cells(1.0, 1.05, 1, "NA"), {"table@100Hz": "not a number"}, chk_invalid(1.0, 1.05, "x")),
