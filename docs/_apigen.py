@@ -28,6 +28,7 @@ PACKAGES = [
     "fdikit.monitor",
     "fdikit.evaluate",
     "fdikit.report",
+    "fdikit.codegen",
     "fdikit.systems",
     "fdikit.systems.abs",
     "fdikit.systems.car",

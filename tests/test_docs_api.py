@@ -65,7 +65,7 @@ def test_every_public_package_is_in_the_reference():
     expected = {"fdikit", "fdikit.signals", "fdikit.model", "fdikit.faults", "fdikit.sim",
                 "fdikit.design", "fdikit.residuals", "fdikit.detect", "fdikit.isolate",
                 "fdikit.estimate", "fdikit.monitor", "fdikit.io", "fdikit.evaluate",
-                "fdikit.report", "fdikit.base", "fdikit.systems", "fdikit.systems.abs",
+                "fdikit.report", "fdikit.codegen", "fdikit.base", "fdikit.systems", "fdikit.systems.abs",
                 "fdikit.systems.car", "fdikit.systems.aircraft", "fdikit.systems.two_mass"}
     assert expected <= set(apigen.PACKAGES)
     index = (DOCS / "api" / "index.md").read_text()
@@ -77,7 +77,7 @@ def test_every_public_package_is_in_the_reference():
     "fdikit", "fdikit.signals", "fdikit.errors", "fdikit.base", "fdikit.io", "fdikit.model",
     "fdikit.faults", "fdikit.sim", "fdikit.design", "fdikit.residuals", "fdikit.detect",
     "fdikit.isolate", "fdikit.estimate", "fdikit.monitor", "fdikit.evaluate", "fdikit.report",
-    "fdikit.systems", "fdikit.systems.abs", "fdikit.systems.car", "fdikit.systems.aircraft",
+    "fdikit.codegen", "fdikit.systems", "fdikit.systems.abs", "fdikit.systems.car", "fdikit.systems.aircraft",
     "fdikit.systems.two_mass"])
 def test_public_names_are_documented_and_in_the_reference(package):
     apigen = _apigen()

@@ -468,6 +468,9 @@ class MHSSPTEmitter(StageEmitter):
                 f"{self.p}_k": np.array([state["_k"]])}
 
 
+#: The core stages' emitters, keyed by the stage's class name (filters and observer residuals,
+#: feature norms, Hold, signature decision, GLRT, time gate, MHSSPT); other stage classes register
+#: through :mod:`.registry`.
 EMITTERS: dict[str, type[StageEmitter]] = {k: e for e in (FilterEmitter, FeatureNormsEmitter, HoldEmitter,
                                                           SignatureEmitter, GLRTEmitter, TimeGatedEmitter,
                                                           MHSSPTEmitter)
