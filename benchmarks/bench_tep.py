@@ -213,7 +213,7 @@ def held_out_design(idx: dict, i00: np.ndarray, faults, warm: int, target: float
 
 
 def smoothed_designs(index: dict, index_tr: dict, faults, warm: dict, tables: dict, designs: dict,
-                     claims: list, target: float = 0.01) -> dict:
+                     claims: list, target: float = 0.01, alarms: dict | None = None) -> dict:
     """The EWMA of every combined index (:func:`~fdikit.detect.design_ewma`) beside the raw one.
 
     Its constant is chosen on the TRAINING sets ``dNN`` (faults 3, 9, 15 left out), never on a test
@@ -222,7 +222,8 @@ def smoothed_designs(index: dict, index_tr: dict, faults, warm: dict, tables: di
     Its 1 %/sample limit is set on the two pools of :func:`held_out_design` (``+pre``: each test set
     judged by a design without its own record), with the smoothing's autocorrelation time in the
     effective samples. Adds the rows ``'<label> ewma[+pre] @1%'`` to ``tables``, ``designs`` and
-    ``claims``; returns the chosen constants and their training-set missed-detection rates."""
+    ``claims`` (and each design's alarms per test set to ``alarms``, when given, under the same label
+    without ' @1%'); returns the chosen constants and their training-set missed-detection rates."""
     from fdikit.detect import choose_lambda, design_ewma
     lams = {}
     for det, (idx, i00) in index.items():
@@ -244,6 +245,8 @@ def smoothed_designs(index: dict, index_tr: dict, faults, warm: dict, tables: di
             label = f"{det} ewma{'+pre' if pool != 'd00' else ''}"
             r = rates(alarm, faults)
             tables[f"{label} @1%"] = r
+            if alarms is not None:
+                alarms[label] = alarm
             pred = d.predictive(len(idx[0]))
             designs[label] = {"threshold": d.limit, "ci": d.interval, "predictive": pred, "lam": lam,
                               "n_eff": d.effective_samples, "tau": d.tau, "supported": d.supported,
@@ -336,15 +339,25 @@ def fmt(x, w=6):
 
 
 # ---------------------------------------------------------------------------------------- isolation
-def isolation(train: dict, test: dict, faults, *, forest_peer=True, seed=0, alarms=None) -> dict:
-    """WindowedIsolator, ForestIsolator vs RandomForest / LDA on the same causal window means (per
-    record). ``alarms``: {set: (960,) bool} of a calibrated detector; 'Forest+det' names the fault
-    where it alarms."""
+def isolation(train: dict, test: dict, faults, *, forest_peer=True, seed=0, alarms=None,
+              features="auto") -> dict:
+    """WindowedIsolator, ForestIsolator vs RandomForest / LDA on the same causal 20-sample windows (per
+    record).
+
+    ``alarms``: {"det": {set: (960,) bool}, "det~": ...} of calibrated detectors; 'Forest+det' and
+    'Forest+det~' name the most probable fault where they alarm. ``features``: the ForestIsolator's
+    window features (``"auto"``: chosen with its classifier by time-blocked cross-validation on the
+    training sets). Peers: ``forest`` and ``lda`` on the window means (the issue's peer), ``forest*``
+    a default random forest on the features the ForestIsolator chose (same windows, same features).
+    Accuracy: the fraction of the post-onset samples of a fault test set whose answer is that fault
+    (a window answered 'nominal' -- rejected -- counts as wrong); on ``d00_te`` the fraction
+    answered 'nominal'."""
     from sklearn.discriminant_analysis import LinearDiscriminantAnalysis
     from sklearn.ensemble import RandomForestClassifier
 
     from fdikit import DataError
-    from fdikit.isolate import WindowedIsolator
+    from fdikit.isolate import ForestIsolator, WindowedIsolator, window_features
+    alarms = {n: v for n, v in (alarms or {}).items() if v is not None}
     mu, sd = train[0].mean(0), train[0].std(0, ddof=1)
     z = {k: (X - mu) / sd for k, X in train.items()}
     r = np.vstack([z[k] for k in [0, *faults]])
@@ -361,22 +374,27 @@ def isolation(train: dict, test: dict, faults, *, forest_peer=True, seed=0, alar
         except DataError as exc:
             print(f"  WindowedIsolator(pfa={pfa}) refused: {exc}")
             out["refusals"].append(f"pfa {pfa}: {exc}")
+    # fdikit's ForestIsolator: the same windows (each record on its own: groups), rejection at 1 %
+    grp = np.concatenate([np.full(len(z[k]), k) for k in [0, *faults]])
+    t0 = time.perf_counter()
+    fi = ForestIsolator(window=WINDOW, pfa=0.01, features=features, random_state=seed).fit(r, lab, grp)
+    cvs = ", ".join(f"{n} {v:.3f}" for n, v in fi.cv_scores_.items())
+    print(f"  ForestIsolator: {fi.classifier_} on window {fi.features_} (time-blocked CV on the training "
+          f"sets: {cvs}; {time.perf_counter() - t0:.0f} s)")
+    out["forest_isolator"] = dict(fi.design_report_)
     # peers: the same windows (each record on its own), every clean sample (window not across records)
-    X, y = [], []
+    X, Xs, y = [], [], []
     for k in [0, *faults]:
-        F = peer_window_means(z[k], WINDOW)[WINDOW:]
-        X.append(F)
-        y += ["nominal" if k == 0 else f"f{k}"] * len(F)
-    X, y = np.vstack(X), np.array(y)
+        X.append(peer_window_means(z[k], WINDOW)[WINDOW:])
+        Xs.append(window_features(z[k], WINDOW, kind=fi.features_)[WINDOW:])
+        y += ["nominal" if k == 0 else f"f{k}"] * (len(z[k]) - WINDOW)
+    X, Xs, y = np.vstack(X), np.vstack(Xs), np.array(y)
     peers = {"forest": RandomForestClassifier(random_state=seed) if forest_peer else None,
              "lda": LinearDiscriminantAnalysis()}
     peers = {n: c.fit(X, y) for n, c in peers.items() if c is not None}
-    # fdikit's ForestIsolator: the same windows (each record on its own: groups), rejection at 1 %
-    from fdikit.isolate import ForestIsolator
-    grp = np.concatenate([np.full(len(z[k]), k) for k in [0, *faults]])
-    fi = ForestIsolator(window=WINDOW, pfa=0.01, random_state=seed).fit(r, lab, grp)
-    out["forest_isolator"] = dict(fi.design_report_)
-    acc = {n: {} for n in ["Windowed", "Forest", "Forest+pre", "Forest+det", "Forest-nr", *peers]}
+    same = {"forest*": RandomForestClassifier(random_state=seed).fit(Xs, y)} if forest_peer else {}
+    acc = {n: {} for n in ["Windowed", "Forest", "Forest+pre", *[f"Forest+{n}" for n in alarms], "Forest-nr",
+                           *peers, *same]}
     # '+pre': the rejection set again on the pre-onset windows of the fault test sets (nominal runs the
     # classifier never saw); each test set judged by a threshold set without its own record
     pre = {k: fi.fault_score((test[k][:ONSET] - mu) / sd)[WINDOW - 1:] for k in faults}
@@ -394,12 +412,14 @@ def isolation(train: dict, test: dict, faults, *, forest_peer=True, seed=0, alar
         if k:
             fi_pre.calibrate(scores=[v for j, v in pre.items() if j != k])
         acc["Forest+pre"][k] = float(np.mean(fi_pre.predict(Z)[sl] == truth))
-        if alarms is not None:
-            acc["Forest+det"][k] = float(np.mean(fi.predict(Z, detected=alarms[k])[sl] == truth))
+        for n, al in alarms.items():
+            acc[f"Forest+{n}"][k] = float(np.mean(fi.predict(Z, detected=al[k])[sl] == truth))
         acc["Forest-nr"][k] = float(np.mean(fi.predict(Z, reject=False)[sl] == truth))
         F = peer_window_means(Z, WINDOW)
         for n, c in peers.items():
             acc[n][k] = float(np.mean(c.predict(F)[sl] == truth))
+        for n, c in same.items():
+            acc[n][k] = float(np.mean(c.predict(window_features(Z, WINDOW, kind=fi.features_))[sl] == truth))
     if iso is not None:
         out["design_report"] = {kk: (v.tolist() if isinstance(v, np.ndarray) else v)
                                 for kk, v in iso.design_report_.items()
@@ -409,6 +429,8 @@ def isolation(train: dict, test: dict, faults, *, forest_peer=True, seed=0, alar
         nominal_ok = {"gate_far_d00te": float(np.mean(iso.predict((test[0] - mu) / sd) != "nominal"))}
     out["forest_isolator_far"] = fi.false_alarm_rate((test[0] - mu) / sd)
     out["forest_classifier"] = fi.classifier_
+    out["forest_features"] = fi.features_
+    out["forest_cv_scores"] = dict(fi.cv_scores_)
     out["accuracy"] = {n: {k: v for k, v in a.items() if k} for n, a in acc.items() if a}
     out["nominal_accuracy"] = {n: a.get(0) for n, a in acc.items()}
     out.update(nominal_ok)
@@ -554,7 +576,7 @@ def main(argv=None) -> dict:
                            "claim": 0.01, "interval": pred, "measured": r["far_d00te"],
                            "note": f"rate interval {d['interval'][0]:.3f}-{d['interval'][1]:.3f}; pool {pool}"
                                    + ("; pre-onset judged leave-one-record-out" if pool != "d00" else "")})
-    lams = smoothed_designs(index, index_tr, faults, warm, tables, designs, claims)
+    lams = smoothed_designs(index, index_tr, faults, warm, tables, designs, claims, alarms=alarms)
     result["ewma_lambda"] = lams
     cl, tb = calibrated_limits(fk_fit, d00, test, faults, stat_names)
     claims += cl
@@ -570,7 +592,8 @@ def main(argv=None) -> dict:
     iso = None
     if not a.no_isolation:
         print(f"\nisolation (window {WINDOW}): training d00 + d01..d21, testing the _te sets after the onset")
-        iso = isolation(train, test, faults, alarms=alarms.get("CVA+pre"))
+        iso = isolation(train, test, faults, alarms={"det": alarms.get("CVA+pre"),
+                                                     "det~": alarms.get("CVA ewma+pre")})
         result["isolation"] = iso
         if iso.get("pfa") is not None:
             rep = iso["design_report"]
@@ -617,11 +640,13 @@ def main(argv=None) -> dict:
 
     if iso is not None:
         names = list(iso["accuracy"])
-        print("\nisolation accuracy after the onset: Windowed = WindowedIsolator (classifier "
-              f"{iso.get('classifier')}, gate pfa {iso.get('pfa')}); Forest = ForestIsolator "
-              f"({iso['forest_classifier']}, rejection at 1 %/sample; +pre: set on the pre-onset windows "
-              "too; +det: the fault where CVA+pre@1% alarms; Forest-nr: no rejection); forest, lda: "
-              "the scikit-learn peers (no rejection); published: none in the README")
+        print("\nisolation accuracy after the onset (a sample answered 'nominal' counts as wrong): "
+              f"Windowed = WindowedIsolator (classifier {iso.get('classifier')}, gate pfa {iso.get('pfa')}); "
+              f"Forest = ForestIsolator ({iso['forest_classifier']} on window {iso['forest_features']}, "
+              "rejection at 1 %/sample; +pre: set on the pre-onset windows too; +det / +det~: the fault "
+              "where CVA+pre@1% / CVA~+pre@1% (EWMA) alarms; Forest-nr: no rejection); forest, lda: the "
+              "scikit-learn peers on the window means, forest*: RandomForestClassifier() on the window "
+              f"{iso['forest_features']} (no rejection); published: none in the README")
         print("IDV " + "".join(f"{n:>9}" for n in names))
         for k in faults:
             row = "".join(fmt(iso["accuracy"][n].get(k), 9) for n in names)
@@ -651,12 +676,15 @@ def main(argv=None) -> dict:
               f"{'met' if ok_mdr else 'NOT met'}")
     if iso is not None:
         ra = mean_easy(iso["accuracy"]["forest"])
-        for n in ("Forest", "Forest+pre", "Forest+det", "Forest-nr", "Windowed"):
+        rs = mean_easy(iso["accuracy"]["forest*"]) if iso["accuracy"].get("forest*") else None
+        for n in ("Forest", "Forest+pre", "Forest+det", "Forest+det~", "Forest-nr", "Windowed"):
             if iso["accuracy"].get(n):
                 fa = mean_easy(iso["accuracy"][n])
                 targets[f"isolation_{n}_ge_forest"] = fa >= ra
                 ok = "met" if fa >= ra else "NOT met"
-                print(f"  isolation: {n} {fa:.3f} >= random forest {ra:.3f}: {ok}")
+                txt = "" if rs is None else (f"; >= random forest on the same {iso['forest_features']} "
+                                             f"features {rs:.3f}: {'met' if fa >= rs else 'NOT met'}")
+                print(f"  isolation: {n} {fa:.3f} >= random forest on window means {ra:.3f}: {ok}{txt}")
         for key in ("forest_isolator", "forest_isolator_pre"):
             f = iso[key + "_far"]
             targets[key + "_far_within"] = f["within"] and f["measured"] <= 0.02
