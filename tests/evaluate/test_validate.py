@@ -68,3 +68,26 @@ def test_bad_input_is_named(cfg):
     s = _log(seed=1)
     with pytest.raises(DataError, match=r"log 0: the log lacks the channel\(s\) pos2 \(source column 'P2'\)"):
         validate(cfg, Signals(s.t, s.values[:, :, :2], ["F", "P1"], check=False))
+
+
+def test_announcement_claim_counts_the_design_runs_announcements(cfg):
+    """A recipe's claim from its own nominal data: the events and judged time of the monitor's runs,
+    with the exact Poisson interval; a fault-carrying run raises the count."""
+    from scipy.stats import chi2
+
+    from fdikit.evaluate import announcement_claim
+
+    mon = build_monitor(cfg)
+    res = [mon.run(map_channels(cfg, _log(seed=s, runs=3))) for s in (5, 6)]
+    c = announcement_claim(res, "six simulated nominal runs")
+    k = sum(len(r.events) for r in res)
+    dt = float(np.diff(res[0].residuals.t[:2])[0])
+    seconds = sum(float((r.status == 0).sum()) for r in res) * dt
+    assert c["kind"] == "decision" and c["per"] == "hour" and c["target"] is None and c["events"] == k
+    assert c["hours"] == pytest.approx(seconds / 3600.0)
+    hi = chi2.ppf(0.975, 2 * k + 2) / 2 / (seconds / 3600.0)
+    assert c["interval"][1] == pytest.approx(hi)
+    faulty = mon.run(map_channels(cfg, _log([Bias("sensor:pos2", 0.02, start=2.0)], seed=7)))
+    assert announcement_claim(faulty, "a fault")["events"] >= 1
+    with pytest.raises(DataError, match="per must be a unit of time"):
+        announcement_claim(res, "x", per="sample")

@@ -181,3 +181,58 @@ def test_tep_isolation_at_least_the_random_forest_and_a_calibrated_rejection():
     assert np.mean(acc_iso) >= np.mean(acc_rf), (np.mean(acc_iso), np.mean(acc_rf))
     far = iso.false_alarm_rate((rd("d00_te") - mu) / sd)
     assert far["within"] and far["measured"] <= 0.02, far
+
+
+def test_slope_features_equal_a_least_squares_fit_per_window():
+    rng = np.random.default_rng(4)
+    x = rng.standard_normal((40, 2)) + 0.3 * np.arange(40)[:, None]
+    g = np.r_[np.zeros(15, int), np.ones(25, int)]
+    F = window_features(x, 6, g, kind="mean_std_slope")
+    assert F.shape == (40, 6)
+    for t in range(40):
+        w = x[max(0 if t < 15 else 15, t - 5):t + 1]
+        slope = np.polyfit(np.arange(len(w)), w, 1)[0] if len(w) > 1 else np.zeros(2)
+        np.testing.assert_allclose(F[t], np.r_[w.mean(0), w.std(0), slope], atol=1e-10)
+
+
+def _variance_records(seed, T=500):
+    """Nominal AR(0.5) noise in 4 channels; 'wide' doubles the spread of channel 0, 'shift' moves the
+    mean of channel 1: only the window deviation tells 'wide' from nominal."""
+    rng = np.random.default_rng(seed)
+    r, lab, grp = [], [], []
+    for g, name in enumerate(["nominal", "nominal", "wide", "shift", "nominal", "wide", "shift"]):
+        x = lfilter([1.0], [1.0, -0.5], rng.standard_normal((T, 4)), axis=0)
+        if name == "wide":
+            x[:, 0] *= 2.0
+        if name == "shift":
+            x[:, 1] += 1.0
+        r.append(x)
+        lab += [name] * T
+        grp += [g] * T
+    return np.vstack(r), np.array(lab), np.array(grp)
+
+
+def test_auto_features_choose_the_window_deviation_when_only_it_isolates():
+    """features='auto' scores every kind by time-blocked CV on the training records: a fault that only
+    widens a channel needs the window deviation, and the isolator then beats a random forest on the
+    window means (the issue-26 peer) on fresh records."""
+    from sklearn.ensemble import RandomForestClassifier
+
+    r, lab, grp = _variance_records(0)
+    iso = ForestIsolator(window=20, pfa=None, features="auto", candidates=("extra_trees",),
+                         n_estimators=50).fit(r, lab, grp)
+    assert iso.features_ in ("mean_std", "mean_std_slope"), iso.cv_scores_
+    assert set(iso.cv_scores_) == {f"extra_trees/{k}" for k in ("mean", "mean_std", "mean_std_slope")}
+    assert iso.cv_scores_[f"extra_trees/{iso.features_}"] > iso.cv_scores_["extra_trees/mean"] + 0.1
+    assert "features='mean_std" in repr(iso)
+    keep = np.ones(len(lab), bool)
+    for g in np.unique(grp):
+        keep[np.flatnonzero(grp == g)[:20]] = False
+    rf = RandomForestClassifier(random_state=0).fit(window_features(r, 20, grp)[keep], lab[keep])
+    rt, lt, gt = _variance_records(1)
+    ok = lt == "wide"
+    acc_iso = np.mean(iso.predict(rt, gt)[ok] == "wide")
+    acc_rf = np.mean(rf.predict(window_features(rt, 20, gt))[ok] == "wide")
+    assert acc_iso > 0.8 > acc_rf + 0.2, (acc_iso, acc_rf)
+    with pytest.raises(DataError, match="unknown features 'slope'; use 'auto' or one of"):
+        ForestIsolator(features="slope")

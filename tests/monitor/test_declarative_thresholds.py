@@ -157,3 +157,27 @@ def test_bad_nominal_logs_are_named(logs, tmp_path):
         run_design(load_config(tmp_path / "short.toml"))
     with pytest.raises(DataError, match="cannot support the target"):
         run_design(load_config(_config(d, "tiny", extra='nominal_log = "held_out.csv"', pfa=1e-4)))
+
+
+def test_a_short_log_gets_split_conformal_thresholds_that_hold_on_a_further_log(logs):
+    """A per-sample target without a hold needs a quantile, not a tail model: where the fit half is too
+    short for design_threshold (it asks for hundreds of effective exceedances and refused here
+    before), every residual's threshold is the split-conformal quantile of its fit half at pfa / 4,
+    its rate's interval at the effective sample size, and a log the design never saw confirms it."""
+    d = logs["dir"]
+    (d / "short").mkdir()
+    _write_log(d / "short" / "nominal.csv", 21, minutes=0.4)
+    cfg = load_config(_config(d, "short", extra='nominal_log = "short/nominal.csv"', pfa=0.04))
+    rep = json.loads(run_design(cfg)["design_report"].read_text())
+    assert rep["threshold_design"]["method"] == "split-conformal quantile", rep["threshold_design"]
+    th = [c for c in rep["claims"] if c["kind"] == "threshold"]
+    assert len(th) == 4 and all(c["target"] == pytest.approx(0.01) for c in th)
+    assert all(c["interval"][0] < 0.01 < c["interval"][1] < 0.1 for c in th), [c["interval"] for c in th]
+    out = validate(cfg, [logs["held_out"]])
+    assert out["contradicted"] == [], [(c["name"], c["interval"], c["measured"]) for c in out["claims"]]
+    fam = next(c for c in out["claims"] if c["kind"] == "family")
+    assert 0.01 < fam["measured"]["rate"] < 0.1
+    # a target the records cannot show even as a quantile (less than one effective exceedance) is
+    # still refused, naming the data
+    with pytest.raises(DataError, match="cannot support the target pfa = 0.0004"):
+        run_design(load_config(_config(d, "short2", extra='nominal_log = "short/nominal.csv"', pfa=4e-4)))

@@ -8,7 +8,7 @@ claims re-measured on new nominal logs (``fdikit validate``). The papers' campai
 from .detectability import known_signal_dprime
 from .distributed import Engine, chunk_bounds, run_chunked
 from .progress import progress_bar
-from .validate import claims_table, validate
+from .validate import announcement_claim, claims_table, validate
 
-__all__ = ["Engine", "chunk_bounds", "claims_table", "known_signal_dprime", "progress_bar", "run_chunked",
-           "validate"]
+__all__ = ["Engine", "announcement_claim", "chunk_bounds", "claims_table", "known_signal_dprime",
+           "progress_bar", "run_chunked", "validate"]

@@ -22,7 +22,7 @@ import numpy as np
 from ..errors import DataError
 from ..signals import Signals
 
-__all__ = ["claims_table", "validate"]
+__all__ = ["announcement_claim", "claims_table", "validate"]
 
 
 def _runs(cfg, logs) -> list[tuple[str, Signals]]:
@@ -89,6 +89,72 @@ def _measure(claim: dict, results: list, level: float) -> dict:
     m = measure_alarm_rate(recs, per, min(dts), level=level)
     return {k: m[k] for k in ("rate", "interval", "events", "samples", "hours", "interval_method")
             if k in m} | ({"n_eff": m["n_eff"]} if "n_eff" in m else {})
+
+
+def announcement_claim(results: Any, basis: str, *, level: float = 0.95, per: str = "hour",
+                       name: str = "decision (announcements)") -> dict[str, Any]:
+    """The announcement-rate claim of a design, from its monitor run over nominal design data.
+
+    For a design that decides (announces faults) without a designed false-alarm rate, e.g. a
+    recipe whose MHSSPT densities and hold were calibrated on nominal records: the announcements
+    its monitor makes on those records (or on other nominal data the design generated) give the
+    claimed rate and its exact Poisson interval, which :func:`validate` then checks on logs the
+    design never saw. On the design's own data the claim is optimistic (in-sample), which the
+    out-of-sample measurement shows.
+
+    Parameters
+    ----------
+    results : MonitorResult or sequence of MonitorResult
+        The monitor's results on nominal data (every run a record); samples in warm-up or held
+        (``status != 0``, or ``valid`` False) are not counted.
+    basis : str
+        What the data were (printed in the report).
+    level : float
+        Confidence level of the interval.
+    per : str
+        Time unit of the rate (``"hour"``, ``"minute"``, ...).
+    name : str
+        The claim's name.
+
+    Returns
+    -------
+    dict
+        A ``kind="decision"`` claim: ``per``, ``target`` (None: no designed target), ``interval``,
+        ``rate``, ``events``, ``hours`` (judged), ``basis``, ``method``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from types import SimpleNamespace
+    >>> res = SimpleNamespace(events=[], status=np.zeros((1, 360_000)), t=np.arange(360_000) * 0.01)
+    >>> # a MonitorResult (Monitor.run) has the same events and status, its time in residuals.t
+    >>> c = announcement_claim(res, "an hour of simulated nominal driving")
+    >>> c["events"], [round(v, 3) for v in c["interval"]]
+    (0, [0.0, 3.689])
+    """
+    from ..detect.rates import per_seconds, poisson_interval
+
+    unit = per_seconds(per)
+    if unit is None:
+        raise DataError(f"announcement_claim: per must be a unit of time (e.g. 'hour'), got {per!r}")
+    items = list(results) if isinstance(results, list | tuple) else [results]
+    k, seconds = 0, 0.0
+    for i, res in enumerate(items):
+        judged = np.asarray(res.status == 0 if getattr(res, "status", None) is not None else res.valid, bool)
+        t = np.asarray(res.t if hasattr(res, "t") else res.residuals.t, float)
+        if t.size < 2:
+            raise DataError(f"announcement_claim: result {i} has {t.size} sample(s); nominal design data "
+                            "need many")
+        k += len(res.events)
+        seconds += float(judged.sum()) * float(np.median(np.diff(t)))
+    if seconds <= 0:
+        raise DataError("announcement_claim: every sample is in warm-up or held: nothing to claim from")
+    lo, hi = poisson_interval(k, seconds / unit, level)
+    return {"name": name, "kind": "decision", "channels": [], "per": per, "target": None,
+            "interval": [float(lo), float(hi)], "rate": k / (seconds / unit), "events": int(k),
+            "hours": seconds / 3600.0, "basis": basis,
+            "method": f"{k} announcement(s) in {seconds:.4g} s judged of the design's nominal data; exact "
+                      f"Poisson (Garwood) {level:.0%} interval"}
 
 
 def validate(config, logs, *, level: float = 0.95) -> dict[str, Any]:

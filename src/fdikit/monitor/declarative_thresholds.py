@@ -155,6 +155,29 @@ def simulated_thresholds(md, raw, groups: dict[str, list[str]], R: np.ndarray, Q
             "claims": claims}
 
 
+def _conformal(names: list[str], f_fit: list, alarm, level: float):
+    """Per-sample thresholds at ``pfa / len(names)`` each (Bonferroni) as the split-conformal
+    quantile of every feature over the fit halves (:func:`fdikit.detect.held_out_limit`), with the
+    interval of each rate at the effective sample size; None when a feature's records hold less than
+    one effective exceedance (the target is then not supported). A per-sample target without a hold
+    needs no tail model: a quantile is enough where a tail fit (:func:`~fdikit.detect.
+    design_threshold`) asks for hundreds of effective exceedances."""
+    from ..detect.calibrated_limits import held_out_limit
+
+    each = float(alarm.pfa) / len(names)
+    thr, ci, neff = [], [], []
+    for i in range(len(names)):
+        d = held_out_limit([f.values[0][:, i] for f in f_fit], 1.0 - each, confidence=level)
+        if not d["supported"]:
+            return None
+        thr.append(d["limit"])
+        ci.append(d["interval"])
+        neff.append(d["effective_samples"])
+    td = {"threshold": thr, "ci": ci, "target": each, "method": "split-conformal quantile",
+          "effective_samples": neff, "pfa": float(alarm.pfa), "per": "sample"}
+    return np.asarray(thr, float), td
+
+
 def _halves(x: np.ndarray, warm: int) -> tuple[slice, slice]:
     """Fit and measure parts of a record of ``x.shape[0]`` samples after ``warm`` samples."""
     n = x.shape[0]
@@ -268,18 +291,26 @@ def logged_thresholds(raw, groups: dict[str, list[str]], alarm, dt: float, nomin
         thr = np.atleast_1d(np.asarray(td["threshold"], float))
         claims = _claims(feats.output_names, td, alarm, "nominal logs")
     except DataError as exc:
+        conf = _conformal(feats.output_names, f_fit, alarm, level) if per == "sample" and alarm.hold == 1 \
+            else None
         why = (f"the fit half of {source} ({sum(f.n_samples for f in f_fit) * dt / 3600:.3g} h in "
                f"{len(f_fit)} record(s)) cannot support the target pfa = {alarm.pfa:g} per {alarm.per} "
                f"(hold {alarm.hold}): {exc}")
-        if not fallback:
+        if conf is not None:      # a per-sample target without a hold: the quantile suffices
+            thr, td = conf
+            claims = _claims(feats.output_names, td, alarm, "nominal logs (split-conformal quantile)")
+        elif not fallback:
             raise DataError(f"config: {source}: {why}. Give more or longer nominal logs, or a larger "
                             "target") from None
-        thr, td, claims = _chi_bound(raw, W, groups, feats, alarm, dt, exc, "nominal logs (Gaussian bound)")
-        p_each = td["per_sample_each"]
-        warnings.warn(f"design: {why}. Falling back to the Gaussian chi bound of the whitened real "
-                      f"residuals: thresholds {np.round(thr, 4).tolist()} at a per-sample probability "
-                      f"{p_each:.3g} per residual; the held-out halves measure it (give more nominal "
-                      "logs, [design].nominal_log, to set the thresholds on data)", UserWarning, stacklevel=3)
+        else:
+            basis = "nominal logs (Gaussian bound)"
+            thr, td, claims = _chi_bound(raw, W, groups, feats, alarm, dt, exc, basis)
+            p_each = td["per_sample_each"]
+            warnings.warn(f"design: {why}. Falling back to the Gaussian chi bound of the whitened real "
+                          f"residuals: thresholds {np.round(thr, 4).tolist()} at a per-sample probability "
+                          f"{p_each:.3g} per residual; the held-out halves measure it (give more nominal "
+                          "logs, [design].nominal_log, to set the thresholds on data)", UserWarning,
+                          stacklevel=3)
     hold = Hold(feats.output_names, thr, Z=alarm.hold, absolute=True)
     alarms = [hold.run(f).values[0] for f in f_meas]     # (T_i, channels)
     for c in claims:

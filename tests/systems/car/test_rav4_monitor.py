@@ -363,3 +363,26 @@ def test_cubic_table_test_announces_what_the_exact_test_announces():
         assert ea == [(e.k, e.hypothesis, e.kind) for e in b.events + b.cleared], faults
         n_events += len(ea)
     assert n_events >= 3
+
+
+@rav4
+def test_design_report_states_the_announcement_claim_and_the_held_out_half_checks_it(designed):
+    """The RAV4 recipe states its announcement rate from its calibration half (in-sample, about 30 s:
+    0 announcements bound it by a few hundred per hour), and fdikit validate measures it on the
+    held-out second half of the real minute, which it never calibrated on."""
+    from fdikit import Signals
+    from fdikit.evaluate import validate
+    from fdikit.monitor.config import load_config, read_log
+
+    rep = json.loads((designed.parent / "designs" / "design_report.json").read_text())
+    (claim,) = rep["claims"]
+    assert claim["kind"] == "decision" and claim["per"] == "hour" and claim["events"] == 0
+    assert 25.0 < claim["hours"] * 3600 <= 30.5 and 300 < claim["interval"][1] < 600
+    assert "calibration half" in claim["basis"]
+    cfg = load_config(designed)
+    raw = read_log(cfg, DATA / "drive.blf")
+    k = int(np.argmax(raw.t - raw.t[0] > (raw.t[-1] - raw.t[0]) / 2))
+    out = validate(cfg, [Signals(raw.t[k:], raw.values[:, k:], raw.names, raw.units, check=False)])
+    (c,) = out["claims"]
+    assert c["interval"] == claim["interval"] and c["verdict"] == "inside" and out["contradicted"] == []
+    assert 25.0 < out["hours"] * 3600 < 31.0

@@ -20,7 +20,7 @@ from ...errors import DataError
 from .monitor import calibrate_monitor, design_car_monitor
 from .monitor_fused import FusedCarMonitor
 
-__all__ = ["DEFAULTS", "design", "operating_point"]
+__all__ = ["DEFAULTS", "design", "design_claim", "operating_point"]
 
 #: Default recipe parameters (see :func:`design`).
 DEFAULTS: dict[str, Any] = {"speed": 20.0, "dt": 0.01, "seed": 11, "calibration_seconds": 10.0}
@@ -88,4 +88,52 @@ def design(params: dict | None = None) -> dict[str, Any]:
     # the fused runtime needs fixed-speed filters: no speed schedule
     blocks = [calibrate_monitor(b, speed, duration=dur, seed=seed, schedule=()) for b in ("longitudinal",
                                                                                           "lateral")]
-    return {"car": FusedCarMonitor(blocks, deviations=True)}
+    car = FusedCarMonitor(blocks, deviations=True)
+    return {"car": car, "_report": {"rates": "model-based (simulated nominal drives)",
+                                    "claims": [design_claim(car, speed, dur, seed)]}}
+
+
+def design_claim(car: FusedCarMonitor, speed: float, duration: float, seed: int) -> dict[str, Any]:
+    """The announcement-rate claim of the designed car monitor (``design_report.json``).
+
+    The monitor (announcing ``A:<fault>`` at 0.5, as the example config's ``[decision]``) runs over
+    fault-free drives of the calibration's kinds (``curve`` at seed ``seed``, ``speed_change`` at
+    ``seed + 1``, as :func:`~fdikit.systems.car.monitor.calibrate_monitor` simulates them for the
+    no-fault densities), ``duration`` s each; the announcements per hour and their Poisson interval
+    (:func:`fdikit.evaluate.announcement_claim`) are the claim ``fdikit validate`` checks on other
+    nominal logs. The design data are short (two drives of ``duration`` s), so the interval is wide.
+
+    Parameters
+    ----------
+    car : FusedCarMonitor
+    speed : float
+        Design speed, m/s.
+    duration : float
+        Seconds of every drive.
+    seed : int
+        The calibration's noise seed.
+
+    Returns
+    -------
+    dict
+        A ``kind="decision"`` claim per hour.
+    """
+    import numpy as np
+
+    from ...evaluate import announcement_claim
+    from ...monitor import Decision, Monitor
+    from ...signals import Signals
+    from .driving import simulate_drive
+    from .monitor import car_signals, sensor_noise
+
+    op = operating_point(speed)
+    channels = [n for n in car.output_names if n.startswith("A:")]
+    results = []
+    for kind, sd in (("curve", seed), ("speed_change", seed + 1)):
+        res = simulate_drive(kind, speed, duration=duration, runs=1, seed=sd, dt=2.5e-3, noise=sensor_noise())
+        sig = car_signals(res)
+        trim = np.array([op.get(n, 0.0) for n in sig.names])
+        dev = Signals(sig.t, sig.values - trim, sig.names, sig.units, check=False)
+        results.append(Monitor([car], [], Decision(channels, 0.5)).run(dev))
+    return announcement_claim(results, f"fault-free drives of the calibration's kinds at {speed:g} m/s "
+                              f"(curve, speed change; seeds {seed}, {seed + 1}; {duration:g} s each)")

@@ -27,7 +27,8 @@ from .mhsspt import MHSSPT_TABLE, Rav4FeatureNorms, Rav4MHSSPT, real_densities
 from .peers import Rav4PeerSignals, design_peer_stages
 from .sensor_checks import design_sensor_detectors, fit_sensor_channels
 
-__all__ = ["CLEAR_AFTER", "CONFIRM_AFTER", "Rav4Monitor", "decision_for", "design", "rav4_monitor"]
+__all__ = ["CLEAR_AFTER", "CONFIRM_AFTER", "Rav4Monitor", "decision_for", "design", "design_claim",
+           "rav4_monitor"]
 
 
 class Rav4Monitor:
@@ -316,4 +317,31 @@ def design(params: dict | None = None) -> dict[str, Any]:
     if bad:
         raise DataError(f"unknown RAV4 design parameters {bad}; known: {sorted(known | {'data'})}")
     kw = {k: tuple(v) if isinstance(v, list) else v for k, v in kw.items()}
-    return dict(rav4_monitor(data, **kw).artifacts)
+    mon = rav4_monitor(data, **kw)
+    return {**mon.artifacts, "_report": {"rates": "measured on the real minute's calibration half",
+                                         "claims": [design_claim(mon)]}}
+
+
+def design_claim(mon: Rav4Monitor) -> dict[str, Any]:
+    """The announcement-rate claim of a designed RAV4 monitor (``design_report.json``): its
+    announcements per hour on the first half of the real minute, the nominal data it was calibrated
+    on (in-sample: about 30 s, so the exact Poisson interval is wide), after its warm-up.
+    ``fdikit validate`` checks it on the held-out second half.
+
+    Parameters
+    ----------
+    mon : Rav4Monitor
+
+    Returns
+    -------
+    dict
+        A ``kind="decision"`` claim per hour (:func:`fdikit.evaluate.announcement_claim`).
+    """
+    from ....evaluate import announcement_claim
+
+    raw = mon.raw
+    t = raw.t - raw.t[0]
+    half = t <= float(t[-1] / 2)
+    res = mon.run(Signals(raw.t[half], raw.values[:, half], raw.names, check=False))
+    return announcement_claim(res, f"the calibration half of the real minute ({float(t[half][-1]):.1f} s, "
+                              "the data the design was calibrated on: in-sample)")
