@@ -12,7 +12,7 @@ import numpy as np
 
 from ..errors import DataError
 
-__all__ = ["Field", "StageEmitter", "lit", "stage_emitter"]
+__all__ = ["Field", "StageEmitter", "c_array", "lit", "stage_emitter"]
 
 
 @dataclass(frozen=True)
@@ -41,6 +41,20 @@ def lit(x: float) -> str:
 def rl(x: float) -> str:
     """A literal of the working precision (``FDK_R(x)`` casts to fdk_real)."""
     return f"FDK_R({lit(x)})"
+
+
+def c_array(name: str, values: np.ndarray, ctype: str = "double") -> str:
+    """A ``static const`` C array of ``values`` (doubles as shortest round-trip literals; a large
+    table of finite values takes the fast path: ``repr`` of each, ~0.2 s per million values)."""
+    v = np.asarray(values).ravel()
+    if ctype != "double":
+        items = [str(int(a)) for a in v.tolist()]
+    elif np.isfinite(v).all():
+        items = list(map(repr, v.astype(float).tolist()))
+    else:
+        items = [lit(a) for a in v]
+    body = ",\n".join(", ".join(items[i:i + 8]) for i in range(0, len(items), 8))
+    return f"static const {ctype} {name}[{max(v.size, 1)}] = {{\n{body or '0'}\n}};"
 
 
 class StageEmitter:
@@ -325,152 +339,10 @@ class TimeGatedEmitter(StageEmitter):
                 f"{self.p}_has_t0": np.array([t0 is not None]), f"{self.p}_k": np.array([state["_k"]])}
 
 
-#: The exact uniform-mean Gaussian log density and the log-domain Shiryayev recursion of
-#: :mod:`fdikit.detect.mhsspt` (``kernels.py``, ``recursion.py``), in double precision.
-MHSSPT_HELPERS = """
-static double fdk_log_ndtr(double x)
-{
-    double z, s;
-    if (x > 0.0) return log1p(-0.5 * erfc(x / sqrt(2.0)));
-    if (x > -37.0) return log(0.5 * erfc(-x / sqrt(2.0)));
-    z = 1.0 / (x * x);
-    s = 1.0 + z * (-1.0 + z * (3.0 + z * (-15.0 + z * (105.0 + z * (-945.0 + z * 10395.0)))));
-    return -0.5 * x * x - log(-x) - 0.5 * log(2.0 * FDK_PI) + log(s);
-}
-
-static double fdk_umg(double x, double low, double high, double std, int point, double logw)
-{
-    double u, v, hi, lo, p, lhi, d;
-    if (point) {
-        double z = (x - low) / std;
-        return -0.5 * z * z - log(std) - 0.5 * log(2.0 * FDK_PI);
-    }
-    u = (x - low) / std;
-    v = (x - high) / std;
-    if (v > 0.0) { hi = -v; lo = -u; } else { hi = u; lo = v; }
-    if (hi > -30.0) {
-        p = 0.5 * (erfc(-hi * FDK_INV_SQRT2) - erfc(-lo * FDK_INV_SQRT2));
-        if (p > 0.0) return log(p) - logw;
-    }
-    lhi = fdk_log_ndtr(hi);
-    d = fdk_log_ndtr(lo) - lhi;
-    if (d > 0.0) d = 0.0;
-    return lhi + log1p(-exp(d)) - logw;
-}
-
-static double fdk_logaddexp(double a, double b)
-{
-    double d;
-    if (a < b) { d = a; a = b; b = d; }
-    if (a == -HUGE_VAL) return -HUGE_VAL;
-    d = b - a;
-    if (d < -40.0) return a;
-    return a + log(1.0 + exp(d));
-}
-
-/* one step of the log-domain Shiryayev recursion (fdikit.detect.mhsspt.recursion.mhsspt_update) */
-static void fdk_mhsspt_update(double *logF, const double *ll, double *phi, int H, double log1mp,
-                              const double *logp_pi, double logq, double log1mq)
-{
-    double m, s, x, lz, lf0;
-    int j;
-    if (logq == -HUGE_VAL) {
-        phi[0] = logF[0] + log1mp;
-    } else {
-        double lse_f = -HUGE_VAL;
-        m = -HUGE_VAL;
-        for (j = 1; j < H; ++j) if (logF[j] > m) m = logF[j];
-        if (m > -HUGE_VAL) {
-            double sf = 0.0;
-            for (j = 1; j < H; ++j) { x = logF[j] - m; if (x > -40.0) sf += exp(x); }
-            lse_f = m + log(sf);
-        }
-        phi[0] = fdk_logaddexp(logF[0] + log1mp, logq + lse_f);
-    }
-    lf0 = logF[0];
-    for (j = 1; j < H; ++j) phi[j] = fdk_logaddexp(logF[j] + log1mq, lf0 + logp_pi[j]);
-    m = -HUGE_VAL;
-    for (j = 0; j < H; ++j) { phi[j] += ll[j]; if (phi[j] > m) m = phi[j]; }
-    s = 0.0;
-    for (j = 0; j < H; ++j) { x = phi[j] - m; if (x > -40.0) s += exp(x); }
-    lz = m + log(s);
-    for (j = 0; j < H; ++j) logF[j] = phi[j] - lz;
-}
-"""
-
-
-#: The densities and log-sum-exp (shared with the tabulated MHSSPT) and the recursion step, each
-#: emitted once per file.
-MHSSPT_DENSITY_HELPERS, _sep, _rest = MHSSPT_HELPERS.partition("/* one step of the log-domain")
-MHSSPT_UPDATE_HELPER = _sep + _rest
-
-
-class MHSSPTEmitter(StageEmitter):
-    """:class:`~fdikit.detect.MHSSPT` with exact :class:`~fdikit.detect.UniformMeanGaussian`
-    densities (not tabulated): log densities, the log-domain recursion, the posteriors and group
-    sums. Computed in double in both variants (the recursion's logs and exps need it)."""
-
-    kinds = ("MHSSPT",)
-    helpers = (MHSSPT_DENSITY_HELPERS, MHSSPT_UPDATE_HELPER)
-
-    def __init__(self, obj, prefix):
-        if obj.tabulate is not None or obj._umg is None:
-            raise DataError("stage MHSSPT (tabulated densities) cannot be generated yet; the exact "
-                            "densities (tabulate=None) can")
-        super().__init__(obj, prefix)
-        self.H, self.C = len(obj.hypotheses), len(obj.input_names)
-        from ..detect.mhsspt.kernels import _shared_components
-
-        self.sh = _shared_components(*obj._umg)
-
-    def fields(self):
-        return [Field(f"{self.p}_logF", "f64", self.H), Field(f"{self.p}_k", "i64", 1)]
-
-    def reset_code(self):
-        return "\n".join([f"    {self.f('logF')}[0] = 0.0;",
-                          *(f"    {self.f('logF')}[{j}] = -HUGE_VAL;" for j in range(1, self.H)),
-                          f"    {self.f('k')}[0] = 0;"])
-
-    def step_code(self, inp, out):
-        ulow, uhigh, ustd, upoint, ulogw, uoff, jmap = self.sh
-        o = self.obj
-        H = self.H
-        lines = ["    {", f"        double xs[{self.C}], vals[{len(ulow)}], ll[{H}], phi[{H}];",
-                 f"        static const double logp_pi[{H}] = {{{', '.join(lit(v) for v in o._logp_pi)}}};"]
-        lines += [f"        xs[{c}] = (double){e};" for c, e in enumerate(inp)]
-        lines += [f"        if (!FDK_FINITE(xs[{c}])) return FDK_ERR_STAT;" for c in range(self.C)]
-        for c in range(self.C):
-            for e in range(uoff[c], uoff[c + 1]):
-                lines.append(f"        vals[{e}] = fdk_umg(xs[{c}], {lit(ulow[e])}, {lit(uhigh[e])}, "
-                             f"{lit(ustd[e])}, {int(upoint[e])}, {lit(ulogw[e])});")
-        for j in range(H):
-            terms = "".join(f" + vals[{jmap[j, c]}]" for c in range(self.C))
-            lines.append(f"        ll[{j}] = 0.0{terms};")
-        lines.append(f"        fdk_mhsspt_update({self.f('logF')}, ll, phi, {H}, {lit(o._log1mp)}, logp_pi, "
-                     f"{lit(o._logq)}, {lit(o._log1mq)});")
-        lines.append(f"        {self.f('k')}[0] += 1;")
-        for j in range(H):
-            v = f"{self.f('logF')}[{j}]"
-            lines.append(f"        phi[{j}] = ({v} > -746.0) ? exp({v}) : 0.0;")
-            lines.append(f"        {out[j]} = FDK_R(phi[{j}]);")
-        for g in range(o._gmat.shape[0]):
-            terms = "".join(f" + phi[{int(e)}]" for e in o._gmat[g] if e >= 0)
-            lines.append(f"        {out[H + g]} = FDK_R(0.0{terms});")
-        lines.append("    }")
-        return "\n".join(lines)
-
-    def to_py(self, arrays):
-        return {"_logF": arrays[f"{self.p}_logF"].astype(float).reshape(1, -1),
-                "_k": int(arrays[f"{self.p}_k"][0])}
-
-    def from_py(self, state):
-        return {f"{self.p}_logF": np.asarray(state["_logF"], float).reshape(-1),
-                f"{self.p}_k": np.array([state["_k"]])}
-
-
+#: The emitters of the core stages above, by class name (the MHSSPT's, in :mod:`.mhsspt_c` and
+#: :mod:`.stages_mhsspt_tab`, and the other core stages' are registered in :mod:`.registry`).
 EMITTERS: dict[str, type[StageEmitter]] = {k: e for e in (FilterEmitter, FeatureNormsEmitter, HoldEmitter,
-                                                          SignatureEmitter, GLRTEmitter, TimeGatedEmitter,
-                                                          MHSSPTEmitter)
+                                                          SignatureEmitter, GLRTEmitter, TimeGatedEmitter)
                                            for k in e.kinds}
 
 
