@@ -12,7 +12,7 @@ import numpy as np
 
 from ..errors import DataError
 
-__all__ = ["Field", "StageEmitter", "c_array", "lit", "stage_emitter"]
+__all__ = ["Field", "StageEmitter", "lit", "stage_emitter"]
 
 
 @dataclass(frozen=True)
@@ -41,20 +41,6 @@ def lit(x: float) -> str:
 def rl(x: float) -> str:
     """A literal of the working precision (``FDK_R(x)`` casts to fdk_real)."""
     return f"FDK_R({lit(x)})"
-
-
-def c_array(name: str, values: np.ndarray, ctype: str = "double") -> str:
-    """A ``static const`` C array of ``values`` (doubles as shortest round-trip literals; a large
-    table of finite values takes the fast path: ``repr`` of each, ~0.2 s per million values)."""
-    v = np.asarray(values).ravel()
-    if ctype != "double":
-        items = [str(int(a)) for a in v.tolist()]
-    elif np.isfinite(v).all():
-        items = list(map(repr, v.astype(float).tolist()))
-    else:
-        items = [lit(a) for a in v]
-    body = ",\n".join(", ".join(items[i:i + 8]) for i in range(0, len(items), 8))
-    return f"static const {ctype} {name}[{max(v.size, 1)}] = {{\n{body or '0'}\n}};"
 
 
 class StageEmitter:

@@ -7,9 +7,10 @@ order of floating-point operations (``fdikit.detect.mhsspt.tables``)."""
 from __future__ import annotations
 
 from ..errors import DataError
+from .arrays import c_array
 from .mhsspt_c import MHSSPT_DENSITY_HELPERS, UPDATE_P_HELPER, MHSSPTCode, MHSSPTEmitter
 from .registry import register_emitter
-from .stages import c_array, lit
+from .stages import lit
 
 __all__ = ["TabulatedMHSSPTEmitter"]
 
