@@ -69,7 +69,7 @@ def test_c_array_large_tables_in_hex_short_ones_in_decimal():
 def test_the_compiler_reads_the_literals_back_bitwise(tmp_path):
     v = np.concatenate([_values(20_000, seed=1), np.linspace(-1.0, 1.0, HEX_FROM)])
     src = tmp_path / "tab.c"
-    src.write_text(c_array("fdk_tab", v) + f"\nconst double *fdk_table(void);\nconst double *fdk_table(void) "
+    src.write_text(c_array("fdk_tab", v) + "\nconst double *fdk_table(void);\nconst double *fdk_table(void) "
                    "{ return fdk_tab; }\n")
     assert "0x" in src.read_text()
     lib = ctypes.CDLL(str(compile_shared([src], tmp_path / "libtab.so")))
