@@ -10,7 +10,6 @@ and on the real RAV4 minute (skipped when it is absent).
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -24,8 +23,7 @@ from fdikit.residuals.fdf import FaultDetectionFilter, FilterDesign
 from fdikit.residuals.scheduled import ScheduledFilter
 from fdikit.signals import Signals, check_time
 
-ROOT = Path(__file__).resolve().parents[1]
-DATA = ROOT / ".." / "shared" / "data" / "rav4-highway"
+from .systems.car.rav4_example import DATA, rav4_config
 
 
 # ---------------------------------------------------------------------------------- references
@@ -362,16 +360,7 @@ def test_processor_pool_without_copies_gives_the_old_statistics():
 def rav4_cfg(tmp_path_factory):
     if not (DATA / "drive.blf").exists():
         pytest.skip(f"RAV4 data not found at {DATA}")
-    from fdikit.monitor.config import load_config, run_design
-
-    tmp = tmp_path_factory.mktemp("speedcfg")
-    text = (ROOT / "examples" / "rav4-lateral" / "monitor.toml").read_text()
-    text = text.replace('dbc = "../../../shared/data/rav4-highway/toyota_rav4.dbc"',
-                        f'dbc = "{(DATA / "toyota_rav4.dbc").resolve()}"')
-    cfg = tmp / "monitor.toml"
-    cfg.write_text(text)
-    run_design(load_config(cfg))
-    return cfg
+    return rav4_config(tmp_path_factory.mktemp("speedcfg"))
 
 
 def _run_old_and_new(cfg_path, sig):

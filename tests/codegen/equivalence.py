@@ -21,16 +21,22 @@ from fdikit.codegen import (
 STATUS = ("ok", "cannot_judge", "warmup")
 
 
-def build(mon, where: Path, name: str, f32: bool = False):
-    """Generate and compile ``mon``: (double CMonitor, float32 CMonitor or None, emitters)."""
-    generate_monitor(mon, where, name=name, precisions=("double", "float") if f32 else ("double",))
+def generated(mon, where: Path, name: str, f32: bool = True):
+    """Generate and compile ``mon``: (the generation's result, double CMonitor, float32 CMonitor
+    or None, emitters)."""
+    gen = generate_monitor(mon, where, name=name, precisions=("double", "float") if f32 else ("double",))
     c64 = CMonitor(compile_shared([where / f"{name}.c"], where / f"lib{name}.so"),
                    where / f"{name}.layout.json")
     c32 = None
     if f32:
         c32 = CMonitor(compile_shared([where / f"{name}_f32.c"], where / f"lib{name}_f32.so"),
                        where / f"{name}_f32.layout.json")
-    return c64, c32, emit_monitor(mon, name=name).emitters
+    return gen, c64, c32, emit_monitor(mon, name=name).emitters
+
+
+def build(mon, where: Path, name: str, f32: bool = False):
+    """Generate and compile ``mon``: (double CMonitor, float32 CMonitor or None, emitters)."""
+    return generated(mon, where, name, f32)[1:]
 
 
 def py_stream(mon, t, x, names):
@@ -47,6 +53,74 @@ def py_stream(mon, t, x, names):
 
 def c_events(res):
     return [(e["k"], e["kind"], e["hypothesis"], e["episode"], e["value"], e["size"]) for e in res["events"]]
+
+
+def assert_stream_equal(c64, t, x, py):
+    """The C run on (t, x) gives bitwise the Python streaming result ``py`` (outputs, statuses,
+    events: :func:`py_stream`); returns the C result."""
+    py_out, py_status, py_ev = py
+    res = c64.run(t, x)
+    assert np.array_equal(res["status"], py_status), np.flatnonzero(res["status"] != py_status)[:5]
+    assert np.array_equal(res["out"], py_out)       # bitwise: the same operations in the same order
+    assert c_events(res) == py_ev
+    return res
+
+
+def f32_error(c32, t, x, py_out) -> float:
+    """The float32 variant's largest error on (t, x), relative to each channel's largest magnitude."""
+    scale = np.maximum(np.abs(py_out).max(axis=0), 1e-12)
+    return float(np.max(np.abs(c32.run(t, x)["out"] - py_out) / scale))
+
+
+def changed_fields(layout, before, after) -> set[str]:
+    """The state fields (``layout["fields"]``) whose checkpoint values differ (NaN equal to NaN)."""
+    fields = layout["fields"]
+    offs = np.cumsum([0] + [f[2] for f in fields])
+    moved = np.flatnonzero(~((before == after) | (np.isnan(before) & np.isnan(after))))
+    return {fields[np.searchsorted(offs, i, side="right") - 1][0] for i in moved}
+
+
+def field(layout, buf, name: str):
+    """One state field's values in a checkpoint ``buf``."""
+    fields = layout["fields"]
+    offs = np.cumsum([0] + [f[2] for f in fields])
+    i = [f[0] for f in fields].index(name)
+    return buf[offs[i]:offs[i + 1]]
+
+
+def nan_sample(c64, t, x, k, channel):
+    """C run on the first ``k`` samples, then sample ``k`` with NaN on ``channel``: held (status 1,
+    no event). Returns the checkpoints before and after it."""
+    c64.run(t[:k], x[:k])
+    before = c64.checkpoint()
+    bad = x[k].copy()
+    bad[channel] = np.nan
+    st, _out, ev = c64.step(t[k], bad)
+    assert st == 1 and ev == []
+    return before, c64.checkpoint()
+
+
+def c_then_python(mon, c64, em, t, x, cut):
+    """C on the first ``cut`` samples, Python restored from its checkpoint continues: (the C
+    checkpoint, Python's outputs from ``cut`` on)."""
+    names = list(mon.input_names)
+    c64.run(t[:cut], x[:cut])
+    ck = c64.checkpoint()
+    mon.reset(1)
+    mon.restore(c_to_py_state(c64.layout, ck, mon, em))
+    rest = [mon.step(float(t[k]), x[k][None], names) for k in range(cut, len(t))]
+    return ck, np.array([np.concatenate([r[0], s[0]]) for r, s, _ in rest])
+
+
+def python_then_c(mon, c64, em, t, x, cut):
+    """Python on the first ``cut`` samples, a fresh C monitor restored from its state continues:
+    (the C run from ``cut`` on, the restored C state read back as Python's; ``mon`` is left at
+    ``cut``)."""
+    py_stream(mon, t[:cut], x[:cut], list(mon.input_names))
+    fresh = CMonitor(c64.lib._name, c64.layout)
+    fresh.restore(py_to_c_state(c64.layout, mon.state(), em))
+    back = c_to_py_state(c64.layout, fresh.checkpoint(), mon, em)
+    return fresh.run(t[cut:], x[cut:], reset=False), back
 
 
 def same(a, b) -> bool:
@@ -79,15 +153,8 @@ def assert_equivalent(mon, c64, em, t, x, *, min_events=1, batch=True):
         assert sorted(e[:4] for e in py_ev) == sorted((e.k, e.kind, e.hypothesis, e.episode)
                                                       for e in (*rb.events, *rb.cleared))
     for cut in (len(t) // 3, 2 * len(t) // 3):
-        c64.run(t[:cut], x[:cut])
-        mon.reset(1)
-        mon.restore(c_to_py_state(c64.layout, c64.checkpoint(), mon, em))
-        rest = [mon.step(float(t[k]), x[k][None], names) for k in range(cut, len(t))]
-        assert np.array_equal(np.array([np.concatenate([r[0], s[0]]) for r, s, _ in rest]), py_out[cut:])
-        py_stream(mon, t[:cut], x[:cut], names)
-        fresh = CMonitor(c64.lib._name, c64.layout)
-        fresh.restore(py_to_c_state(c64.layout, mon.state(), em))
-        r2 = fresh.run(t[cut:], x[cut:], reset=False)
+        assert np.array_equal(c_then_python(mon, c64, em, t, x, cut)[1], py_out[cut:])
+        r2, _back = python_then_c(mon, c64, em, t, x, cut)
         assert np.array_equal(r2["out"], py_out[cut:])
         assert np.array_equal(r2["status"], py_status[cut:])
         assert c_events(r2) == [e for e in py_ev if e[0] >= cut]
@@ -98,13 +165,10 @@ def assert_nan_held(mon, c64, em, t, x, k, channel=1, exact=True):
     """After ``k`` samples, a NaN on ``channel`` is held in C as in Python; no stage state moves
     (``exact``: and the C state, read as Python's, is bitwise Python's)."""
     names = list(mon.input_names)
-    c64.run(t[:k], x[:k])
     py_stream(mon, t[:k], x[:k], names)
-    before = c64.checkpoint()
+    before, after = nan_sample(c64, t, x, k, channel)
     bad = x[k].copy()
     bad[channel] = np.nan
-    st, _out, ev = c64.step(t[k], bad)
-    assert st == 1 and ev == []
     py_before = mon.state()
     mon.step(float(t[k]), bad[None], names)
     assert mon.last_status == "cannot_judge"
@@ -115,10 +179,6 @@ def assert_nan_held(mon, c64, em, t, x, k, channel=1, exact=True):
         assert same(g_p, g_b)
         assert same(g_c, g_p) or not exact
     assert same(a["plausibility"], p["plausibility"])
-    after = c64.checkpoint()
-    fields = c64.layout["fields"]
-    offs = np.cumsum([0] + [f[2] for f in fields])
-    changed = {fields[np.searchsorted(offs, i, side="right") - 1][0]
-               for i in np.flatnonzero(~((before == after) | (np.isnan(before) & np.isnan(after))))}
-    stage = {f[0] for f in fields if f[0].startswith(("g", "p")) and f[0][1:2].isdigit()}
+    changed = changed_fields(c64.layout, before, after)
+    stage = {f[0] for f in c64.layout["fields"] if f[0].startswith(("g", "p")) and f[0][1:2].isdigit()}
     assert not (changed & stage), changed

@@ -28,8 +28,6 @@ from fdikit.codegen import (
     emit_monitor,
     find_compiler,
     generate,
-    generate_monitor,
-    py_to_c_state,
     run_driver,
 )
 from fdikit.detect import GLRT, MHSSPT, FeatureNorms, Hold, TimeGated, UniformMeanGaussian
@@ -39,6 +37,19 @@ from fdikit.model import LinearFaultModel
 from fdikit.monitor import Decision, Monitor
 from fdikit.monitor.plausibility import Plausibility
 from fdikit.residuals import FaultDetectionFilter, FilterDesign, ObserverResidual, design_observer_residual
+
+from .equivalence import (
+    assert_stream_equal,
+    c_events,
+    c_then_python,
+    changed_fields,
+    f32_error,
+    nan_sample,
+    py_stream,
+    python_then_c,
+    same,
+)
+from .equivalence import generated as _build  # (the name the other codegen tests import)
 
 pytestmark = pytest.mark.skipif(find_compiler() is None, reason="no C compiler (cc, gcc or clang) on PATH")
 
@@ -121,26 +132,6 @@ def _log(mon, seed=0, T=1500, gap=True):
     return t, x, names
 
 
-def _py_stream(mon, t, x, names):
-    mon.reset(1)
-    outs, status, events = [], [], []
-    for k in range(len(t)):
-        r, s, ev = mon.step(float(t[k]), x[k][None], names)
-        outs.append(np.concatenate([r[0], s[0]]))
-        status.append(("ok", "cannot_judge", "warmup").index(mon.last_status))
-        events += [(e.k, e.kind, e.hypothesis, e.episode, e.value, e.size) for e in ev]
-    return np.array(outs), np.array(status), events
-
-
-def _same(a, b) -> bool:
-    """Equal plain-data states (dicts, tuples, arrays, numbers), bitwise."""
-    if isinstance(a, dict):
-        return set(a) == set(b) and all(_same(a[k], b[k]) for k in a)
-    if isinstance(a, tuple | list):
-        return len(a) == len(b) and all(_same(u, v) for u, v in zip(a, b))
-    return np.array_equal(np.asarray(a), np.asarray(b))
-
-
 _REF: dict = {}
 
 
@@ -149,23 +140,8 @@ def _reference(built, which, seed):
     if (which, seed) not in _REF:
         mon = built[which][0]
         t, x, names = _log(mon, seed)
-        _REF[which, seed] = (t, x, names, *_py_stream(mon, t, x, names))
+        _REF[which, seed] = (t, x, names, *py_stream(mon, t, x, names))
     return _REF[which, seed]
-
-
-def _c_events(res):
-    return [(e["k"], e["kind"], e["hypothesis"], e["episode"], e["value"], e["size"]) for e in res["events"]]
-
-
-def _build(mon, where: Path, name: str, f32: bool = True):
-    gen = generate_monitor(mon, where, name=name, precisions=("double", "float") if f32 else ("double",))
-    c64 = CMonitor(compile_shared([where / f"{name}.c"], where / f"lib{name}.so"),
-                   where / f"{name}.layout.json")
-    c32 = None
-    if f32:
-        c32 = CMonitor(compile_shared([where / f"{name}_f32.c"], where / f"lib{name}_f32.so"),
-                       where / f"{name}_f32.layout.json")
-    return gen, c64, c32, emit_monitor(mon, name=name).emitters
 
 
 @pytest.fixture(scope="module")
@@ -182,18 +158,13 @@ def built(tmp_path_factory):
 def test_c_equals_python_streaming(built, which, seed):
     _mon, _gen, c64, c32, _em = built[which]
     t, x, _names, py_out, py_status, py_ev = _reference(built, which, seed)
-    res = c64.run(t, x)
-    assert np.array_equal(res["status"], py_status)
-    assert np.array_equal(res["out"], py_out)       # bitwise: the same operations in the same order
-    assert _c_events(res) == py_ev
+    assert_stream_equal(c64, t, x, (py_out, py_status, py_ev))
     assert len(py_ev) >= 4
     assert {1, 2} <= set(py_status.tolist())   # held samples and warm-up were exercised
     # float32: statistics within float resolution of the channel's scale; events compared
-    r32 = c32.run(t, x)
-    scale = np.maximum(np.abs(py_out).max(axis=0), 1e-12)
-    err = np.max(np.abs(r32["out"] - py_out) / scale)
+    err = f32_error(c32, t, x, py_out)
     assert err < 1e-3, err
-    assert np.array_equal(r32["status"], py_status)
+    assert np.array_equal(c32.run(t, x)["status"], py_status)
 
 
 @pytest.mark.parametrize("which", ["fdf", "obs", "mhsspt"])
@@ -205,7 +176,7 @@ def test_c_equals_python_batch(built, which):
     py = np.concatenate([res.residuals.values[0], res.statistics.values[0]], axis=1)
     assert np.allclose(out["out"], py, rtol=1e-12, atol=0)
     evs = sorted((e.k, e.kind, e.hypothesis, e.episode) for e in (*res.events, *res.cleared))
-    assert sorted(e[:4] for e in _c_events(out)) == evs
+    assert sorted(e[:4] for e in c_events(out)) == evs
 
 
 def test_each_stage_alone_equals_python(tmp_path):
@@ -222,7 +193,7 @@ def test_each_stage_alone_equals_python(tmp_path):
     for key, st in stages.items():
         mon = Monitor([FaultDetectionFilter(d)], [st], None, on_invalid="hold")
         _gen, c64, _c32, _em = _build(mon, tmp_path / key, f"fdk_{key}", f32=False)
-        py_out, py_status, _ = _py_stream(mon, t, x, ["a", "b"])
+        py_out, py_status, _ = py_stream(mon, t, x, ["a", "b"])
         res = c64.run(t, x)
         assert np.array_equal(res["out"], py_out), key
         assert np.array_equal(res["status"], py_status), key
@@ -233,14 +204,10 @@ def test_each_stage_alone_equals_python(tmp_path):
 def test_nan_refused_without_changing_state(built, which):
     mon, _gen, c64, _c32, em = built[which]
     t, x, names = _log(mon, 4, gap=False)
-    c64.run(t[:400], x[:400])
-    _py_stream(mon, t[:400], x[:400], names)
-    before = c64.checkpoint()
+    py_stream(mon, t[:400], x[:400], names)
+    before, after = nan_sample(c64, t, x, 400, 1)
     bad = x[400].copy()
     bad[1] = np.nan
-    st, _out, ev = c64.step(t[400], bad)
-    assert st == 1 and ev == []
-    after = c64.checkpoint()
     py_before = mon.state()
     mon.step(float(t[400]), bad[None], names)
     assert mon.last_status == "cannot_judge"
@@ -248,12 +215,9 @@ def test_nan_refused_without_changing_state(built, which):
     p = mon.state()
     for g_c, g_p, g_b in zip(a["generators"] + a["processors"], p["generators"] + p["processors"],
                              py_before["generators"] + py_before["processors"]):
-        assert _same(g_c, g_p)   # the C state as Python reads it is Python's own state after the sample
-        assert _same(g_p, g_b)   # and Python kept its state
-    changed = np.flatnonzero(before != after)
-    fields = c64.layout["fields"]
-    offs = np.cumsum([0] + [f[2] for f in fields])
-    names_changed = {fields[np.searchsorted(offs, i, side="right") - 1][0] for i in changed}
+        assert same(g_c, g_p)   # the C state as Python reads it is Python's own state after the sample
+        assert same(g_p, g_b)   # and Python kept its state
+    names_changed = changed_fields(c64.layout, before, after)
     assert names_changed <= {"k", "held", "held_t", "t_prev"}, names_changed   # no stage state moved
     assert (a["k"], a["held"], a["held_t"], a["t_prev"]) == (p["k"], p["held"], p["held_t"], p["t_prev"])
 
@@ -265,7 +229,7 @@ def test_time_going_back_and_raise_mode(built, tmp_path):
     t, x, names = _log(mon, 7, gap=False)
     t, x = t[:300], x[:300]
     c64.run(t[:200], x[:200])
-    _py_stream(mon, t[:200], x[:200], names)
+    py_stream(mon, t[:200], x[:200], names)
     st, _o, _e = c64.step(t[150], x[200])
     mon.step(float(t[150]), x[200][None], names)
     assert st == 1 and mon.last_status == "cannot_judge"
@@ -283,7 +247,7 @@ def test_time_going_back_and_raise_mode(built, tmp_path):
     assert cs.step(t[50], x[100])[0] == -1        # FDK_ERR_TIME
     assert cs.step(np.nan, x[100])[0] == -1
     assert np.array_equal(cs.checkpoint(), before)
-    _py_stream(strict, t[:100], x[:100], names)
+    py_stream(strict, t[:100], x[:100], names)
     with pytest.raises(DataError):
         strict.step(float(t[100]), bad[None], names)
 
@@ -307,22 +271,14 @@ def test_command_prints_one_json_object(own_system, tmp_path, capsys):
 @pytest.mark.parametrize("cut", [130, 1003])
 def test_checkpoint_c_to_python_and_back(built, which, cut):
     mon, _gen, c64, _c32, em = built[which]
-    t, x, names, full_out, full_status, full_ev = _reference(built, which, 0)
+    t, x, _names, full_out, full_status, full_ev = _reference(built, which, 0)
     # C first, Python continues
-    c64.run(t[:cut], x[:cut])
-    mon.reset(1)
-    mon.restore(c_to_py_state(c64.layout, c64.checkpoint(), mon, em))
-    rest = [mon.step(float(t[k]), x[k][None], names) for k in range(cut, len(t))]
-    py_rest = np.array([np.concatenate([r[0], s[0]]) for r, s, _ in rest])
-    assert np.array_equal(py_rest, full_out[cut:])
+    assert np.array_equal(c_then_python(mon, c64, em, t, x, cut)[1], full_out[cut:])
     # Python first, C continues
-    _py_stream(mon, t[:cut], x[:cut], names)
-    fresh = CMonitor(c64.lib._name, c64.layout)
-    fresh.restore(py_to_c_state(c64.layout, mon.state(), em))
-    res = fresh.run(t[cut:], x[cut:], reset=False)
+    res, _back = python_then_c(mon, c64, em, t, x, cut)
     assert np.array_equal(res["out"], full_out[cut:])
     assert np.array_equal(res["status"], full_status[cut:])
-    assert _c_events(res) == [e for e in full_ev if e[0] >= cut]
+    assert c_events(res) == [e for e in full_ev if e[0] >= cut]
     # and the C checkpoint restores in C
     c64.run(t[:cut], x[:cut])
     buf = c64.checkpoint()
@@ -394,12 +350,12 @@ def test_example_config_events_equal(own_system):
         log = tmp / "logs" / f"{stem}.csv"
         sig = map_channels(cfg, read_log(cfg, log))
         x = sig.values[0][:, sig.index(c64.layout["inputs"])]
-        py_out, _status, py_ev = _py_stream(mon, sig.t, x, c64.layout["inputs"])
+        py_out, _status, py_ev = py_stream(mon, sig.t, x, c64.layout["inputs"])
         res = c64.run(sig.t, x)
         assert np.array_equal(res["out"], py_out), log.name
-        assert _c_events(res) == py_ev, log.name
+        assert c_events(res) == py_ev, log.name
         r32 = c32.run(sig.t, x)
-        assert [e[:4] for e in _c_events(r32)] == [e[:4] for e in py_ev], log.name   # float32: same events
+        assert [e[:4] for e in c_events(r32)] == [e[:4] for e in py_ev], log.name   # float32: same events
         n_onsets += sum(e[1] == "onset" for e in py_ev)
     assert n_onsets >= 2   # each fault log announces its fault
 
@@ -439,5 +395,5 @@ def test_under_sanitizers(built, tmp_path):
     res = run_driver(exe, layout, t, x)
     assert np.array_equal(res["out"], py_out)
     assert np.array_equal(res["status"], py_status)
-    assert _c_events(res) == py_ev and py_ev
+    assert c_events(res) == py_ev and py_ev
     assert "runtime error" not in res["stderr"]

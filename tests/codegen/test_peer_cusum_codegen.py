@@ -10,11 +10,23 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from fdikit.codegen import CMonitor, c_to_py_state, find_compiler, py_to_c_state
+from fdikit.codegen import find_compiler
 from fdikit.detect import PeerCUSUM
 from fdikit.monitor import Decision, Monitor
 
-from .test_codegen import DT, _build, _c_events, _py_stream, _same
+from .equivalence import (
+    assert_stream_equal,
+    c_events,
+    c_then_python,
+    changed_fields,
+    f32_error,
+    field,
+    nan_sample,
+    py_stream,
+    python_then_c,
+    same,
+)
+from .test_codegen import DT, _build
 from .test_sensor_codegen import _bank_monitor, _log
 
 pytestmark = pytest.mark.skipif(find_compiler() is None, reason="no C compiler (cc, gcc or clang) on PATH")
@@ -48,52 +60,28 @@ def built(tmp_path_factory):
 def test_peer_cusum_c_equals_python(built, warmup, seed):
     mon, _gen, c64, c32, _em = built[warmup]
     t, x, names = _log(mon, seed)
-    py_out, py_status, py_ev = _py_stream(mon, t, x, names)
-    res = c64.run(t, x)
-    assert np.array_equal(res["status"], py_status)
-    assert np.array_equal(res["out"], py_out)
-    assert _c_events(res) == py_ev
+    py_out, py_status, py_ev = py = py_stream(mon, t, x, names)
+    assert_stream_equal(c64, t, x, py)
     cols = mon.residual_names + mon.stat_names
     assert py_out[:, cols.index("cusum:r0")].max() > 1.0          # the CUSUM isolates
     assert py_out[:, cols.index("cusum:r5:isolated")].max() == 1.0
     assert len(py_ev) >= 2 and {1, 2} <= set(py_status.tolist())
-    r32 = c32.run(t, x)
-    scale = np.maximum(np.abs(py_out).max(axis=0), 1e-12)
-    assert np.max(np.abs(r32["out"] - py_out) / scale) < 1e-3
+    assert f32_error(c32, t, x, py_out) < 1e-3
 
 
 def test_peer_cusum_nan_refused_and_checkpoints_cross(built):
     mon, _gen, c64, _c32, em = built[4]
     t, x, names = _log(mon, 2, gap=False)
     cut = 400
-    c64.run(t[:cut], x[:cut])
-    before = c64.checkpoint()
-    bad = x[cut].copy()
-    bad[names.index("y0")] = np.nan
-    st, _o, ev = c64.step(t[cut], bad)
-    assert st == 1 and ev == []
-    fields = c64.layout["fields"]
-    offs = np.cumsum([0] + [f[2] for f in fields])
-    moved = np.flatnonzero(before != c64.checkpoint())
-    changed = {fields[np.searchsorted(offs, i, side="right") - 1][0] for i in moved}
+    changed = changed_fields(c64.layout, *nan_sample(c64, t, x, cut, names.index("y0")))
     assert changed <= {"k", "held", "held_t", "t_prev"}, changed
-    full_out, _s, full_ev = _py_stream(mon, t, x, names)
+    full_out, _s, full_ev = py_stream(mon, t, x, names)
     # C -> Python continues bitwise
-    c64.run(t[:cut], x[:cut])
-    ck = c64.checkpoint()
-    p_up = [f[0] for f in fields].index("p1_up")
-    assert np.any(ck[offs[p_up]:offs[p_up + 1]] != 0)               # the CUSUM state crosses
-    mon.reset(1)
-    mon.restore(c_to_py_state(c64.layout, ck, mon, em))
-    rest = np.array([np.concatenate([r[0], s[0]]) for r, s, _ in
-                     (mon.step(float(t[k]), x[k][None], names) for k in range(cut, len(t)))])
+    ck, rest = c_then_python(mon, c64, em, t, x, cut)
+    assert np.any(field(c64.layout, ck, "p1_up") != 0)               # the CUSUM state crosses
     assert np.array_equal(rest, full_out[cut:])
     # Python -> C continues bitwise
-    _py_stream(mon, t[:cut], x[:cut], names)
-    fresh = CMonitor(c64.lib._name, c64.layout)
-    fresh.restore(py_to_c_state(c64.layout, mon.state(), em))
-    back = c_to_py_state(c64.layout, fresh.checkpoint(), mon, em)
-    assert _same(back["processors"], mon.state()["processors"])
-    res = fresh.run(t[cut:], x[cut:], reset=False)
+    res, back = python_then_c(mon, c64, em, t, x, cut)
+    assert same(back["processors"], mon.state()["processors"])
     assert np.array_equal(res["out"], full_out[cut:])
-    assert _c_events(res) == [e for e in full_ev if e[0] >= cut]
+    assert c_events(res) == [e for e in full_ev if e[0] >= cut]

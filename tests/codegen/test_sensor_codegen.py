@@ -15,11 +15,8 @@ import numpy as np
 import pytest
 
 from fdikit.codegen import (
-    CMonitor,
-    c_to_py_state,
     class_path,
     find_compiler,
-    py_to_c_state,
     register_emitter,
     registered_emitter,
     subset_monitor,
@@ -30,7 +27,17 @@ from fdikit.errors import DataError
 from fdikit.monitor import Decision, Monitor
 from fdikit.residuals import FilterDesign, ScheduledFilter
 
-from .test_codegen import DT, _build, _c_events, _py_stream, _same, _stable
+from .equivalence import (
+    assert_stream_equal,
+    c_then_python,
+    changed_fields,
+    f32_error,
+    nan_sample,
+    py_stream,
+    python_then_c,
+    same,
+)
+from .test_codegen import DT, _build, _stable
 
 pytestmark = pytest.mark.skipif(find_compiler() is None, reason="no C compiler (cc, gcc or clang) on PATH")
 
@@ -90,49 +97,27 @@ def built(tmp_path_factory):
 def test_bank_stuck_peer_c_equals_python(built, measured, seed):
     mon, _gen, c64, c32, _em = built[measured]
     t, x, names = _log(mon, seed)
-    py_out, py_status, py_ev = _py_stream(mon, t, x, names)
-    res = c64.run(t, x)
-    assert np.array_equal(res["status"], py_status)
-    assert np.array_equal(res["out"], py_out)
-    assert _c_events(res) == py_ev
+    py_out, py_status, py_ev = py = py_stream(mon, t, x, names)
+    assert_stream_equal(c64, t, x, py)
     assert len(py_ev) >= 3 and {1, 2} <= set(py_status.tolist())
     names_out = mon.residual_names + mon.stat_names
     assert py_out[:, names_out.index("r0:stuck")].max() > 0          # the stuck statistic moved
     assert py_out[:, names_out.index("peer:r0:isolated")].max() == 1.0
-    r32 = c32.run(t, x)
-    scale = np.maximum(np.abs(py_out).max(axis=0), 1e-12)
-    assert np.max(np.abs(r32["out"] - py_out) / scale) < 1e-3
+    assert f32_error(c32, t, x, py_out) < 1e-3
 
 
 def test_nan_leaves_stage_state_and_checkpoints_cross(built):
     mon, _gen, c64, _c32, em = built[False]
     t, x, names = _log(mon, 2, gap=False)
     cut = 400
-    c64.run(t[:cut], x[:cut])
-    before = c64.checkpoint()
-    bad = x[cut].copy()
-    bad[names.index("y1")] = np.nan
-    st, _o, ev = c64.step(t[cut], bad)
-    assert st == 1 and ev == []
-    fields = c64.layout["fields"]
-    offs = np.cumsum([0] + [f[2] for f in fields])
-    moved = np.flatnonzero(before != c64.checkpoint())
-    changed = {fields[np.searchsorted(offs, i, side="right") - 1][0] for i in moved}
+    changed = changed_fields(c64.layout, *nan_sample(c64, t, x, cut, names.index("y1")))
     assert changed <= {"k", "held", "held_t", "t_prev"}, changed
     # C -> Python -> C continues bitwise
-    full_out, _s, _e = _py_stream(mon, t, x, names)
-    c64.run(t[:cut], x[:cut])
-    mon.reset(1)
-    mon.restore(c_to_py_state(c64.layout, c64.checkpoint(), mon, em))
-    rest = np.array([np.concatenate([r[0], s[0]]) for r, s, _ in
-                     (mon.step(float(t[k]), x[k][None], names) for k in range(cut, len(t)))])
-    assert np.array_equal(rest, full_out[cut:])
-    _py_stream(mon, t[:cut], x[:cut], names)
-    fresh = CMonitor(c64.lib._name, c64.layout)
-    fresh.restore(py_to_c_state(c64.layout, mon.state(), em))
-    back = c_to_py_state(c64.layout, fresh.checkpoint(), mon, em)
-    assert _same(back["processors"], mon.state()["processors"])
-    assert np.array_equal(fresh.run(t[cut:], x[cut:], reset=False)["out"], full_out[cut:])
+    full_out, _s, _e = py_stream(mon, t, x, names)
+    assert np.array_equal(c_then_python(mon, c64, em, t, x, cut)[1], full_out[cut:])
+    res, back = python_then_c(mon, c64, em, t, x, cut)
+    assert same(back["processors"], mon.state()["processors"])
+    assert np.array_equal(res["out"], full_out[cut:])
 
 
 def test_registry_refuses_and_finds():

@@ -11,7 +11,6 @@ import json
 import shutil
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -24,10 +23,9 @@ from fdikit.fleet import batch as fleet_batch
 from fdikit.fleet import batch_size, batches, is_done, plan, process_log, process_logs, run_fleet
 from fdikit.fleet import process as fleet_process
 from fdikit.io.decode import read_blf_table, write_blf_table
-from fdikit.monitor.config import load_config, run_design
 
-ROOT = Path(__file__).resolve().parents[2]
-DATA = ROOT / ".." / "shared" / "data" / "rav4-highway"
+from ..systems.car.rav4_example import DATA, rav4_config
+
 pytestmark = pytest.mark.skipif(not (DATA / "drive.blf").exists(),
                                 reason=f"real RAV4 data not found at {DATA}")
 N_LOGS = 7
@@ -36,11 +34,7 @@ N_LOGS = 7
 @pytest.fixture(scope="module")
 def fleet_dir(tmp_path_factory):
     d = tmp_path_factory.mktemp("fleet_batch")
-    text = (ROOT / "examples" / "rav4-lateral" / "monitor.toml").read_text()
-    text = text.replace('dbc = "../../../shared/data/rav4-highway/toyota_rav4.dbc"',
-                        f'dbc = "{(DATA / "toyota_rav4.dbc").resolve()}"')
-    (d / "monitor.toml").write_text(text)
-    run_design(load_config(d / "monitor.toml"))
+    rav4_config(d)
     ts, ids, pay, _ = read_blf_table(DATA / "drive.blf")
     for i in range(N_LOGS):
         keep = (ts - ts[0] >= 2.0 * i) & (ts - ts[0] <= 30.0 + 4.0 * i)

@@ -18,10 +18,10 @@ import pytest
 
 from fdikit.commands.fleet import discover, path_fields, plan
 from fdikit.io.decode import decode_message, read_blf_table, set_signal, write_blf_table
-from fdikit.monitor.config import build_monitor, load_config, map_channels, read_log, run_design
+from fdikit.monitor.config import build_monitor, load_config, map_channels, read_log
 
-ROOT = Path(__file__).resolve().parents[2]
-DATA = ROOT / ".." / "shared" / "data" / "rav4-highway"
+from ..systems.car.rav4_example import DATA, rav4_config
+
 pytestmark = pytest.mark.skipif(not (DATA / "drive.blf").exists(),
                                 reason=f"real RAV4 data not found at {DATA}")
 
@@ -34,11 +34,7 @@ def cli(*args):
 @pytest.fixture(scope="module")
 def fleet(tmp_path_factory):
     d = tmp_path_factory.mktemp("fleet")
-    text = (ROOT / "examples" / "rav4-lateral" / "monitor.toml").read_text()
-    text = text.replace('dbc = "../../../shared/data/rav4-highway/toyota_rav4.dbc"',
-                        f'dbc = "{(DATA / "toyota_rav4.dbc").resolve()}"')
-    (d / "monitor.toml").write_text(text)
-    run_design(load_config(d / "monitor.toml"))
+    rav4_config(d)
     ts, ids, pay, _ = read_blf_table(DATA / "drive.blf")
     db = cantools.database.load_file(str(DATA / "toyota_rav4.dbc"), strict=False)
     logs = d / "logs"

@@ -3,7 +3,6 @@ writer, multi-instance names, the causal zero-order hold and its age channel, ba
 
 from __future__ import annotations
 
-import random
 import struct
 from pathlib import Path
 
@@ -13,6 +12,8 @@ import pytest
 from fdikit.errors import DataError
 from fdikit.io import read_log, read_ulog
 from fdikit.io.formats import MultiRateSignals, detect_format
+
+from .fuzzing import BIN_OPS, check_read, mutate
 
 pytest.importorskip("pyulog")
 
@@ -171,41 +172,16 @@ def test_bad_files(tmp_path):
         read_ulog(p, method="cubic")
 
 
-def _check(fn):
-    """A clear DataError (returns its message) or sound data (returns the signals)."""
-    try:
-        out = fn()
-    except DataError as exc:
-        assert "ULog file" in str(exc), str(exc)
-        return str(exc)
-    assert isinstance(out, MultiRateSignals)
-    np.testing.assert_array_equal(out.valid, np.isfinite(out.values))
-    return out
-
-
-@pytest.mark.parametrize("op", ["truncate", "corrupt", "zero-block", "append-garbage"])
+@pytest.mark.parametrize("op", BIN_OPS)
 @pytest.mark.parametrize("seed", range(6))
 def test_fuzzed_ulog(tmp_path, op, seed):
     p, _ = _example(tmp_path)
-    data = bytearray(p.read_bytes())
-    r = random.Random(seed)
-    if op == "truncate":
-        data = data[: r.randrange(1, len(data))]
-    elif op == "corrupt":
-        for _ in range(r.choice([1, 3, 20])):
-            data[r.randrange(len(data))] = r.randrange(256)
-    elif op == "zero-block":
-        a = r.randrange(len(data))
-        n = min(len(data) - a, r.randrange(8, 512))
-        data[a: a + n] = bytes(n)
-    else:
-        data += bytes(r.randrange(256) for _ in range(r.randrange(1, 200)))
     q = tmp_path / "fuzz.ulg"
-    q.write_bytes(bytes(data))
-    _check(lambda: read_ulog(q, rate=50.0))
-    _check(lambda: read_ulog(q, rate=50.0, strict=False))
+    q.write_bytes(mutate(p.read_bytes(), op, seed))
+    check_read(lambda: read_ulog(q, rate=50.0), "ULog file")
+    check_read(lambda: read_ulog(q, rate=50.0, strict=False), "ULog file")
     if op == "truncate":  # a log cut short is the log up to the cut (ULog has no index)
-        out = _check(lambda: read_ulog(q, ["sensor_accel.x"], rate=50.0, span="log"))
+        out = check_read(lambda: read_ulog(q, ["sensor_accel.x"], rate=50.0, span="log"), "ULog file")
         if not isinstance(out, str):
             full = read_ulog(p, ["sensor_accel.x"], rate=50.0, span="log")
             n = out.n_samples

@@ -13,11 +13,11 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from fdikit import DataError, Signals
-from fdikit.detect import GLRT, MHSSPT, Hold, UniformMeanGaussian
 from fdikit.faults import Bias
-from fdikit.monitor import Monitor
-from fdikit.residuals import ObserverResidual, design_observer_residual
 from fdikit.systems import two_mass
+
+from .two_mass_monitor import build as build_monitor
+from .two_mass_monitor import observer_design
 
 T = 300
 CHANNELS = ["force", "pos1", "pos2"]
@@ -30,17 +30,12 @@ def record():
 
 @pytest.fixture(scope="module")
 def design():
-    return design_observer_residual(two_mass.model(), dt=two_mass.DT, Q=np.eye(4) * 1e-8,
-                                    R=np.eye(2) * two_mass.NOISE_STD**2)
+    return observer_design()
 
 
 def build(design):
-    gen = ObserverResidual(design)
-    glrt = GLRT(gen.output_names, 0.0, two_mass.NOISE_STD**2, W=10)
-    return Monitor([gen], [glrt, Hold(glrt.output_names, 50.0, Z=3, absolute=False),
-                           MHSSPT(["r:pos2"], {"ok": UniformMeanGaussian([0], [0], [0.003]),
-                                               "bias": UniformMeanGaussian([0.004], [0.05], [0.003])},
-                                  p=1e-3, q=1e-3)], on_invalid="hold")
+    """The two-mass monitor without a decision."""
+    return build_monitor(design, decision=False)
 
 
 def check(design, rec, values, times, bad_expected):

@@ -22,9 +22,10 @@ import pytest
 from fdikit.faults import Bias
 from fdikit.systems import two_mass
 
+from ..systems.car.rav4_example import DATA, rav4_config
+
 ROOT = Path(__file__).resolve().parents[2]
 EXAMPLE = ROOT / "examples" / "two-mass" / "monitor.toml"
-DATA = ROOT / ".." / "shared" / "data" / "rav4-highway"
 
 
 def follow_cmd(cfg, events, ckpt=None, every=None, resume=False):
@@ -136,14 +137,8 @@ def test_candump_follow_resumed_after_kill9_equals_uninterrupted(tmp_path):
     import cantools
 
     from fdikit.io.decode import decode_message, read_blf_table, set_signal
-    from fdikit.monitor.config import load_config, run_design
 
-    text = (ROOT / "examples" / "rav4-lateral" / "monitor.toml").read_text()
-    text = text.replace('dbc = "../../../shared/data/rav4-highway/toyota_rav4.dbc"',
-                        f'dbc = "{(DATA / "toyota_rav4.dbc").resolve()}"')
-    cfg = tmp_path / "monitor.toml"
-    cfg.write_text(text)
-    run_design(load_config(cfg))
+    cfg = rav4_config(tmp_path)
     ts, ids, pay, _ = read_blf_table(DATA / "drive.blf")
     db = cantools.database.load_file(str(DATA / "toyota_rav4.dbc"), strict=False)
     msg = db.get_message_by_name("KINEMATICS")

@@ -9,11 +9,13 @@ import numpy as np
 import pytest
 
 from fdikit import DataError, Signals
-from fdikit.detect import GLRT, MHSSPT, Hold, UniformMeanGaussian
+from fdikit.detect import Hold
 from fdikit.faults import Bias
 from fdikit.monitor import STATUS_NAMES, Decision, Monitor
-from fdikit.residuals import ObserverResidual, design_observer_residual
+from fdikit.residuals import ObserverResidual
 from fdikit.systems import two_mass
+
+from .two_mass_monitor import build, observer_design
 
 DT = two_mass.DT
 WARM, CANNOT = STATUS_NAMES.index("warmup"), STATUS_NAMES.index("cannot_judge")
@@ -21,19 +23,7 @@ WARM, CANNOT = STATUS_NAMES.index("warmup"), STATUS_NAMES.index("cannot_judge")
 
 @pytest.fixture(scope="module")
 def design():
-    return design_observer_residual(two_mass.model(), dt=DT, Q=np.eye(4) * 1e-8,
-                                    R=np.eye(2) * two_mass.NOISE_STD**2)
-
-
-def build(design, **kw):
-    """The config-style monitor of the bad-input tests, with a decision on its alarms."""
-    gen = ObserverResidual(design)
-    glrt = GLRT(gen.output_names, 0.0, two_mass.NOISE_STD**2, W=10)
-    hold = Hold(glrt.output_names, 50.0, Z=3, absolute=False)
-    mh = MHSSPT(["r:pos2"], {"ok": UniformMeanGaussian([0], [0], [0.003]),
-                             "bias": UniformMeanGaussian([0.004], [0.05], [0.003])}, p=1e-3, q=1e-3)
-    return Monitor([gen], [glrt, hold, mh], Decision([*hold.output_names, "P:bias"], level=0.9),
-                   on_invalid="hold", **kw)
+    return observer_design()
 
 
 def cut(sig, t0, t1):

@@ -5,34 +5,24 @@ import numpy as np
 import pytest
 
 from fdikit import DataError, Signals
-from fdikit.detect import GLRT, MHSSPT, Hold, UniformMeanGaussian
 from fdikit.faults import Bias
-from fdikit.monitor import Decision, Monitor, Plausibility, PlausibilityChecker
-from fdikit.residuals import ObserverResidual, design_observer_residual
+from fdikit.monitor import Monitor, Plausibility, PlausibilityChecker
+from fdikit.residuals import ObserverResidual
 from fdikit.systems import two_mass
+
+from .two_mass_monitor import build, observer_design
 
 CH = ["force", "pos1", "pos2"]
 
 
 @pytest.fixture(scope="module")
 def design():
-    return design_observer_residual(two_mass.model(), dt=two_mass.DT, Q=np.eye(4) * 1e-8,
-                                    R=np.eye(2) * two_mass.NOISE_STD**2)
+    return observer_design()
 
 
 @pytest.fixture(scope="module")
 def record():
     return two_mass.record([Bias("sensor:pos2", 0.02, start=12.0)], 1, 21, duration=16.0)
-
-
-def build(design, **kw):
-    gen = ObserverResidual(design)
-    glrt = GLRT(gen.output_names, 0.0, two_mass.NOISE_STD**2, W=10)
-    hold = Hold(glrt.output_names, 50.0, Z=3, absolute=False)
-    mh = MHSSPT(["r:pos2"], {"ok": UniformMeanGaussian([0], [0], [0.003]),
-                             "bias": UniformMeanGaussian([0.004], [0.05], [0.003])}, p=1e-3, q=1e-3)
-    return Monitor([gen], [glrt, hold, mh], Decision([*hold.output_names, "P:bias"], level=0.9),
-                   on_invalid="hold", **kw)
 
 
 def with_value(rec, k, c, x):

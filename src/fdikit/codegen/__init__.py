@@ -3,8 +3,10 @@
 recursion, no globals with state, only ``<math.h>`` and ``<stdint.h>``; double and float32.
 
 * :func:`generate` (a config's artifacts) and :func:`generate_monitor` (a built Monitor) write
-  the code (:mod:`.generate`, :mod:`.emit`, the stages in :mod:`.stages`, the tabulated
-  MHSSPT in :mod:`.stages_mhsspt_tab`, the plausibility rules in :mod:`.plausibility`);
+  the code (:mod:`.generate`, :mod:`.emit`, the stages in :mod:`.stages`, the MHSSPT's shared
+  C and its exact form in :mod:`.mhsspt_c`, the tabulated MHSSPT in :mod:`.stages_mhsspt_tab`,
+  the plausibility rules in :mod:`.plausibility`, constant tables as exact C arrays in
+  :mod:`.arrays`);
 * :class:`CMonitor` and :func:`compile_shared` are the equivalence harness (:mod:`.harness`);
 * :func:`register_emitter` adds the emitter of another stage class (:mod:`.registry`: system
   stages register from their own package, found by the plugin convention); the sensor checks

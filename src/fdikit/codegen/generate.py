@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import DataError
+from .arrays import forget_tables
 from .emit import GeneratedSource, emit_monitor, stage_digest
 
 __all__ = ["config_digest", "generate", "generate_monitor"]
@@ -51,16 +52,19 @@ def generate_monitor(mon: Any, out_dir: str | Path, *, name: str = "fdk_monitor"
     out.mkdir(parents=True, exist_ok=True)
     digest = stage_digest(mon) if design_hash is None else design_hash
     files, sizes, layout = [], {}, None
-    for prec in precisions:
-        nm = name if prec == "double" else f"{name}_f32"
-        src: GeneratedSource = emit_monitor(mon, name=nm, precision=prec, design_hash=digest)
-        for fn, text in ((f"{nm}.h", src.header), (f"{nm}.c", src.source)):
-            (out / fn).write_text(text)
-            files.append(str(out / fn))
-        sizes[prec] = len(src.header) + len(src.source)
-        layout = layout or src.layout
-        (out / f"{nm}.layout.json").write_text(json.dumps(src.layout, indent=1))
-        files.append(str(out / f"{nm}.layout.json"))
+    try:   # (the variants share their large tables' text: formatted once, forgotten at the end)
+        for prec in precisions:
+            nm = name if prec == "double" else f"{name}_f32"
+            src: GeneratedSource = emit_monitor(mon, name=nm, precision=prec, design_hash=digest)
+            for fn, text in ((f"{nm}.h", src.header), (f"{nm}.c", src.source)):
+                (out / fn).write_text(text)
+                files.append(str(out / fn))
+            sizes[prec] = len(src.header) + len(src.source)
+            layout = layout or src.layout
+            (out / f"{nm}.layout.json").write_text(json.dumps(src.layout, indent=1))
+            files.append(str(out / f"{nm}.layout.json"))
+    finally:
+        forget_tables()
     return {"files": files, "layout": layout, "design_hash": digest, "code_bytes": sizes,
             "seconds": time.perf_counter() - t0}
 

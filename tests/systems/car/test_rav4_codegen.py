@@ -7,8 +7,6 @@ cross between C and Python; the float32 variant's error is measured."""
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 
@@ -23,8 +21,8 @@ from fdikit.codegen import (
 )
 from fdikit.errors import DataError
 
-ROOT = Path(__file__).resolve().parents[3]
-DATA = ROOT / ".." / "shared" / "data" / "rav4-highway"
+from .rav4_example import DATA, rav4_config
+
 pytestmark = [
     pytest.mark.skipif(find_compiler() is None, reason="no C compiler (cc, gcc or clang) on PATH"),
     pytest.mark.skipif(not (DATA / "drive.blf").exists(),
@@ -33,19 +31,6 @@ pytestmark = [
 ]
 #: The fault each run injects (CAN names, DBC units; fdikit.systems.car.monitor_rav4.parse_inject).
 FAULTS = ["stuck:STEER_ANGLE_SENSOR@15,YAW_RATE:3.0@40", "gain:WHEEL_SPEED_FL:1.03@20,ACCEL_Y:1.5@45"]
-
-
-def rav4_config(tmp: Path) -> Path:
-    """The RAV4 example config designed into ``tmp`` (its DBC path made absolute)."""
-    from fdikit.monitor.config import load_config, run_design
-
-    text = (ROOT / "examples" / "rav4-lateral" / "monitor.toml").read_text()
-    text = text.replace('dbc = "../../../shared/data/rav4-highway/toyota_rav4.dbc"',
-                        f'dbc = "{(DATA / "toyota_rav4.dbc").resolve()}"')
-    cfg = tmp / "monitor.toml"
-    cfg.write_text(text)
-    run_design(load_config(cfg))
-    return cfg
 
 
 @pytest.fixture(scope="module")

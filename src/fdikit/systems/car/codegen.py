@@ -10,9 +10,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from ...codegen.arrays import c_array
+from ...codegen.mhsspt_c import MHSSPT_DENSITY_HELPERS, UPDATE_P_HELPER
 from ...codegen.registry import register_emitter
-from ...codegen.stages import MHSSPT_DENSITY_HELPERS, Field, StageEmitter, lit
-from ...codegen.stages_mhsspt_tab import UPDATE_P_HELPER, c_array
+from ...codegen.stages import Field, StageEmitter, lit
 from .monitor_fused import _colspans
 
 __all__ = ["FusedCarMonitorEmitter"]

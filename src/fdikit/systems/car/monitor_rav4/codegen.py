@@ -18,10 +18,11 @@ from typing import Any
 
 import numpy as np
 
+from ....codegen.mhsspt_c import MHSSPT_HELPERS, MHSSPTCode
 from ....codegen.registry import class_path, register_emitter
 from ....codegen.scheduled import ScheduledFilterEmitter
 from ....codegen.sensor import MEDIAN_HELPER, median_code
-from ....codegen.stages import MHSSPT_HELPERS, Field, StageEmitter, lit, rl
+from ....codegen.stages import Field, StageEmitter, lit, rl
 from ....errors import DataError
 from ..rav4 import RAV4
 from .filters import Rav4LateralFilter
@@ -202,7 +203,7 @@ def _tables(obj: Any, p: str) -> str:
     return text
 
 
-class Rav4MHSSPTEmitter(StageEmitter):
+class Rav4MHSSPTEmitter(MHSSPTCode):
     """:class:`Rav4MHSSPT` with cubic Hermite tables (the design's ``tabulate``,
     ``interpolation="cubic"``): the tables as constant data, the exact densities outside them,
     the recursion and the posteriors it forms, in double in both variants; the warm-up (the middle
@@ -216,20 +217,16 @@ class Rav4MHSSPTEmitter(StageEmitter):
             raise DataError("stage Rav4MHSSPT cannot be generated yet without cubic tables (tabulate with "
                             "interpolation='cubic'); its exact and linear-table forms are not emitted")
         super().__init__(obj, prefix)
-        self.H, self.C = len(obj.hypotheses), len(obj.input_names)
         coef, g0, inv_h, nG, coff, ulow, uhigh, ustd, upoint, ulogw, uoff, jmap = obj._cubic
         self.tab = dict(coef=coef, g0=g0, inv_h=inv_h, nG=nG, coff=coff, ulow=ulow, uhigh=uhigh, ustd=ustd,
                         upoint=upoint, ulogw=ulogw, uoff=uoff, jmap=jmap)
         self.helpers = (MHSSPT_HELPERS, UPDATE_P_HELPER, _tables(obj, prefix))
 
     def fields(self):
-        return [Field(f"{self.p}_logF", "f64", self.H), Field(f"{self.p}_k", "i64", 1),
-                Field(f"{self.p}_warm_from", "i64", 1)]
+        return [*super().fields(), Field(f"{self.p}_warm_from", "i64", 1)]
 
     def reset_code(self):
-        return "\n".join([f"    {self.f('logF')}[0] = 0.0;",
-                          *(f"    {self.f('logF')}[{j}] = -HUGE_VAL;" for j in range(1, self.H)),
-                          f"    {self.f('k')}[0] = 0; {self.f('warm_from')}[0] = 0;"])
+        return super().reset_code() + f" {self.f('warm_from')}[0] = 0;"
 
     def resume_code(self):
         return f"        {self.f('warm_from')}[0] = {self.f('k')}[0];"
@@ -242,7 +239,7 @@ class Rav4MHSSPTEmitter(StageEmitter):
                  "        int64_t ii, b, q;",
                  f"        int warm = {int(o.warmup)} - ({self.f('k')}[0] - {self.f('warm_from')}[0]) > 0;"]
         lines += [f"        xs[{c}] = warm ? {p}_x0[{c}] : (double){e};" for c, e in enumerate(inp)]
-        lines += [f"        if (!FDK_FINITE(xs[{c}])) return FDK_ERR_STAT;" for c in range(C)]
+        lines += self.refusal_lines()
         for c in range(C):
             e0, e1 = int(uoff[c]), int(uoff[c + 1])
             lines += [f"        t = (xs[{c}] - {p}_g0[{c}]) * {p}_inv_h[{c}];",
@@ -256,26 +253,14 @@ class Rav4MHSSPTEmitter(StageEmitter):
                       f"            for (q = {e0}; q < {e1}; ++q) vals[q] = fdk_umg(xs[{c}], {p}_ulow[q], "
                       f"{p}_uhigh[q], {p}_ustd[q], {p}_upoint[q], {p}_ulogw[q]);",
                       "        }"]
-        for j in range(H):
-            terms = "".join(f" + vals[{int(jmap[j, c])}]" for c in range(C))
-            lines.append(f"        ll[{j}] = 0.0{terms};")
-        lines.append(f"        fdk_mhsspt_update_p({self.f('logF')}, ll, phi, P, {H}, {lit(o._log1mp)}, "
-                     f"{p}_logp_pi, {lit(o._logq)}, {lit(o._log1mq)});")
-        lines.append(f"        {self.f('k')}[0] += 1;")
-        lines += [f"        {out[j]} = FDK_R(P[{j}]);" for j in range(H)]
-        for g in range(o._gmat.shape[0]):
-            terms = "".join(f" + P[{int(e)}]" for e in o._gmat[g] if e >= 0)
-            lines.append(f"        {out[H + g]} = FDK_R(0.0{terms});")
-        lines.append("    }")
-        return "\n".join(lines)
+        lines += self.ll_lines(jmap)
+        return "\n".join(lines + self.posterior_tail(out, f"{p}_logp_pi"))
 
     def to_py(self, arrays):
-        return {"_logF": arrays[f"{self.p}_logF"].astype(float).reshape(1, -1),
-                "_k": int(arrays[f"{self.p}_k"][0]), "_warm_from": int(arrays[f"{self.p}_warm_from"][0])}
+        return {**super().to_py(arrays), "_warm_from": int(arrays[f"{self.p}_warm_from"][0])}
 
     def from_py(self, state):
-        return {f"{self.p}_logF": np.ravel(state["_logF"]), f"{self.p}_k": np.array([state["_k"]]),
-                f"{self.p}_warm_from": np.array([state["_warm_from"]])}
+        return {**super().from_py(state), f"{self.p}_warm_from": np.array([state["_warm_from"]])}
 
 
 for _cls, _em in ((Rav4LateralFilter, Rav4FilterEmitter), (Rav4SensorChannels, Rav4SensorChannelsEmitter),
