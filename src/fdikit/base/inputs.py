@@ -1,0 +1,151 @@
+"""Inputs that reading consumes: a log given as a FIFO (``mkfifo``), a pipe (``<(zcat drive.csv.gz)``,
+``/dev/stdin``) or a socket is read once, whole and interruptibly, into a temporary file that every
+later step (the format sniffing, the reader and its error messages) reads as often as it needs.
+
+* :func:`is_stream` -- whether a path is such an input (reading it takes its bytes away);
+* :func:`read_stream` -- its bytes, up to the end of the input (its last writer closed it),
+  waiting for data with :func:`fdikit.base.interrupt.wait_readable`: Ctrl-C or SIGTERM stop the
+  wait at once (never a hang on a writer that keeps the FIFO open and sends nothing);
+* :func:`spooled` -- a regular file holding a stream's bytes, with the stream's file name (so
+  messages and suffix-based format detection read as for the original), removed afterwards; a
+  regular file or folder is passed through untouched.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import stat
+import tempfile
+from collections.abc import Iterator
+from pathlib import Path
+
+from ..errors import DataError
+from . import interrupt
+
+__all__ = ["is_stream", "read_stream", "spooled", "stream_kind"]
+
+
+def stream_kind(path: str | os.PathLike) -> str | None:
+    """What a path is when reading it consumes it: ``"FIFO"``, ``"pipe"``, ``"socket"`` or
+    ``"character device"``; None for a regular file, a folder or a missing path.
+
+    Examples
+    --------
+    >>> stream_kind(__file__) is None
+    True
+    """
+    try:
+        mode = os.stat(path).st_mode
+    except (OSError, ValueError):
+        return None
+    if stat.S_ISFIFO(mode):   # a named FIFO, or an anonymous pipe seen through /dev/fd or /proc
+        return "FIFO" if stat.S_ISFIFO(os.lstat(path).st_mode) else "pipe"
+    if stat.S_ISSOCK(mode):
+        return "socket"
+    if stat.S_ISCHR(mode):
+        return "character device"
+    return None
+
+
+def is_stream(path: str | os.PathLike) -> bool:
+    """Whether reading ``path`` consumes it (a FIFO, a pipe, a socket or a character device).
+
+    Examples
+    --------
+    >>> is_stream(__file__)
+    False
+    """
+    return stream_kind(path) is not None
+
+
+def read_stream(path: str | os.PathLike, *, chunk: int = 1 << 16) -> bytes:
+    """Every byte of a stream input, read without ever blocking where a signal cannot stop it.
+
+    The input is opened without blocking (no hang on a FIFO that no process writes yet) and read
+    whenever :func:`fdikit.base.interrupt.wait_readable` says it has data, until its end (every
+    writer closed it; a FIFO that no writer has opened yet is waited for).
+
+    Parameters
+    ----------
+    path : path-like
+        A FIFO, pipe, socket or character device.
+    chunk : int
+        Bytes per read.
+
+    Returns
+    -------
+    bytes
+
+    Raises
+    ------
+    DataError
+        The input cannot be opened or read (naming it).
+    KeyboardInterrupt
+        Ctrl-C (or :class:`~fdikit.base.interrupt.Terminated` for SIGTERM) while waiting or reading.
+
+    Examples
+    --------
+    >>> import tempfile, threading
+    >>> fifo = os.path.join(tempfile.mkdtemp(), "log.csv"); os.mkfifo(fifo)
+    >>> def write():
+    ...     with open(fifo, "w") as fh:
+    ...         _ = fh.write("t,x\\n0,1\\n")
+    >>> threading.Thread(target=write).start()
+    >>> read_stream(fifo)
+    b't,x\\n0,1\\n'
+    """
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)
+    except OSError as exc:
+        raise DataError(f"{path}: cannot be opened for reading: {exc.strerror or exc}") from None
+    parts: list[bytes] = []
+    try:
+        with interrupt.wakeup() as wake:
+            while True:
+                if not interrupt.wait_readable(fd, wake):
+                    continue
+                try:
+                    data = os.read(fd, chunk)
+                except (BlockingIOError, InterruptedError):
+                    continue
+                except OSError as exc:
+                    raise DataError(f"{path}: cannot be read: {exc.strerror or exc}") from None
+                if not data:
+                    return b"".join(parts)
+                parts.append(data)
+    finally:
+        os.close(fd)
+
+
+@contextlib.contextmanager
+def spooled(path: str | os.PathLike) -> Iterator[Path]:
+    """A path that can be read as often as needed: ``path`` itself, or for a stream input
+    (:func:`is_stream`) a temporary regular file of the same name holding all its bytes
+    (:func:`read_stream`), removed when the block ends.
+
+    Parameters
+    ----------
+    path : path-like
+        A log file, folder or stream.
+
+    Yields
+    ------
+    pathlib.Path
+
+    Examples
+    --------
+    >>> with spooled(__file__) as p:
+    ...     p == Path(__file__)
+    True
+    """
+    p = Path(path)
+    if not is_stream(p):
+        yield p
+        return
+    data = read_stream(p)
+    with tempfile.TemporaryDirectory(prefix="fdikit-input-") as tmp:
+        q = Path(tmp) / (p.name or "input")
+        q.write_bytes(data)
+        del data
+        yield q
