@@ -281,6 +281,78 @@ def test_follow_mode_stops_on_ctrl_c_with_its_summary(setup):
     assert dt < 5.0
 
 
+_QUIET = r"""
+import signal, sys, threading, time
+from fdikit.cli import main
+
+sleeper = threading.Thread(target=time.sleep, args=(120,), daemon=True)
+sleeper.start()
+
+
+def waiting():   # the main thread sleeps in read, poll or select (x86-64, arm64 numbers)
+    with open(f"/proc/self/task/{threading.main_thread().native_id}/syscall") as fh:
+        return fh.read().split()[0] in ("0", "7", "23", "63", "73", "270", "271")
+
+
+def stop():   # once the follower waits for lines, SIGINT reaches a thread that is not the reader
+    while "fdikit.monitor.live" not in sys.modules:
+        time.sleep(0.05)
+    quiet = 0
+    while quiet < 20:   # waiting for input for 1 s on end
+        quiet = quiet + 1 if waiting() else 0
+        time.sleep(0.05)
+    signal.pthread_kill(sleeper.ident, signal.SIGINT)
+
+
+threading.Thread(target=stop, daemon=True).start()
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+@pytest.mark.parametrize("via", ["stdin", "fifo"])
+def test_a_follower_waiting_on_a_quiet_stream_stops_on_ctrl_c(setup, tmp_path, via):
+    """``candump -L can0 | fdikit monitor - --follow`` on a quiet bus: the writer keeps the pipe
+    open and sends nothing, and SIGINT reaches another thread (as when a BLAS thread takes it), so
+    the reader's ``read`` never returns EINTR. Before: a hang until the next line; now the wait
+    includes the signal wake-up pipe (:func:`fdikit.base.inputs.iter_lines`), and a FIFO is a
+    valid follow-mode log (before: "no such log file")."""
+    head = (setup / "log.csv").read_text().splitlines(keepends=True)[:3]
+    log = "-"
+    if via == "fifo":
+        log = tmp_path / "bus.csv"
+        os.mkfifo(log)
+    p = subprocess.Popen([sys.executable, "-c", _QUIET, "monitor", str(log), "--config",
+                          str(setup / "monitor.toml"), "--follow"], stdin=subprocess.PIPE,
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV)
+    fh = p.stdin
+    deadline = time.monotonic() + 120
+    while via == "fifo" and fh is p.stdin:   # opens once the follower opened its FIFO
+        try:
+            fh = os.fdopen(os.open(log, os.O_WRONLY | os.O_NONBLOCK), "w")
+        except OSError as exc:
+            if exc.errno != errno.ENXIO or p.poll() is not None or time.monotonic() > deadline:
+                p.kill()
+                raise AssertionError(f"the follower never opened its FIFO: {p.communicate()[1]}") from None
+            time.sleep(0.01)
+    try:
+        fh.write("".join(head))
+        fh.flush()
+        try:
+            p.wait(timeout=60)   # not communicate(): it would close standard input, an end of file
+        except subprocess.TimeoutExpired:
+            p.kill()
+            p.wait()
+            pytest.fail("the follower did not stop on Ctrl-C (a hang)")
+    finally:
+        fh.close()
+        p.stdin.close()
+    err = p.stderr.read()
+    p.stdout.close()
+    p.stderr.close()
+    assert p.returncode == 130 and "stopped (Ctrl-C)" in err and "follow: 2 samples" in err, err
+    no_traceback(err)
+
+
 def test_follow_mode_prints_its_summary_on_a_clean_stream(setup):
     out = run_cmd("monitor", setup / "log.csv", "--config", setup / "monitor.toml", "--follow")
     assert out.returncode == 0 and "follow: 1001 samples, 1 announcements" in out.stderr, out.stderr

@@ -8,22 +8,26 @@ later step (the format sniffing, the reader and its error messages) reads as oft
   wait at once (never a hang on a writer that keeps the FIFO open and sends nothing);
 * :func:`spooled` -- a regular file holding a stream's bytes, with the stream's file name (so
   messages and suffix-based format detection read as for the original), removed afterwards; a
-  regular file or folder is passed through untouched.
+  regular file or folder is passed through untouched;
+* :func:`open_lines` and :func:`iter_lines` -- follow mode's input (standard input, a FIFO, a
+  file), line by line as it arrives: a stream is opened without blocking and each wait for its
+  next line ends at once on Ctrl-C or SIGTERM, even on a quiet bus that sends nothing.
 """
 
 from __future__ import annotations
 
+import codecs
 import contextlib
 import os
 import stat
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 
 from ..errors import DataError
 from . import interrupt
 
-__all__ = ["is_stream", "read_stream", "spooled", "stream_kind"]
+__all__ = ["is_stream", "iter_lines", "open_lines", "read_stream", "spooled", "stream_kind"]
 
 
 def stream_kind(path: str | os.PathLike) -> str | None:
@@ -46,6 +50,14 @@ def stream_kind(path: str | os.PathLike) -> str | None:
     if stat.S_ISCHR(mode):
         return "character device"
     return None
+
+
+def _fd_kind(fd: int) -> bool:
+    try:
+        mode = os.fstat(fd).st_mode
+    except OSError:
+        return False
+    return stat.S_ISFIFO(mode) or stat.S_ISSOCK(mode) or stat.S_ISCHR(mode)
 
 
 def is_stream(path: str | os.PathLike) -> bool:
@@ -149,3 +161,69 @@ def spooled(path: str | os.PathLike) -> Iterator[Path]:
         q.write_bytes(data)
         del data
         yield q
+
+
+def open_lines(path: str | os.PathLike, encoding: str = "utf-8"):
+    """A text file object over ``path`` for :func:`iter_lines`: a stream (a FIFO) is opened without
+    blocking, so waiting for its first writer is a wait that Ctrl-C ends, not a blocked ``open``.
+
+    Examples
+    --------
+    >>> with open_lines(__file__) as fh:
+    ...     next(iter_lines(fh)).endswith("\\n")
+    True
+    """
+    if not is_stream(path):
+        return open(path, encoding=encoding, newline=None)
+    fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)
+    return os.fdopen(fd, encoding=encoding, newline=None)
+
+
+def iter_lines(lines: Iterable[str]) -> Iterator[str]:
+    """The lines of ``lines`` as they arrive (each with its ``"\\n"``; ``"\\r\\n"`` read as
+    ``"\\n"``), waiting for a stream's data on the signal wake-up pipe too
+    (:func:`fdikit.base.interrupt.wait_readable`): Ctrl-C or SIGTERM end the wait at once.
+
+    A file object on a FIFO, pipe, socket or terminal is read through its file descriptor (with its
+    own encoding); anything else (a regular file, a list of strings) is iterated as it is.
+
+    Parameters
+    ----------
+    lines : iterable of str
+        A text file object (``sys.stdin``, :func:`open_lines`) or any iterable of lines.
+
+    Yields
+    ------
+    str
+
+    Examples
+    --------
+    >>> list(iter_lines(["t,x\\n", "0,1\\n"]))
+    ['t,x\\n', '0,1\\n']
+    """
+    try:
+        fd = lines.fileno()   # type: ignore[attr-defined]
+    except (AttributeError, OSError, ValueError):
+        fd = None
+    if fd is None or not _fd_kind(fd):
+        yield from lines
+        return
+    decoder = codecs.getincrementaldecoder(getattr(lines, "encoding", None) or "utf-8")(
+        getattr(lines, "errors", None) or "strict")
+    pending = ""
+    with interrupt.wakeup() as wake:
+        while True:
+            if not interrupt.wait_readable(fd, wake):
+                continue
+            try:
+                data = os.read(fd, 1 << 16)
+            except (BlockingIOError, InterruptedError):
+                continue
+            pending += decoder.decode(data, final=not data)
+            *done, pending = pending.split("\n")
+            for line in done:
+                yield (line[:-1] if line.endswith("\r") else line) + "\n"
+            if not data:
+                break
+    if pending:
+        yield pending
