@@ -407,6 +407,19 @@ def test_a_fleet_never_merges_two_vehicles_through_path_fields(setup, tmp_path):
     assert sorted(t.vehicle for t in tasks) == ["car1", "car2"]
 
 
+def test_a_fleet_never_merges_two_vehicles_whose_logs_have_other_names(setup, tmp_path):
+    """``car1/run1/a.csv`` and ``car2/run1/b.csv``: before, both were vehicle ``run1`` (routes
+    ``a`` and ``b``) without a word; only logs of one name were refused."""
+    from fdikit.fleet import plan
+
+    for car, name in (("car1", "a"), ("car2", "b")):
+        (tmp_path / car / "run1").mkdir(parents=True)
+        shutil.copy(setup / "log.csv", tmp_path / car / "run1" / f"{name}.csv")
+    with pytest.raises(DataError, match=r"'car1/run1/a.csv' and 'car2/run1/b.csv' both get vehicle 'run1'.*"
+                                        r"two vehicles would be merged"):
+        plan([str(tmp_path)], setup / "monitor.toml", tmp_path / "out")
+
+
 # ------------------------------------------------------------------ 5. follow-mode findings
 def test_resume_on_a_different_log_is_refused(setup, tmp_path):
     from fdikit.monitor.live import LiveMonitor
