@@ -151,3 +151,20 @@ def test_sigterm_ends_the_wait_for_a_fifo_that_no_process_writes(tmp_path):
     out = subprocess.run([sys.executable, "-c", _NO_WRITER, str(fifo)], capture_output=True, text=True,
                          env=ENV, timeout=60)
     assert out.returncode == 143, out.stderr
+
+
+def test_a_full_temporary_folder_is_one_error_naming_the_input(tmp_path, monkeypatch):
+    import errno
+
+    fifo = tmp_path / "drive.csv"
+    os.mkfifo(fifo)
+    _writer(fifo, "t,x\n0,1\n")
+
+    def full(self, data):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(Path, "write_bytes", full)
+    with pytest.raises(DataError, match=r"drive.csv: cannot be copied into the temporary folder "
+                                        r".*fdikit-input-.*: no space left on device \(the disk is full\)"):
+        with spooled(fifo):
+            pass

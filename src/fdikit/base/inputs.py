@@ -26,6 +26,7 @@ from pathlib import Path
 
 from ..errors import DataError
 from . import interrupt
+from .outputs import io_error
 
 __all__ = ["is_stream", "iter_lines", "open_lines", "read_stream", "spooled", "stream_kind"]
 
@@ -145,6 +146,11 @@ def spooled(path: str | os.PathLike) -> Iterator[Path]:
     ------
     pathlib.Path
 
+    Raises
+    ------
+    DataError
+        The stream cannot be read, or the temporary folder is full (naming both).
+
     Examples
     --------
     >>> with spooled(__file__) as p:
@@ -158,7 +164,10 @@ def spooled(path: str | os.PathLike) -> Iterator[Path]:
     data = read_stream(p)
     with tempfile.TemporaryDirectory(prefix="fdikit-input-") as tmp:
         q = Path(tmp) / (p.name or "input")
-        q.write_bytes(data)
+        try:
+            q.write_bytes(data)
+        except OSError as exc:   # a full temporary folder: name the input and the folder
+            raise io_error(p, exc, f"cannot be copied into the temporary folder {tmp}") from None
         del data
         yield q
 
