@@ -22,6 +22,7 @@ import sys
 import time
 from pathlib import Path
 
+from ..base.inputs import is_stream, open_lines
 from ..base.outputs import io_error
 from ..errors import DataError
 from ._output import print_json
@@ -76,7 +77,7 @@ def _follow(args, cfg) -> int:
     if args.checkpoint_every < 1:
         raise DataError(f"--checkpoint-every must be >= 1 sample, got {args.checkpoint_every}")
     live = LiveMonitor(cfg, input=args.input)
-    stream = sys.stdin if args.log == "-" else open(args.log)  # closed below
+    stream = sys.stdin if args.log == "-" else open_lines(args.log)  # a FIFO without blocking; closed below
     try:
         live.follow(stream, on_record=lambda rec: print(json.dumps(rec), flush=True), events=args.events,
                     checkpoint=args.checkpoint, resume=args.resume, checkpoint_every=args.checkpoint_every)
@@ -101,9 +102,9 @@ def _monitor(args) -> int:
     if args.follow:
         if args.json:
             raise DataError("--follow prints one JSON line per announcement; it does not take --json")
-        if args.log != "-" and not Path(args.log).is_file():
-            raise DataError(f"{args.log}: no such log file (follow mode reads a file, or - for standard "
-                            "input)")
+        if args.log != "-" and not (Path(args.log).is_file() or is_stream(args.log)):
+            raise DataError(f"{args.log}: no such log file (follow mode reads a file, a FIFO, or - for "
+                            "standard input)")
         return _follow(args, cfg)
     if args.log == "-":
         raise DataError("reading a log from standard input needs --follow")

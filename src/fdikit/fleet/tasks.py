@@ -291,13 +291,13 @@ def plan(specs: list[str], config: str | os.PathLike, out: str | os.PathLike, *,
         route = f.pop("route", "") or (rel.name[: -len(rel.suffix)] if rel.suffix else rel.name)
         log_id = str(rel)
         if "vehicle" not in given:  # folders above the template's must not tell two vehicles apart
-            key = (vehicle, route, json.dumps(f, sort_keys=True))
+            key = (vehicle, json.dumps(f, sort_keys=True))   # whatever their routes are called
             above = rel.parts[:max(0, len(rel.parts) - depth)]
             other = names.setdefault(key, (log_id, above))
             if other[1] != above:
                 raise DataError(
-                    f"the logs {other[0]!r} and {log_id!r} both get vehicle {vehicle!r} and route "
-                    f"{route!r} from --path-fields {template!r}: their paths differ in folders the "
+                    f"the logs {other[0]!r} and {log_id!r} both get vehicle {vehicle!r} "
+                    f"from --path-fields {template!r}: their paths differ in folders the "
                     f"template does not read ({'/'.join(other[1]) or '.'} vs {'/'.join(above) or '.'}), "
                     f"so two vehicles would be merged; name every folder, e.g. --path-fields "
                     f"'{{vehicle}}/{{run}}/{{route}}', or give a --manifest")

@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from ..base import interrupt
+from ..base.inputs import spooled
 from ..errors import DataError
 from .can import LogSignals, SignalInfo, convert_units
 from .timebase import time_unit_hint, times_to_seconds
@@ -102,7 +103,8 @@ def read_csv(
     Parameters
     ----------
     path : path-like
-        A comma-separated file with a header row (a UTF-8 byte-order mark is allowed).
+        A comma-separated file with a header row (a UTF-8 byte-order mark is allowed); a FIFO or
+        pipe is read whole first, interruptibly (:func:`fdikit.base.inputs.spooled`).
     time : str
         Name of the time column; must be strictly increasing.
     columns : sequence of str, optional
@@ -160,7 +162,8 @@ def read_csv(
     if p.is_dir():
         raise DataError(f"CSV file {str(p)!r} is a directory, not a file")
     where = f"CSV {p.name!r}"
-    header, body = _read_rows(p, where, encoding)
+    with spooled(p) as src:   # a FIFO or pipe: read once, interruptibly, into a file of its name
+        header, body = _read_rows(src, where, encoding)
     if len(set(header)) != len(header):
         dup = sorted({h for h in header if header.count(h) > 1})
         raise DataError(f"{where}: duplicated column name(s) {dup} in the header {header}")

@@ -669,8 +669,18 @@ def read_log(cfg: MonitorConfig, path: str | Path) -> Signals:
     channels' ``min``, ``max`` and ``spike`` rules also go to the CAN frame readers (BLF, ASC,
     candump), converted to the source's unit (:func:`source_plausibility`): a frame that breaks
     them is refused before resampling, where one bad frame could otherwise spread over two grid
-    samples that are both in range.
+    samples that are both in range. A FIFO or pipe is read once, interruptibly, before its format
+    is sniffed (:func:`fdikit.base.inputs.spooled`).
     """
+    from ..base.inputs import is_stream, spooled
+
+    if is_stream(path):
+        with spooled(path) as src:
+            return _read_log(cfg, src)
+    return _read_log(cfg, path)
+
+
+def _read_log(cfg: MonitorConfig, path: str | Path) -> Signals:
     from .. import io
     from .logs import FRAME_FORMATS, read_options
 

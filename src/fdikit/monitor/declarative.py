@@ -301,14 +301,16 @@ def _read_design_log(path, log: Mapping[str, Any] | None, base_dir, signals, tim
     """A nominal log of the design, read as the config's ``[log]`` table says (every column of a
     table; ``signals`` from a CAN or MDF log), ``time`` overriding ``[log].time`` and ``rate`` (an
     identification's own grid) the reader's."""
+    from ..base.inputs import spooled
     from ..io import read_log
     from .logs import read_options
 
-    _, kw = read_options(log or {}, path, base_dir, signals=signals, time=time,
-                         tables_as_recordings=False, where="config")
-    if rate is not None:
-        kw["rate"] = float(rate)
-    return read_log(path, **kw)
+    with spooled(path) as src:   # a FIFO or pipe: read once before its format is sniffed
+        _, kw = read_options(log or {}, src, base_dir, signals=signals, time=time,
+                             tables_as_recordings=False, where="config")
+        if rate is not None:
+            kw["rate"] = float(rate)
+        return read_log(src, **kw)
 
 
 def _plant(design: Mapping[str, Any], base_dir: str | Path, where: str, log: Mapping[str, Any] | None = None):

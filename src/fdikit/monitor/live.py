@@ -33,6 +33,7 @@ from typing import Any
 
 import numpy as np
 
+from ..base.inputs import iter_lines
 from ..errors import DataError
 from .records import NOT_SEEN, step_records
 
@@ -496,7 +497,9 @@ class LiveMonitor:
         Parameters
         ----------
         lines : iterable of str
-            The input lines.
+            The input lines; a file object on a pipe or FIFO (``sys.stdin``) is read as its lines
+            arrive, and Ctrl-C or SIGTERM end the wait for the next one at once
+            (:func:`fdikit.base.inputs.iter_lines`).
         on_record : callable, optional
             Called with each record as it happens (before it is logged).
         events : path-like, optional
@@ -536,7 +539,7 @@ class LiveMonitor:
                 live.save_checkpoint(ckpt, events_bytes=0 if log is None else log.sync())
 
             n = 0
-            for rec in self.records(lines, checkpoint_every=checkpoint_every,
+            for rec in self.records(iter_lines(lines), checkpoint_every=checkpoint_every,
                                     on_checkpoint=save if ckpt is not None else None):
                 self._count(rec)
                 if on_record is not None:

@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import re
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from ...base.inputs import is_stream, spooled, stream_kind
 from ...errors import DataError
 from ..can import LogSignals
 from .asc import read_asc
@@ -52,6 +54,8 @@ def detect_format(path, *, among: Sequence[str] | None = None) -> str:
     (``"topics"``) when it holds ``*.csv`` files. A file is recognised by its suffix, else by its
     magic bytes: BLF ``LOGG``, Parquet ``PAR1``, MDF ``MDF``, ULog ``ULog\\x01\\x12\\x35``, ROS 1
     bag ``#ROSBAG V2.0``, MCAP ``\\x89MCAP0\\r\\n``, else the first text line (ASC, candump).
+    A stream (a FIFO, a pipe: :func:`fdikit.base.inputs.is_stream`) is recognised by its suffix
+    only: sniffing would take its first bytes from the reader.
 
     Parameters
     ----------
@@ -72,7 +76,7 @@ def detect_format(path, *, among: Sequence[str] | None = None) -> str:
     ------
     DataError
         Missing file, or neither the suffix nor the content is a known format (or one of
-        ``among``).
+        ``among``), or a stream whose suffix names no format.
 
     Examples
     --------
@@ -87,7 +91,8 @@ def detect_format(path, *, among: Sequence[str] | None = None) -> str:
             return "topics"
         raise DataError(f"log {str(d)!r} is a directory, not a file, and neither a ROS 2 bag (no "
                         "metadata.yaml) nor a folder of per-topic CSV files (no *.csv)")
-    p = _check_file(path, "log")
+    kind = stream_kind(path)
+    p = Path(path) if kind else _check_file(path, "log")
     suffix = p.suffix.lower()
     if among is not None:
         unknown = [f for f in among if f not in FORMATS]
@@ -96,6 +101,10 @@ def detect_format(path, *, among: Sequence[str] | None = None) -> str:
     for fmt, sufs in FORMATS.items():
         if suffix in sufs and (among is None or fmt in among):
             return fmt
+    if kind:   # its first bytes would be taken from the reader that comes next
+        raise DataError(f"log {p.name!r} is a {kind}: its format cannot be told from its first bytes "
+                        "without consuming them; name the format (format=, or [log].format in a config), "
+                        "or read it with fdikit.io.read_log, which reads such an input once")
     with open(p, "rb") as fh:
         head = fh.read(4096)
     found = None
@@ -140,7 +149,9 @@ def read_log(path, dbc=None, signals=None, rate=None, *, format: str | None = No
     path : path-like
         A Vector BLF or ASC log, a candump log, a Parquet or CSV table of decoded signals, an
         MDF4 file (decoded channels or raw CAN bus logging), a PX4 ULog file, a ROS 1 bag, a
-        ROS 2 bag (folder, ``.db3`` or ``.mcap``), or a folder of per-topic CSV files.
+        ROS 2 bag (folder, ``.db3`` or ``.mcap``), or a folder of per-topic CSV files. A FIFO or
+        pipe is read whole first, interruptibly, into a temporary file of its name
+        (:func:`fdikit.base.inputs.spooled`); ``source.path`` still names it.
     dbc : path-like or cantools Database, optional
         Needed for frame logs (BLF, ASC, candump, raw CAN in MDF4).
     signals : sequence of str
@@ -190,6 +201,12 @@ def read_log(path, dbc=None, signals=None, rate=None, *, format: str | None = No
     ...
     fdikit.errors.DataError: log 'drive.vsb' does not exist
     """
+    if is_stream(path):   # a FIFO or pipe: read once, interruptibly, into a file of its name
+        with spooled(path) as src:
+            out = read_log(src, dbc, signals, rate, format=format, **kw)
+        if getattr(out, "source", None) is not None:
+            out.source = dataclasses.replace(out.source, path=str(path))
+        return out
     if format is None:
         fmt = detect_format(path)
     else:
