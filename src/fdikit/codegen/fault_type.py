@@ -146,7 +146,8 @@ static void fdk_ftc_classify(const double *bs, const int64_t *be, int64_t b0, in
     e1 = exp(0.5 * (S1 - smax));
     e2 = exp(0.5 * (S2 - smax));
     esum = e0 + e1 + e2;
-    fdk_ftc_gain_test(bs, b0 + nb - Lb, Lb, NR, B, sig_blk, &fb, &fg, &by_time);
+    g = Lb - 1 > 0 ? Lb - 1 : 0;
+    fdk_ftc_gain_test(bs, b0 + nb - g, g, NR, B, sig_blk, &fb, &fg, &by_time);
     if (by_time && S1 > S0 + prefer) fb = 0.0;
     if (fb >= gain_crit) { *typ = 2; *conf = 1.0 / (1.0 + exp(-0.5 * (fb - gain_crit))); return; }
     for (m = 0; m < nb; ++m) {

@@ -20,8 +20,9 @@ each sample between announces the latest decision (or stuck, checked per sample)
   longest frozen run of the nominal data (``stuck_after``); checked on every sensor that has it,
   isolated or not;
 * **gain** first, decided by regression on the signal (the residual's explained variance): over
-  the blocks since the step's change point (below) (block means: the residual's high-frequency
-  noise averages out), the block means of the residual are regressed on
+  the blocks after the step's change point (below; the block the change falls in is left out, its
+  mean mixes the samples before and after) (block means: the residual's high-frequency noise
+  averages out), the block means of the residual are regressed on
   those of the signal with an intercept, ``r = a + theta x``. The drop of the sum of squares
   against a constant, ``F_b = theta^2 S_xx / s^2`` (``s^2`` the block-mean noise variance, the
   larger of the nominal ``sigma_block^2`` and the fit's own), is the evidence of a gain (a
@@ -143,7 +144,10 @@ def _classify(bs, be, b0, nb, NR, B, sigma, min_len, prefer, burst_gap, spike_ma
     smax = max(S0, max(S1, S2))
     e0, e1, e2 = np.exp(0.5 * (S0 - smax)), np.exp(0.5 * (S1 - smax)), np.exp(0.5 * (S2 - smax))
     esum = e0 + e1 + e2
-    fb, fg, by_time = _gain_test_blocks(bs, b0 + nb - Lb, Lb, NR, B, sig_blk)
+    # the gain test over the blocks after the change point's: that block holds the change at block
+    # resolution, its mean mixes the samples before and after it
+    nl = max(Lb - 1, 0)
+    fb, fg, by_time = _gain_test_blocks(bs, b0 + nb - nl, nl, NR, B, sig_blk)
     if by_time and S1 > S0 + prefer:
         fb = 0.0                                      # a drift, which the signal happens to follow
     if fb >= gain_crit:                               # the residual follows the signal: a gain
