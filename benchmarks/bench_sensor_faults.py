@@ -197,7 +197,10 @@ def judge(r, sensors, t0):
         typf = tp(mine[-1][1])
     n_chg = sum(1 for t, h, k in ev if k == "change" and t >= t0 and len(hypothesis_sensors(h)) == 1
                 and _named_sensor(h) == comp)
-    return {"comp": comp, "typ5": typ5, "typf": typf, "delay": (hit[0] - t0) if hit else None,
+    # a final bias the stage is at most 0.5 sure of: a gain not ruled out (the data cannot tell)
+    conf = r.get("type_confidence_end", {}).get(comp)
+    typq = "bias?" if typf == "bias" and conf is not None and conf <= 0.5 else typf
+    return {"comp": comp, "typ5": typ5, "typf": typf, "typq": typq, "delay": (hit[0] - t0) if hit else None,
             "wrong": wrong, "before": before, "changes": n_chg}
 
 
@@ -303,6 +306,7 @@ def main():
     comp = collections.defaultdict(collections.Counter)
     typ5 = collections.defaultdict(collections.Counter)
     typf = collections.defaultdict(collections.Counter)
+    typq = collections.defaultdict(collections.Counter)
     delays = collections.defaultdict(list)              # (sensor, type) -> fdikit delays
     pdel = {p: collections.defaultdict(list) for p in ("PH raw", "PH physics")}
     pcomp = {p: collections.defaultdict(collections.Counter) for p in pdel}
@@ -330,6 +334,7 @@ def main():
                 n_changes[j["changes"]] += 1
                 typ5[typ][j["typ5"]] += 1
                 typf[typ][j["typf"]] += 1
+                typq[typ][j["typq"]] += 1
         sig = inject(raw, parse_inject(spec), pre)
         for p, first in peer_first(sig).items():
             if first is None:
@@ -350,11 +355,19 @@ def main():
     tcols = [*list(TYPES), "spike", "(untyped)"]
     show("fdikit fault type 5 s after the first naming (right component only)", typ5, tcols)
     show("fdikit fault type at the end of the run (right component only)", typf, tcols)
+    show("the same with the stage's confidence: 'bias?' = a bias at most 0.5 sure (a gain not ruled out)",
+         typq, [*list(TYPES), "bias?", "spike", "(untyped)"])
+    n_q = sum(row.get("bias?", 0) for row in typq.values())
+    n_dec = n_typed_cases - n_q
+    n_rdec = sum(row.get(ty, 0) for ty, row in typq.items())
     pc = lambda a, b: f"{a}/{b} ({100 * a / max(b, 1):.1f} %)"  # noqa: E731
     print(f"\nTARGETS: right component {pc(n_comp, n_det)} of detected (target >= 95 %); right type at +5 s "
           f"{pc(n_t5, n_typed_cases)}, final {pc(n_tf, n_typed_cases)} (target >= 90 %); "
           f"<= 1 wrong after the onset in {n_wrong_ok}/{n} ({100 * n_wrong_ok / n:.1f} %, target >= 95 %); "
           f"announcements before an onset {before}; detected {n_det}/{n}")
+    print(f"with the confidence: right type final among the decided {pc(n_rdec, n_dec)}; undecided "
+          f"('bias?': bias or gain) {n_q} (true bias {typq['bias'].get('bias?', 0)}, true gain "
+          f"{typq['gain'].get('bias?', 0)})")
     nc = sum(n_changes.values())
     print(f"type changes of the named sensor per run (right component): mean "
           f"{sum(k * v for k, v in n_changes.items()) / max(nc, 1):.2f}, max {max(n_changes, default=0)}, "

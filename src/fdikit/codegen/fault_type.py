@@ -47,13 +47,15 @@ static void fdk_ftc_accumulate(double *bs, int64_t *be, int64_t i, double r, dou
     }
 }
 
-static int64_t fdk_ftc_block_episodes(const double *bs, int64_t b0, int64_t nb, int64_t NR, int64_t B,
+static int64_t fdk_ftc_block_episodes(const double *bs, int64_t b0, int64_t nb, int64_t NR, double ib,
                                       double sig_blk, int64_t gap)
 {
-    int64_t m, n_ep = 0, below = 0;
+    int64_t m, s = b0 % NR, n_ep = 0, below = 0;
     int seen = 0;
     for (m = 0; m < nb; ++m) {
-        double z = fabs(bs[((b0 + m) % NR) * 5] / (double)B) / sig_blk;
+        double z;
+        if (m > 0) s = s < NR - 1 ? s + 1 : 0;
+        z = fabs(bs[s * 5] * ib) / sig_blk;
         if (z >= 5.0) {
             if (!seen || below >= gap) n_ep += 1;
             seen = 1; below = 0;
@@ -65,7 +67,7 @@ static int64_t fdk_ftc_block_episodes(const double *bs, int64_t b0, int64_t nb, 
 }
 
 /* _gain_test_blocks over blocks b0 .. b0 + nb - 1: (F_b, F_g, by_time) */
-static void fdk_ftc_gain_test(const double *bs, int64_t b0, int64_t nb, int64_t NR, int64_t B, double sig_blk,
+static void fdk_ftc_gain_test(const double *bs, int64_t b0, int64_t nb, int64_t NR, double ib, double sig_blk,
                               double *fb, double *fg, int *by_time)
 {
     int64_t m, s;
@@ -73,19 +75,21 @@ static void fdk_ftc_gain_test(const double *bs, int64_t b0, int64_t nb, int64_t 
     double sxy0 = 0.0, rss, rss_t, s2, q;
     *fb = 0.0; *fg = 0.0; *by_time = 0;
     if (nb < 4) return;
+    s = b0 % NR;
     for (m = 0; m < nb; ++m) {
-        s = (b0 + m) % NR;
-        mr += bs[s * 5] / (double)B;
-        mx += bs[s * 5 + 2] / (double)B;
+        if (m > 0) s = s < NR - 1 ? s + 1 : 0;
+        mr += bs[s * 5] * ib;
+        mx += bs[s * 5 + 2] * ib;
     }
     mr = mr / (double)nb;
     mx = mx / (double)nb;
     mt = 0.5 * (double)(nb - 1);
+    s = b0 % NR;
     for (m = 0; m < nb; ++m) {
         double rm, xm, dx, dy, dt;
-        s = (b0 + m) % NR;
-        rm = bs[s * 5] / (double)B;
-        xm = bs[s * 5 + 2] / (double)B;
+        if (m > 0) s = s < NR - 1 ? s + 1 : 0;
+        rm = bs[s * 5] * ib;
+        xm = bs[s * 5 + 2] * ib;
         dx = xm - mx; dy = rm - mr; dt = (double)m - mt;
         sxx += dx * dx;
         sxy += dx * dy;
@@ -119,9 +123,11 @@ static void fdk_ftc_classify(const double *bs, const int64_t *be, int64_t b0, in
     double S0 = 0.0, S1 = 0.0, S2 = 0.0, e0, e1, e2, smax, esum, fb, fg, c, q;
     int64_t qq, m, s, L, Lb = 0, first = -1, last = -1, n_ep = 0, below = 0, g;
     int by_time;
+    double ib;
+    s = (b0 + nb - 1) % NR;
     for (qq = 0; qq < nb; ++qq) {
         double s_tr, stt;
-        s = (b0 + nb - 1 - qq) % NR;
+        if (qq > 0) s = s > 0 ? s - 1 : NR - 1;
         sr += bs[s * 5];
         sar += (double)(qq * B + B - 1) * bs[s * 5] - bs[s * 5 + 1];
         sxr += bs[s * 5 + 3];
@@ -147,11 +153,15 @@ static void fdk_ftc_classify(const double *bs, const int64_t *be, int64_t b0, in
     e2 = exp(0.5 * (S2 - smax));
     esum = e0 + e1 + e2;
     g = Lb - 1 > 0 ? Lb - 1 : 0;
-    fdk_ftc_gain_test(bs, b0 + nb - g, g, NR, B, sig_blk, &fb, &fg, &by_time);
+    ib = 1.0 / (double)B;
+    fdk_ftc_gain_test(bs, b0 + nb - g, g, NR, ib, sig_blk, &fb, &fg, &by_time);
     if (by_time && S1 > S0 + prefer) fb = 0.0;
     if (fb >= gain_crit) { *typ = 2; *conf = 1.0 / (1.0 + exp(-0.5 * (fb - gain_crit))); return; }
+    s = b0 % NR;
     for (m = 0; m < nb; ++m) {
-        const int64_t *e = be + ((b0 + m) % NR) * 5;
+        const int64_t *e;
+        if (m > 0) s = s < NR - 1 ? s + 1 : 0;
+        e = be + s * 5;
         below += e[2];
         if (e[0] >= 0) {
             if (first < 0) { first = m * B + e[0]; n_ep = 1; }
@@ -162,7 +172,7 @@ static void fdk_ftc_classify(const double *bs, const int64_t *be, int64_t b0, in
         }
     }
     if (n_ep < 2) {
-        g = fdk_ftc_block_episodes(bs, b0, nb, NR, B, sig_blk, burst_gap / B > 1 ? burst_gap / B : 1);
+        g = fdk_ftc_block_episodes(bs, b0, nb, NR, ib, sig_blk, burst_gap / B > 1 ? burst_gap / B : 1);
         if (g > n_ep) n_ep = g;
     }
     if (n_ep >= 2) { *typ = 4; *conf = 1.0 - ldexp(1.0, (int)-(n_ep - 1)); return; }

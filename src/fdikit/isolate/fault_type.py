@@ -122,8 +122,10 @@ def _classify(bs, be, b0, nb, NR, B, sigma, min_len, prefer, burst_gap, spike_ma
     sr = sar = sxr = sxx = 0.0
     sb = sd = sg = -np.inf
     Lb = 0                                            # the step's change point: the last Lb blocks
+    s = (b0 + nb - 1) % NR                            # ring slots stepped, not taken modulo NR
     for q in range(nb):
-        s = (b0 + nb - 1 - q) % NR
+        if q > 0:
+            s = s - 1 if s > 0 else NR - 1
         sr += bs[s, _SR]
         sar += (q * B + B - 1) * bs[s, _SR] - bs[s, _SIR]     # age (0 = newest) times r
         sxr += bs[s, _SXR]
@@ -147,7 +149,8 @@ def _classify(bs, be, b0, nb, NR, B, sigma, min_len, prefer, burst_gap, spike_ma
     # the gain test over the blocks after the change point's: that block holds the change at block
     # resolution, its mean mixes the samples before and after it
     nl = max(Lb - 1, 0)
-    fb, fg, by_time = _gain_test_blocks(bs, b0 + nb - nl, nl, NR, B, sig_blk)
+    ib = 1.0 / B
+    fb, fg, by_time = _gain_test_blocks(bs, b0 + nb - nl, nl, NR, ib, sig_blk)
     if by_time and S1 > S0 + prefer:
         fb = 0.0                                      # a drift, which the signal happens to follow
     if fb >= gain_crit:                               # the residual follows the signal: a gain
@@ -156,8 +159,10 @@ def _classify(bs, be, b0, nb, NR, B, sigma, min_len, prefer, burst_gap, spike_ma
     first = last = -1
     n_ep = 0
     below = 0                                         # samples below release since the last one out
+    s = b0 % NR
     for m in range(nb):
-        s = (b0 + m) % NR
+        if m > 0:
+            s = s + 1 if s < NR - 1 else 0
         below += be[s, _BB]
         if be[s, _FO] >= 0:
             if first < 0:
@@ -171,7 +176,7 @@ def _classify(bs, be, b0, nb, NR, B, sigma, min_len, prefer, burst_gap, spike_ma
     if n_ep < 2:
         # bursts shorter than the statistic's low-pass smear into one episode there: count them on
         # the residual's block means too
-        n_ep = max(n_ep, _block_episodes(bs, b0, nb, NR, B, sig_blk, max(1, burst_gap // B)))
+        n_ep = max(n_ep, _block_episodes(bs, b0, nb, NR, ib, sig_blk, max(1, burst_gap // B)))
     if n_ep >= 2:
         return _INTER, 1.0 - 0.5 ** (n_ep - 1)
     if first >= 0:
@@ -189,12 +194,16 @@ _BURST_ON, _BURST_OFF = 5.0, 2.0
 
 
 @njit(cache=True)
-def _block_episodes(bs, b0, nb, NR, B, sig_blk, gap):
-    """Episodes of the residual over blocks ``b0 .. b0 + nb - 1``: runs of block means with
-    ``|mean| >= 5 sig_blk``, separated by at least ``gap`` blocks below ``2 sig_blk``."""
+def _block_episodes(bs, b0, nb, NR, ib, sig_blk, gap):
+    """Episodes of the residual over blocks ``b0 .. b0 + nb - 1`` (``ib`` one over the block
+    length): runs of block means with ``|mean| >= 5 sig_blk``, separated by at least ``gap`` blocks
+    below ``2 sig_blk``."""
     n_ep, seen, below = 0, False, 0
+    s = b0 % NR
     for m in range(nb):
-        z = abs(bs[(b0 + m) % NR, _SR] / B) / sig_blk
+        if m > 0:
+            s = s + 1 if s < NR - 1 else 0
+        z = abs(bs[s, _SR] * ib) / sig_blk
         if z >= _BURST_ON:
             if not seen or below >= gap:
                 n_ep += 1
@@ -205,9 +214,10 @@ def _block_episodes(bs, b0, nb, NR, B, sig_blk, gap):
 
 
 @njit(cache=True)
-def _gain_test_blocks(bs, b0, nb, NR, B, sig_blk):
-    """``(F_b, F_g, by_time)`` over blocks ``b0 .. b0 + nb - 1`` of ``B`` samples (ring slot
-    ``b % NR`` of the aggregates bs): the block means of r regressed on those of x with an intercept;
+def _gain_test_blocks(bs, b0, nb, NR, ib, sig_blk):
+    """``(F_b, F_g, by_time)`` over blocks ``b0 .. b0 + nb - 1`` (ring slot ``b % NR`` of the
+    aggregates bs; ``ib`` one over the block length): the block means of r regressed on those of x
+    with an intercept;
     F_b the drop of the residual sum of squares against a constant (the slope: a gain, or a time
     trend that x follows), F_g against a line through the origin (a gain without an offset), each
     over the noise variance of a block mean (the larger of ``sig_blk^2`` and the fit's own);
@@ -216,15 +226,19 @@ def _gain_test_blocks(bs, b0, nb, NR, B, sig_blk):
     if nb < 4:
         return 0.0, 0.0, False
     mr = mx = 0.0
+    s = b0 % NR
     for m in range(nb):
-        s = (b0 + m) % NR
-        mr += bs[s, _SR] / B
-        mx += bs[s, _SX] / B
+        if m > 0:
+            s = s + 1 if s < NR - 1 else 0
+        mr += bs[s, _SR] * ib
+        mx += bs[s, _SX] * ib
     mr, mx, mt = mr / nb, mx / nb, 0.5 * (nb - 1)
     sxx = sxy = syy = stt = sty = sx0 = sxy0 = 0.0
+    s = b0 % NR
     for m in range(nb):
-        s = (b0 + m) % NR
-        rm, xm = bs[s, _SR] / B, bs[s, _SX] / B
+        if m > 0:
+            s = s + 1 if s < NR - 1 else 0
+        rm, xm = bs[s, _SR] * ib, bs[s, _SX] * ib
         dx, dy, dt = xm - mx, rm - mr, m - mt
         sxx += dx * dx
         sxy += dx * dy
@@ -253,7 +267,7 @@ def _gain_test(r: np.ndarray, x: np.ndarray, block: int, sig_blk: float) -> tupl
     if nb:
         bs[:, _SR] = r[off:].reshape(nb, block).sum(axis=1)
         bs[:, _SX] = x[off:].reshape(nb, block).sum(axis=1)
-    fb, fg, by_time = _gain_test_blocks(bs, 0, nb, max(nb, 1), block, sig_blk)
+    fb, fg, by_time = _gain_test_blocks(bs, 0, nb, max(nb, 1), 1.0 / block, sig_blk)
     return float(fb), float(fg), bool(by_time)
 
 
