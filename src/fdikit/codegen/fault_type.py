@@ -68,7 +68,7 @@ static int64_t fdk_ftc_block_episodes(const double *bs, int64_t b0, int64_t nb, 
 
 /* _gain_test_blocks over blocks b0 .. b0 + nb - 1: (F_b, F_g, by_time) */
 static void fdk_ftc_gain_test(const double *bs, int64_t b0, int64_t nb, int64_t NR, double ib, double sig_blk,
-                              double *fb, double *fg, int *by_time)
+                              double r0, double *fb, double *fg, int *by_time)
 {
     int64_t m, s;
     double mr = 0.0, mx = 0.0, mt, sxx = 0.0, sxy = 0.0, syy = 0.0, stt = 0.0, sty = 0.0, sx0 = 0.0;
@@ -97,7 +97,7 @@ static void fdk_ftc_gain_test(const double *bs, int64_t b0, int64_t nb, int64_t 
         stt += dt * dt;
         sty += dt * dy;
         sx0 += xm * xm;
-        sxy0 += xm * rm;
+        sxy0 += xm * (rm - r0);
     }
     if (sxx <= 0.0 || sx0 <= 0.0) return;
     rss = syy - sxy * sxy / sxx;
@@ -108,7 +108,7 @@ static void fdk_ftc_gain_test(const double *bs, int64_t b0, int64_t nb, int64_t 
     q = rss / (double)(nb - 2);
     if (q > s2) s2 = q;
     *fb = (syy - rss) / s2;
-    q = syy + (double)nb * mr * mr - sxy0 * sxy0 / sx0 - rss;
+    q = syy + (double)nb * (mr - r0) * (mr - r0) - sxy0 * sxy0 / sx0 - rss;
     if (0.0 > q) q = 0.0;
     *fg = q / s2;
     *by_time = rss_t < rss;
@@ -123,7 +123,7 @@ static void fdk_ftc_classify(const double *bs, const int64_t *be, int64_t b0, in
     double S0 = 0.0, S1 = 0.0, S2 = 0.0, e0, e1, e2, smax, esum, fb, fg, c, q;
     int64_t qq, m, s, L, Lb = 0, first = -1, last = -1, n_ep = 0, below = 0, g;
     int by_time;
-    double ib;
+    double ib, r0;
     s = (b0 + nb - 1) % NR;
     for (qq = 0; qq < nb; ++qq) {
         double s_tr, stt;
@@ -154,7 +154,17 @@ static void fdk_ftc_classify(const double *bs, const int64_t *be, int64_t b0, in
     esum = e0 + e1 + e2;
     g = Lb - 1 > 0 ? Lb - 1 : 0;
     ib = 1.0 / (double)B;
-    fdk_ftc_gain_test(bs, b0 + nb - g, g, NR, ib, sig_blk, &fb, &fg, &by_time);
+    r0 = 0.0;
+    L = b0 + nb - (NR - 1) > 0 ? b0 + nb - (NR - 1) : 0;   /* the ring's oldest block */
+    if (b0 - L >= 4) {
+        s = L % NR;
+        for (m = 0; m < b0 - L; ++m) {
+            if (m > 0) s = s < NR - 1 ? s + 1 : 0;
+            r0 += bs[s * 5];
+        }
+        r0 = r0 * ib / (double)(b0 - L);
+    }
+    fdk_ftc_gain_test(bs, b0 + nb - g, g, NR, ib, sig_blk, r0, &fb, &fg, &by_time);
     if (by_time && S1 > S0 + prefer) fb = 0.0;
     if (fb >= gain_crit) { *typ = 2; *conf = 1.0 / (1.0 + exp(-0.5 * (fb - gain_crit))); return; }
     s = b0 % NR;

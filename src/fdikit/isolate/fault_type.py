@@ -112,6 +112,10 @@ def _accumulate(bs, be, i, r, x, st, release, burst_gap):
             be[_BA] += 1
 
 
+#: fewest blocks before the window for the residual's fault-free level (else zero)
+_BASE_MIN = 4
+
+
 @njit(cache=True)
 def _classify(bs, be, b0, nb, NR, B, sigma, min_len, prefer, burst_gap, spike_max, sig_blk, gain_crit):
     """Type and confidence of one member's fault from the aggregates of its window's blocks ``b0``
@@ -150,7 +154,19 @@ def _classify(bs, be, b0, nb, NR, B, sigma, min_len, prefer, burst_gap, spike_ma
     # resolution, its mean mixes the samples before and after it
     nl = max(Lb - 1, 0)
     ib = 1.0 / B
-    fb, fg, by_time = _gain_test_blocks(bs, b0 + nb - nl, nl, NR, ib, sig_blk)
+    # the residual's fault-free level: the mean of the ring's blocks before the window (before the
+    # onset), if at least _BASE_MIN; a gain without an offset is a line through it (issue 27: the
+    # peers' fit leaves the residual an offset of its own on held-out data)
+    p0 = max(0, b0 + nb - (NR - 1))
+    r0 = 0.0
+    if b0 - p0 >= _BASE_MIN:
+        s = p0 % NR
+        for m in range(b0 - p0):
+            if m > 0:
+                s = s + 1 if s < NR - 1 else 0
+            r0 += bs[s, _SR]
+        r0 = r0 * ib / (b0 - p0)
+    fb, fg, by_time = _gain_test_blocks(bs, b0 + nb - nl, nl, NR, ib, sig_blk, r0)
     if by_time and S1 > S0 + prefer:
         fb = 0.0                                      # a drift, which the signal happens to follow
     if fb >= gain_crit:                               # the residual follows the signal: a gain
@@ -214,12 +230,13 @@ def _block_episodes(bs, b0, nb, NR, ib, sig_blk, gap):
 
 
 @njit(cache=True)
-def _gain_test_blocks(bs, b0, nb, NR, ib, sig_blk):
+def _gain_test_blocks(bs, b0, nb, NR, ib, sig_blk, r0):
     """``(F_b, F_g, by_time)`` over blocks ``b0 .. b0 + nb - 1`` (ring slot ``b % NR`` of the
     aggregates bs; ``ib`` one over the block length): the block means of r regressed on those of x
     with an intercept;
     F_b the drop of the residual sum of squares against a constant (the slope: a gain, or a time
-    trend that x follows), F_g against a line through the origin (a gain without an offset), each
+    trend that x follows), F_g against a line through ``(0, r0)`` (a gain without an offset from the
+    fault-free level ``r0``), each
     over the noise variance of a block mean (the larger of ``sig_blk^2`` and the fit's own);
     ``by_time`` where a line in time fits the block means better than the line in x.
     ``(0, 0, False)`` with fewer than 4 blocks or no excitation."""
@@ -246,14 +263,14 @@ def _gain_test_blocks(bs, b0, nb, NR, ib, sig_blk):
         stt += dt * dt
         sty += dt * dy
         sx0 += xm * xm
-        sxy0 += xm * rm
+        sxy0 += xm * (rm - r0)
     if sxx <= 0.0 or sx0 <= 0.0:
         return 0.0, 0.0, False
     rss = max(syy - sxy * sxy / sxx, 0.0)             # a + theta x
     rss_t = max(syy - sty * sty / stt, 0.0)           # a + s t: a drift
     s2 = max(sig_blk * sig_blk, rss / (nb - 2))
     fb = (syy - rss) / s2
-    fg = max(syy + nb * mr * mr - sxy0 * sxy0 / sx0 - rss, 0.0) / s2
+    fg = max(syy + nb * (mr - r0) * (mr - r0) - sxy0 * sxy0 / sx0 - rss, 0.0) / s2
     return fb, fg, rss_t < rss
 
 
@@ -267,7 +284,7 @@ def _gain_test(r: np.ndarray, x: np.ndarray, block: int, sig_blk: float) -> tupl
     if nb:
         bs[:, _SR] = r[off:].reshape(nb, block).sum(axis=1)
         bs[:, _SX] = x[off:].reshape(nb, block).sum(axis=1)
-    fb, fg, by_time = _gain_test_blocks(bs, 0, nb, max(nb, 1), 1.0 / block, sig_blk)
+    fb, fg, by_time = _gain_test_blocks(bs, 0, nb, max(nb, 1), 1.0 / block, sig_blk, 0.0)
     return float(fb), float(fg), bool(by_time)
 
 
