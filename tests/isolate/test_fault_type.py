@@ -240,3 +240,21 @@ def test_a_state_with_sample_windows_restores_as_block_sums(cut):
     assert np.allclose(out, full[:, cut:], rtol=1e-9, atol=1e-12)
     with pytest.raises(Exception, match="_rb, _xb, _sb"):
         ftc2.set_state({**_old_state(ftc, x, cut, 600), "_xb": np.zeros((1, 1, 5))})
+
+
+def test_gain_without_offset_is_a_line_through_the_fault_free_level():
+    # issue 27: the peers' fit leaves the residual an offset of its own (r0) on held-out data; a gain
+    # adds (g - 1) x to it. Through the origin the gain would be "ruled out" (a confident bias); through
+    # the fault-free level it fits, and the evidence of a slope (F_b) does not depend on r0
+    from fdikit.isolate.fault_type import _gain_test_blocks
+
+    rng = np.random.default_rng(0)
+    B, nb = 25, 40
+    x = 15.0 + 2.0 * np.sin(np.arange(nb) / 6.0)
+    r = 0.1 + 0.01 * x + 0.002 * rng.standard_normal(nb)
+    bs = np.zeros((nb, 5))
+    bs[:, 0], bs[:, 2] = B * r, B * x
+    fb0, fg0, _ = _gain_test_blocks(bs, 0, nb, nb, 1.0 / B, 0.003, 0.0)
+    fb1, fg1, _ = _gain_test_blocks(bs, 0, nb, nb, 1.0 / B, 0.003, 0.1)
+    assert fg0 > 100.0 and fg1 < 10.0
+    assert fb0 == pytest.approx(fb1, rel=1e-9) and fb0 > 100.0

@@ -31,8 +31,10 @@ each sample between announces the latest decision (or stuck, checked per sample)
   residual better than the signal does (a drift the signal happens to follow). At least 4 blocks
   are needed, and a signal that does not move gives no evidence: with too little excitation the
   fault stays a bias (the default explanation) with a confidence of at most 0.5 until the line
-  through the origin, the gain without an offset, is also ruled out (``F_g >= gain_crit``), and is
-  revised to a gain as the signal moves. (The sample-wise GLR ``S_g`` below is not used to decide
+  through the residual's fault-free level (the mean of the ring's blocks before the onset, else
+  zero), the gain without an offset, is also ruled out (``F_g >= gain_crit``), and is revised to a
+  gain as the signal moves: a bias at most 0.5 sure says the data cannot tell it from a gain.
+  (The sample-wise GLR ``S_g`` below is not used to decide
   a gain: on a coloured residual a constant step beat by a few units of ``S_g`` out of thousands
   typed biases as gains once the signal moved.)
 * **intermittent** -- at least two episodes of the normalised residual above 1 in the window,
