@@ -112,7 +112,9 @@ def test_a_persisting_fault_type_does_not_flap(kind, seed):
     sig = _persisting(kind, seed)
     kw = {"lookback": 100, "block": 10}
     _seq0, ch0 = _types(FaultTypeClassifier(["s"], {"s": 0.023}, 1500, **kw).run(sig))
-    assert len(ch0) >= 3                                 # the flapping this guards against
+    # the flapping this guards against (decided once a block since the block aggregates, issue 29:
+    # the gains of seeds 0 and 2 change once without hysteresis too)
+    assert len(ch0) >= (1 if (kind, seed) in (("gain", 0), ("gain", 2)) else 3)
     seq, ch = _types(FaultTypeClassifier(["s"], {"s": 0.023}, 1500, revise_after=100, revise_conf=0.5,
                                          **kw).run(sig))
     assert len(ch) <= 2 and seq[-1] == kind, ch          # a revision or two, to the right type
@@ -197,3 +199,62 @@ def test_a_state_from_before_the_hysteresis_restores():
     assert ftc2._active.any() and np.array_equal(ftc2._cnt, np.zeros((1, 1), np.int64))
     with pytest.raises(Exception, match="state has keys"):
         ftc2.set_state({**old, "_cand": ftc.get_state()["_cand"]})
+
+
+def test_state_is_block_sums_not_samples():
+    # issue 29: the window is held as block sums, O(window / block) per member, whatever the window
+    small = FaultTypeClassifier(["s", "t"], {"s": 0.1, "t": 0.1}, 1500, block=25)
+    assert small._bs.shape == (1, 2, 61, 5) and small._be.shape == (1, 2, 61, 5)
+    st = small.get_state()
+    assert sum(np.asarray(v).size for v in st.values() if np.ndim(v)) < 2 * 61 * 10 + 2 * 20
+
+
+def _old_state(ftc, x, k_end, W):
+    """The raw-window state (before the block sums) of ``ftc`` after samples 0 .. k_end - 1."""
+    rb, xb, sb = (np.zeros((1, 1, W)) for _ in range(3))
+    for k in range(k_end):
+        rb[0, 0, k % W], xb[0, 0, k % W], sb[0, 0, k % W] = x[0, k, 2], x[0, k, 3], x[0, k, 1]
+    st = {k: v for k, v in ftc.get_state().items() if k not in ("_bs", "_be", "_dtype", "_dconf")}
+    return {**st, "_rb": rb, "_xb": xb, "_sb": sb}
+
+
+@pytest.mark.parametrize("cut", [1234, 1250])
+def test_a_state_with_sample_windows_restores_as_block_sums(cut):
+    sig = _persisting("drift", 1, T=2500)
+    kw = {"lookback": 100, "block": 10}
+    ftc = FaultTypeClassifier(["s"], {"s": 0.023}, 600, **kw)
+    full = ftc.run(sig).values
+    x = sig.values[:, :, sig.index(ftc.input_names)]
+    ftc.reset(1)
+    for k in range(cut):
+        ftc.step(x[:, k])
+    new = ftc.get_state()
+    ftc2 = FaultTypeClassifier(["s"], {"s": 0.023}, 600, **kw)
+    ftc2.set_state(_old_state(ftc, x, cut, 600))
+    # the blocks the raw window covers whole are the block sums; the oldest, cut by the window, is
+    # left out of every later decision
+    whole = [b % 61 for b in range(-((600 - cut) // 10), (cut - 1) // 10 + 1)]
+    assert np.allclose(ftc2._bs[0, 0, whole], new["_bs"][0, 0, whole], rtol=1e-12, atol=1e-12)
+    assert np.array_equal(ftc2._be[0, 0, whole], new["_be"][0, 0, whole])
+    out = np.stack([ftc2.step(x[:, k]) for k in range(cut, 2500)], axis=1)
+    assert np.allclose(out, full[:, cut:], rtol=1e-9, atol=1e-12)
+    with pytest.raises(Exception, match="_rb, _xb, _sb"):
+        ftc2.set_state({**_old_state(ftc, x, cut, 600), "_xb": np.zeros((1, 1, 5))})
+
+
+def test_gain_without_offset_is_a_line_through_the_fault_free_level():
+    # issue 27: the peers' fit leaves the residual an offset of its own (r0) on held-out data; a gain
+    # adds (g - 1) x to it. Through the origin the gain would be "ruled out" (a confident bias); through
+    # the fault-free level it fits, and the evidence of a slope (F_b) does not depend on r0
+    from fdikit.isolate.fault_type import _gain_test_blocks
+
+    rng = np.random.default_rng(0)
+    B, nb = 25, 40
+    x = 15.0 + 2.0 * np.sin(np.arange(nb) / 6.0)
+    r = 0.1 + 0.01 * x + 0.002 * rng.standard_normal(nb)
+    bs = np.zeros((nb, 5))
+    bs[:, 0], bs[:, 2] = B * r, B * x
+    fb0, fg0, _ = _gain_test_blocks(bs, 0, nb, nb, 1.0 / B, 0.003, 0.0)
+    fb1, fg1, _ = _gain_test_blocks(bs, 0, nb, nb, 1.0 / B, 0.003, 0.1)
+    assert fg0 > 100.0 and fg1 < 10.0
+    assert fb0 == pytest.approx(fb1, rel=1e-9) and fb0 > 100.0

@@ -3,16 +3,26 @@ intermittent or spike, from its residual and its signal, with a confidence, revi
 grows.
 
 Once a sensor is isolated (an isolation stage's flag, e.g. :class:`~fdikit.detect.PeerCheck`'s
-``peer:m:isolated``) its fault is *active*; the type is decided at every sample over the window
-since the onset (from ``lookback`` samples before the first flag; the first ``window`` samples
-of it, so that evidence grows until then):
+``peer:m:isolated``) its fault is *active*; the type is decided over the window since the onset
+(from the block holding the sample ``lookback`` samples before the first flag; at most the last
+``window // block`` blocks, so that evidence grows until then).
+
+The window is held as recursive sufficient statistics, not as samples (issue 29: a step costs O(1)
+per sensor, the state is O(window / block)): each sample adds to its block of ``block`` samples
+(blocks aligned to the sample count) the sums of ``r``, ``i r`` (``i`` its index in the block),
+``x``, ``x r`` and ``x^2``, and the counts of the normalised residual's episodes (first and last
+sample out, samples below ``release`` before and after them, episodes starting in between); a
+ring of ``window // block + 1`` blocks per sensor holds them. The type is decided at the onset and
+again each time a block completes, from the blocks alone (change points at block boundaries);
+each sample between announces the latest decision (or stuck, checked per sample):
 
 * **stuck** -- the sensor's raw signal has not changed (zero increments) for longer than the
   longest frozen run of the nominal data (``stuck_after``); checked on every sensor that has it,
   isolated or not;
 * **gain** first, decided by regression on the signal (the residual's explained variance): over
-  the samples since the step's change point (below), averaged in blocks of ``block`` samples (the
-  residual's high-frequency noise averages out), the block means of the residual are regressed on
+  the blocks after the step's change point (below; the block the change falls in is left out, its
+  mean mixes the samples before and after) (block means: the residual's high-frequency noise
+  averages out), the block means of the residual are regressed on
   those of the signal with an intercept, ``r = a + theta x``. The drop of the sum of squares
   against a constant, ``F_b = theta^2 S_xx / s^2`` (``s^2`` the block-mean noise variance, the
   larger of the nominal ``sigma_block^2`` and the fit's own), is the evidence of a gain (a
@@ -21,8 +31,10 @@ of it, so that evidence grows until then):
   residual better than the signal does (a drift the signal happens to follow). At least 4 blocks
   are needed, and a signal that does not move gives no evidence: with too little excitation the
   fault stays a bias (the default explanation) with a confidence of at most 0.5 until the line
-  through the origin, the gain without an offset, is also ruled out (``F_g >= gain_crit``), and is
-  revised to a gain as the signal moves. (The sample-wise GLR ``S_g`` below is not used to decide
+  through the residual's fault-free level (the mean of the ring's blocks before the onset, else
+  zero), the gain without an offset, is also ruled out (``F_g >= gain_crit``), and is revised to a
+  gain as the signal moves: a bias at most 0.5 sure says the data cannot tell it from a gain.
+  (The sample-wise GLR ``S_g`` below is not used to decide
   a gain: on a coloured residual a constant step beat by a few units of ``S_g`` out of thousands
   typed biases as gains once the signal moved.)
 * **intermittent** -- at least two episodes of the normalised residual above 1 in the window,
@@ -67,39 +79,97 @@ FAULT_TYPES = ("bias", "drift", "gain", "stuck", "intermittent", "spike")
 _BIAS, _DRIFT, _GAIN, _STUCK, _INTER, _SPIKE = range(6)
 
 
+#: the block aggregates of one member's ring, per block: sums of r, i r (i the sample's index in the
+#: block), x, x r, x^2 (``_bs``); and of the normalised residual's episodes (``_be``): the index in the
+#: block of the first and last sample out (>= 1; -1: none), the samples below ``release`` before the
+#: first and after the last, and the episodes that start after the first in the block
+_SR, _SIR, _SX, _SXR, _SXX = range(5)
+_FO, _LO, _BB, _BA, _NE = range(5)
+
+
 @njit(cache=True)
-def _classify(r, x, st, sigma, min_len, prefer, release, burst_gap, spike_max, block, sig_blk, gain_crit):
-    """Type and confidence of one member's fault from its window since the onset, oldest first:
-    residual r (n,), signal x (n,), normalised residual st (n,) (see the module docstring)."""
-    n = r.size
+def _accumulate(bs, be, i, r, x, st, release, burst_gap):
+    """Add sample i of a block (residual r, signal x, normalised residual st) to its aggregates
+    bs (5,), be (5,); i = 0 starts the block."""
+    if i == 0:
+        for c in range(5):
+            bs[c] = 0.0
+        be[_FO], be[_LO], be[_BB], be[_BA], be[_NE] = -1, -1, 0, 0, 0
+    bs[_SR] += r
+    bs[_SIR] += i * r
+    bs[_SX] += x
+    bs[_SXR] += x * r
+    bs[_SXX] += x * x
+    if st >= 1.0:
+        if be[_FO] < 0:
+            be[_FO] = i
+        elif be[_BA] >= burst_gap:
+            be[_NE] += 1
+        be[_LO] = i
+        be[_BA] = 0
+    elif st < release:
+        if be[_FO] < 0:
+            be[_BB] += 1
+        else:
+            be[_BA] += 1
+
+
+#: fewest blocks before the window for the residual's fault-free level (else zero)
+_BASE_MIN = 4
+
+
+@njit(cache=True)
+def _classify(bs, be, b0, nb, NR, B, sigma, min_len, prefer, burst_gap, spike_max, sig_blk, gain_crit):
+    """Type and confidence of one member's fault from the aggregates of its window's blocks ``b0``
+    .. ``b0 + nb - 1`` (block numbers; ring slot ``b % NR``) of ``B`` samples (see the module
+    docstring); change points at block boundaries."""
     # the GLRs [S_b, S_d, S_g], each maximised over the change point (segments of at least min_len
-    # samples ending at the newest sample): sums over the last L samples, newest first
+    # samples ending at the newest sample): sums over the last q blocks, newest first
     sr = sar = sxr = sxx = 0.0
     sb = sd = sg = -np.inf
-    Lb = 0                                            # the step's change point: the last Lb samples
-    for L in range(1, n + 1):
-        i = n - L
-        sr += r[i]
-        sar += (L - 1) * r[i]                         # age (0 = newest) times r
-        sxr += x[i] * r[i]
-        sxx += x[i] * x[i]
+    Lb = 0                                            # the step's change point: the last Lb blocks
+    s = (b0 + nb - 1) % NR                            # ring slots stepped, not taken modulo NR
+    for q in range(nb):
+        if q > 0:
+            s = s - 1 if s > 0 else NR - 1
+        sr += bs[s, _SR]
+        sar += (q * B + B - 1) * bs[s, _SR] - bs[s, _SIR]     # age (0 = newest) times r
+        sxr += bs[s, _SXR]
+        sxx += bs[s, _SXX]
+        L = (q + 1) * B
         if L < min_len:
             continue
         s_tr = L * sr - sar                           # sum tau r, tau = 1 (oldest) .. L (newest)
         stt = L * (L + 1) * (2 * L + 1) / 6.0
         if sr * sr / L > sb:
-            sb, Lb = sr * sr / L, L
+            sb, Lb = sr * sr / L, q + 1
         sd = max(sd, s_tr * s_tr / stt)
         sg = max(sg, sxr * sxr / sxx if sxx > 0 else 0.0)
-    S = np.zeros(3)
-    if n >= min_len:
+    S0 = S1 = S2 = 0.0
+    if nb * B >= min_len:
         s2 = sigma * sigma
-        S[0], S[1], S[2] = sb / s2, sd / s2, sg / s2
-    smax = max(S[0], max(S[1], S[2]))
-    e = np.exp(0.5 * (S - smax))
-    esum = e[0] + e[1] + e[2]
-    fb, fg, by_time = _gain_test(r[n - Lb:], x[n - Lb:], block, sig_blk)
-    if by_time and S[1] > S[0] + prefer:
+        S0, S1, S2 = sb / s2, sd / s2, sg / s2
+    smax = max(S0, max(S1, S2))
+    e0, e1, e2 = np.exp(0.5 * (S0 - smax)), np.exp(0.5 * (S1 - smax)), np.exp(0.5 * (S2 - smax))
+    esum = e0 + e1 + e2
+    # the gain test over the blocks after the change point's: that block holds the change at block
+    # resolution, its mean mixes the samples before and after it
+    nl = max(Lb - 1, 0)
+    ib = 1.0 / B
+    # the residual's fault-free level: the mean of the ring's blocks before the window (before the
+    # onset), if at least _BASE_MIN; a gain without an offset is a line through it (issue 27: the
+    # peers' fit leaves the residual an offset of its own on held-out data)
+    p0 = max(0, b0 + nb - (NR - 1))
+    r0 = 0.0
+    if b0 - p0 >= _BASE_MIN:
+        s = p0 % NR
+        for m in range(b0 - p0):
+            if m > 0:
+                s = s + 1 if s < NR - 1 else 0
+            r0 += bs[s, _SR]
+        r0 = r0 * ib / (b0 - p0)
+    fb, fg, by_time = _gain_test_blocks(bs, b0 + nb - nl, nl, NR, ib, sig_blk, r0)
+    if by_time and S1 > S0 + prefer:
         fb = 0.0                                      # a drift, which the signal happens to follow
     if fb >= gain_crit:                               # the residual follows the signal: a gain
         return _GAIN, 1.0 / (1.0 + np.exp(-0.5 * (fb - gain_crit)))
@@ -107,28 +177,31 @@ def _classify(r, x, st, sigma, min_len, prefer, release, burst_gap, spike_max, b
     first = last = -1
     n_ep = 0
     below = 0                                         # samples below release since the last one out
-    for i in range(n):
-        if st[i] >= 1.0:
+    s = b0 % NR
+    for m in range(nb):
+        if m > 0:
+            s = s + 1 if s < NR - 1 else 0
+        below += be[s, _BB]
+        if be[s, _FO] >= 0:
             if first < 0:
-                first = i
+                first = m * B + be[s, _FO]
                 n_ep = 1
             elif below >= burst_gap:
                 n_ep += 1
-            last = i
-            below = 0
-        elif st[i] < release:
-            below += 1
+            n_ep += be[s, _NE]
+            last = m * B + be[s, _LO]
+            below = be[s, _BA]
     if n_ep < 2:
         # bursts shorter than the statistic's low-pass smear into one episode there: count them on
         # the residual's block means too
-        n_ep = max(n_ep, _block_episodes(r, block, sig_blk, max(1, burst_gap // block)))
+        n_ep = max(n_ep, _block_episodes(bs, b0, nb, NR, ib, sig_blk, max(1, burst_gap // B)))
     if n_ep >= 2:
         return _INTER, 1.0 - 0.5 ** (n_ep - 1)
     if first >= 0:
         if last - first < spike_max and below >= burst_gap:
             return _SPIKE, min(1.0, below / (2.0 * burst_gap))
-    best = _DRIFT if S[1] > S[0] + prefer else _BIAS
-    c = e[best] / esum
+    best = _DRIFT if S1 > S0 + prefer else _BIAS
+    c = (e1 if best == _DRIFT else e0) / esum
     if best == _BIAS and fg < gain_crit:
         c = min(c, 0.5)                               # a gain is not ruled out yet (too little excitation)
     return best, c
@@ -139,17 +212,16 @@ _BURST_ON, _BURST_OFF = 5.0, 2.0
 
 
 @njit(cache=True)
-def _block_episodes(r, block, sig_blk, gap):
-    """Episodes of the residual r (n,): runs of block means with ``|mean| >= 5 sig_blk``, separated
-    by at least ``gap`` blocks below ``2 sig_blk`` (blocks aligned to the newest sample)."""
-    nb = r.size // block
-    off = r.size - nb * block
+def _block_episodes(bs, b0, nb, NR, ib, sig_blk, gap):
+    """Episodes of the residual over blocks ``b0 .. b0 + nb - 1`` (``ib`` one over the block
+    length): runs of block means with ``|mean| >= 5 sig_blk``, separated by at least ``gap`` blocks
+    below ``2 sig_blk``."""
     n_ep, seen, below = 0, False, 0
-    for b in range(nb):
-        m = 0.0
-        for i in range(block):
-            m += r[off + b * block + i]
-        z = abs(m / block) / sig_blk
+    s = b0 % NR
+    for m in range(nb):
+        if m > 0:
+            s = s + 1 if s < NR - 1 else 0
+        z = abs(bs[s, _SR] * ib) / sig_blk
         if z >= _BURST_ON:
             if not seen or below >= gap:
                 n_ep += 1
@@ -160,43 +232,62 @@ def _block_episodes(r, block, sig_blk, gap):
 
 
 @njit(cache=True)
-def _gain_test(r, x, block, sig_blk):
-    """``(F_b, F_g, by_time)``: the block means of r (n,) regressed on those of x with an intercept; F_b the
-    drop of the residual sum of squares against a constant (the slope: a gain, or a time trend that
-    x follows), F_g against a line through the origin (a gain without an
-    offset), each over the noise variance of a block mean (the larger of ``sig_blk^2`` and the fit's
-    own); ``by_time`` where a line in time fits the block means better than the line in x.
+def _gain_test_blocks(bs, b0, nb, NR, ib, sig_blk, r0):
+    """``(F_b, F_g, by_time)`` over blocks ``b0 .. b0 + nb - 1`` (ring slot ``b % NR`` of the
+    aggregates bs; ``ib`` one over the block length): the block means of r regressed on those of x
+    with an intercept;
+    F_b the drop of the residual sum of squares against a constant (the slope: a gain, or a time
+    trend that x follows), F_g against a line through ``(0, r0)`` (a gain without an offset from the
+    fault-free level ``r0``), each
+    over the noise variance of a block mean (the larger of ``sig_blk^2`` and the fit's own);
+    ``by_time`` where a line in time fits the block means better than the line in x.
     ``(0, 0, False)`` with fewer than 4 blocks or no excitation."""
-    nb = r.size // block
     if nb < 4:
         return 0.0, 0.0, False
-    rm, xm = np.zeros(nb), np.zeros(nb)
-    off = r.size - nb * block                         # the newest nb * block samples
-    for b in range(nb):
-        for i in range(block):
-            rm[b] += r[off + b * block + i]
-            xm[b] += x[off + b * block + i]
-        rm[b] /= block
-        xm[b] /= block
-    mr, mx, mt = rm.mean(), xm.mean(), 0.5 * (nb - 1)
+    mr = mx = 0.0
+    s = b0 % NR
+    for m in range(nb):
+        if m > 0:
+            s = s + 1 if s < NR - 1 else 0
+        mr += bs[s, _SR] * ib
+        mx += bs[s, _SX] * ib
+    mr, mx, mt = mr / nb, mx / nb, 0.5 * (nb - 1)
     sxx = sxy = syy = stt = sty = sx0 = sxy0 = 0.0
-    for b in range(nb):
-        dx, dy, dt = xm[b] - mx, rm[b] - mr, b - mt
+    s = b0 % NR
+    for m in range(nb):
+        if m > 0:
+            s = s + 1 if s < NR - 1 else 0
+        rm, xm = bs[s, _SR] * ib, bs[s, _SX] * ib
+        dx, dy, dt = xm - mx, rm - mr, m - mt
         sxx += dx * dx
         sxy += dx * dy
         syy += dy * dy
         stt += dt * dt
         sty += dt * dy
-        sx0 += xm[b] * xm[b]
-        sxy0 += xm[b] * rm[b]
+        sx0 += xm * xm
+        sxy0 += xm * (rm - r0)
     if sxx <= 0.0 or sx0 <= 0.0:
         return 0.0, 0.0, False
     rss = max(syy - sxy * sxy / sxx, 0.0)             # a + theta x
     rss_t = max(syy - sty * sty / stt, 0.0)           # a + s t: a drift
     s2 = max(sig_blk * sig_blk, rss / (nb - 2))
     fb = (syy - rss) / s2
-    fg = max(syy + nb * mr * mr - sxy0 * sxy0 / sx0 - rss, 0.0) / s2
+    fg = max(syy + nb * (mr - r0) * (mr - r0) - sxy0 * sxy0 / sx0 - rss, 0.0) / s2
     return fb, fg, rss_t < rss
+
+
+def _gain_test(r: np.ndarray, x: np.ndarray, block: int, sig_blk: float) -> tuple[float, float, bool]:
+    """The gain test of :func:`_gain_test_blocks` on samples: residual r (n,) and signal x (n,) in
+    blocks of ``block`` samples aligned to the newest (a design's calibration on nominal windows)."""
+    r, x = np.asarray(r, float), np.asarray(x, float)
+    nb = r.size // block
+    off = r.size - nb * block
+    bs = np.zeros((max(nb, 1), 5))
+    if nb:
+        bs[:, _SR] = r[off:].reshape(nb, block).sum(axis=1)
+        bs[:, _SX] = x[off:].reshape(nb, block).sum(axis=1)
+    fb, fg, by_time = _gain_test_blocks(bs, 0, nb, max(nb, 1), 1.0 / block, sig_blk, 0.0)
+    return float(fb), float(fg), bool(by_time)
 
 
 @njit(cache=True)
@@ -226,26 +317,28 @@ _RETURN = 3
 
 
 @njit(cache=True)
-def _run_kernel(V, ix, ixx, confirm, iraw, stuck, sigma, window, lookback, min_len, spike_max, burst_gap,
+def _run_kernel(V, ix, ixx, confirm, iraw, stuck, sigma, NB, lookback, min_len, spike_max, burst_gap,
                 release, clear_after, prefer, block, sig_blk, gain_crit, revise_after, revise_conf, hold_iso,
-                k, rb, xb, sb, active, onset, typ, conf, below, zero, last, cand, cnt, left, out):
+                k, bs, be, active, onset, typ, conf, below, zero, last, cand, cnt, left, dtyp, dconf, out):
     """The classifier over samples V (R, T, inputs) from sample count k, state updated in place;
-    outputs into out (R, T, outputs). Returns the new sample count."""
+    outputs into out (R, T, outputs). Returns the new sample count. Each sample adds to its block's
+    aggregates (ring of ``NB + 1`` blocks per member: the window's ``NB`` and the one being filled);
+    an active fault is decided again when a block completes (and at its onset), each sample's
+    decision is the latest one (or stuck)."""
     R, T = V.shape[0], V.shape[1]
-    M, W, NT = ix.shape[0], window, 6
-    r_seg, x_seg, s_seg = np.empty(W), np.empty(W), np.empty(W)
+    M, NT, B, NR = ix.shape[0], 6, block, NB + 1
     for kk in range(T):
-        p = k % W
+        i, slot = k % B, (k // B) % NR
         for run in range(R):
             for j in range(M):
-                rb[run, j, p] = V[run, kk, ix[j, 2]]
-                xb[run, j, p] = V[run, kk, ix[j, 3]]
-                sb[run, j, p] = V[run, kk, ix[j, 1]]
+                _accumulate(bs[run, j, slot], be[run, j, slot], i, V[run, kk, ix[j, 2]], V[run, kk, ix[j, 3]],
+                            V[run, kk, ix[j, 1]], release, burst_gap)
                 if iraw[j] >= 0:
                     raw = V[run, kk, iraw[j]]
                     zero[run, j] = zero[run, j] + 1 if raw == last[run, j] else 0
                     last[run, j] = raw
         k += 1
+        done = k // B                                 # blocks completed
         for run in range(R):
             for j in range(M):
                 stat = V[run, kk, ix[j, 1]]
@@ -254,10 +347,12 @@ def _run_kernel(V, ix, ixx, confirm, iraw, stuck, sigma, window, lookback, min_l
                 for c in range(ixx.shape[1]):
                     if ixx[j, c] >= 0 and V[run, kk, ixx[j, c]] >= 1.0 and V[run, kk, ix[j, 1]] >= confirm:
                         iso = True
+                decide = active[run, j] and i == B - 1
                 if not active[run, j] and (iso or is_stuck):
                     onset[run, j] = max(k - 1 - lookback, 0)
                     active[run, j] = True
                     cand[run, j], cnt[run, j], left[run, j] = -1, -1, 0
+                    decide = True
                 if active[run, j] and stat < release and not is_stuck and not (hold_iso and iso):
                     below[run, j] += 1
                 else:
@@ -265,22 +360,21 @@ def _run_kernel(V, ix, ixx, confirm, iraw, stuck, sigma, window, lookback, min_l
                 if below[run, j] >= clear_after:
                     active[run, j] = False
                 if active[run, j]:
+                    if decide:
+                        b0 = max(onset[run, j] // B, done - NB)
+                        dtyp[run, j], dconf[run, j] = _classify(
+                            bs[run, j], be[run, j], b0, done - b0, NR, B, sigma[j], min_len, prefer,
+                            burst_gap, spike_max, sig_blk[j], gain_crit[j])
                     if is_stuck:
                         z = float(zero[run, j])
                         nt, nc = _STUCK, z / (z + stuck[j])
                     else:
-                        n = min(W, k - onset[run, j])
-                        k0 = max(onset[run, j], k - W)
-                        for i in range(n):
-                            q = (k0 + i) % W
-                            r_seg[i], x_seg[i], s_seg[i] = rb[run, j, q], xb[run, j, q], sb[run, j, q]
-                        nt, nc = _classify(r_seg[:n], x_seg[:n], s_seg[:n], sigma[j], min_len, prefer,
-                                           release, burst_gap, spike_max, block, sig_blk[j], gain_crit[j])
+                        nt, nc = dtyp[run, j], dconf[run, j]
                     typ[run, j], conf[run, j], cand[run, j], cnt[run, j], left[run, j] = _revise(
                         typ[run, j], conf[run, j], cand[run, j], cnt[run, j], left[run, j], nt, nc,
                         revise_after, revise_conf)
-                for i in range(NT):
-                    out[run, kk, j * NT + i] = 1.0 if (active[run, j] and typ[run, j] == i) else 0.0
+                for c in range(NT):
+                    out[run, kk, j * NT + c] = 1.0 if (active[run, j] and typ[run, j] == c) else 0.0
                 out[run, kk, M * NT + j] = conf[run, j] if active[run, j] else 0.0
                 out[run, kk, M * NT + M + j] = 1.0 if active[run, j] else 0.0
     return k
@@ -296,7 +390,9 @@ class FaultTypeClassifier(ResidualProcessor):
     sigma : mapping str -> float
         Member -> standard deviation of its nominal residual (> 0).
     window : int
-        Longest window (samples) the type is decided over.
+        Longest window (samples) the type is decided over: its last ``window // block`` complete
+        blocks (at least one), held as block sums (the state is ``window // block + 1`` blocks per
+        member, not ``window`` samples).
     channels : mapping, optional
         Templates of the input channels with ``{m}`` for the member: ``isolated`` (the isolation
         flag, default ``"peer:{m}:isolated"``), ``stat`` (the normalised residual, >= 1 is out,
@@ -329,8 +425,9 @@ class FaultTypeClassifier(ResidualProcessor):
     prefer : float
         GLR margin a drift must beat a bias by.
     block : int
-        Samples averaged into one block mean for the gain test (longer than the residual's
-        high-frequency noise; at least 4 blocks since the change point before a gain is decided).
+        Samples summed into one block (the gain test's block means: longer than the residual's
+        high-frequency noise; at least 4 blocks since the change point before a gain is decided);
+        the type is decided again each time a block completes.
     sigma_block : mapping str -> float, optional
         Member -> standard deviation of a block mean of its nominal residual (default
         ``sigma / sqrt(block)``, right for white noise).
@@ -363,8 +460,8 @@ class FaultTypeClassifier(ResidualProcessor):
     1.0
     """
 
-    _state_attrs = ("_rb", "_xb", "_sb", "_k", "_active", "_onset", "_type", "_conf", "_below", "_zero",
-                    "_last", "_cand", "_cnt", "_left")
+    _state_attrs = ("_bs", "_be", "_k", "_active", "_onset", "_type", "_conf", "_below", "_zero",
+                    "_last", "_cand", "_cnt", "_left", "_dtype", "_dconf")
 
     def __init__(self, members: Sequence[str], sigma: Mapping[str, float], window: int, *,
                  channels: Mapping[str, str] | None = None,
@@ -391,6 +488,7 @@ class FaultTypeClassifier(ResidualProcessor):
         self.spike_max, self.burst_gap, self.clear_after = int(spike_max), int(burst_gap), int(clear_after)
         self.release, self.prefer = float(release), float(prefer)
         self.block, self.revise_after = int(block), int(revise_after)
+        self.n_blocks = max(1, self.window // self.block)
         self.revise_conf = float(revise_conf)
         self.hold_while_isolated = bool(hold_while_isolated)
         if not 0.0 <= self.revise_conf <= 1.0:
@@ -441,11 +539,10 @@ class FaultTypeClassifier(ResidualProcessor):
         self.reset(1)
 
     def reset(self, runs: int = 1) -> None:
-        R, M, W = int(runs), len(self.members), self.window
+        R, M, NR = int(runs), len(self.members), self.n_blocks + 1
         self._R = R
-        self._rb = np.zeros((R, M, W))
-        self._xb = np.zeros((R, M, W))
-        self._sb = np.zeros((R, M, W))
+        self._bs = np.zeros((R, M, NR, 5))
+        self._be = np.zeros((R, M, NR, 5), np.int64)
         self._k = 0
         self._active = np.zeros((R, M), bool)
         self._onset = np.zeros((R, M), np.int64)
@@ -457,15 +554,44 @@ class FaultTypeClassifier(ResidualProcessor):
         self._cand = np.zeros((R, M), np.int64)
         self._cnt = np.zeros((R, M), np.int64)
         self._left = np.zeros((R, M), np.int64)
+        self._dtype = np.zeros((R, M), np.int64)
+        self._dconf = np.zeros((R, M))
 
     def set_state(self, state: dict[str, Any]) -> None:
         """Restore a state of :meth:`get_state`; one saved before the type's hysteresis (no
-        ``_cand``, ``_cnt``, ``_left``) continues with the announced type as the episode's first."""
+        ``_cand``, ``_cnt``, ``_left``) continues with the announced type as the episode's first;
+        one saved with the raw sample windows (``_rb``, ``_xb``, ``_sb``, before the block
+        aggregates) has its samples summed into blocks."""
         if isinstance(state, dict) and "_type" in state and not {"_cand", "_cnt", "_left"} & set(state):
             shape = np.shape(state["_type"])
             state = {**state, "_cand": np.full(shape, -1, np.int64), "_cnt": np.zeros(shape, np.int64),
                      "_left": np.zeros(shape, np.int64)}
+        if isinstance(state, dict) and {"_rb", "_xb", "_sb"} <= set(state) and "_bs" not in state:
+            state = self._from_windows(state)
         super().set_state(state)
+
+    def _from_windows(self, state: dict[str, Any]) -> dict[str, Any]:
+        """A state of the raw-window classifier as block aggregates: the window's samples (ring
+        buffers ``(runs, members, window)`` indexed by the sample count modulo their length) summed
+        into the blocks they fall in; the latest decision is the announced type."""
+        state = dict(state)
+        rb, xb, sb = (np.asarray(state.pop(n), float) for n in ("_rb", "_xb", "_sb"))
+        if rb.ndim != 3 or rb.shape[1] != len(self.members) or xb.shape != rb.shape or sb.shape != rb.shape:
+            raise DataError(f"FaultTypeClassifier state: _rb, _xb, _sb must be (runs, {len(self.members)}, "
+                            f"window) alike, got {rb.shape}, {xb.shape}, {sb.shape}")
+        R, M, W = rb.shape
+        k, B, NR = int(state["_k"]), self.block, self.n_blocks + 1
+        bs, be = np.zeros((R, M, NR, 5)), np.zeros((R, M, NR, 5), np.int64)
+        k0 = max(0, k - W, (k // B - self.n_blocks) * B)
+        be[..., _FO], be[..., _LO] = -1, -1
+        for kk in range(k0, k):
+            i, s, q = kk % B, (kk // B) % NR, kk % W
+            for run in range(R):
+                for j in range(M):
+                    _accumulate(bs[run, j, s], be[run, j, s], i, rb[run, j, q], xb[run, j, q], sb[run, j, q],
+                                self.release, self.burst_gap)
+        return {**state, "_bs": bs, "_be": be, "_dtype": np.asarray(state["_type"], np.int64).copy(),
+                "_dconf": np.asarray(state["_conf"], float).copy()}
 
     def resume(self, n_held: int) -> None:
         """After held samples: start again (the window would span the gap)."""
@@ -475,12 +601,12 @@ class FaultTypeClassifier(ResidualProcessor):
         """Samples v (runs, T, inputs) through the kernel -> outputs (runs, T, outputs)."""
         out = np.empty((v.shape[0], v.shape[1], len(self.output_names)))
         self._k = _run_kernel(v, self._ix, self._ixx, self.confirm, self._iraw, self._stuck, self._sigma,
-                              self.window, self.lookback, self.min_len, self.spike_max, self.burst_gap,
+                              self.n_blocks, self.lookback, self.min_len, self.spike_max, self.burst_gap,
                               self.release, self.clear_after, self.prefer, self.block, self._sig_blk,
                               self._gain_crit, self.revise_after, self.revise_conf,
-                              self.hold_while_isolated, self._k, self._rb,
-                              self._xb, self._sb, self._active, self._onset, self._type, self._conf,
-                              self._below, self._zero, self._last, self._cand, self._cnt, self._left, out)
+                              self.hold_while_isolated, self._k, self._bs, self._be, self._active,
+                              self._onset, self._type, self._conf, self._below, self._zero, self._last,
+                              self._cand, self._cnt, self._left, self._dtype, self._dconf, out)
         return out
 
     def _check(self, v: np.ndarray, k: int) -> None:

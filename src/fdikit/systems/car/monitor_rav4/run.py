@@ -12,6 +12,7 @@ import numpy as np
 from ..rav4 import default_data_path
 from .build import rav4_monitor
 from .injection import inject, injected_sensor, injected_sensors, injection_summary, parse_inject
+from .peers import PEER_SENSORS
 
 __all__ = ["HYPOTHESIS_SENSORS", "hypothesis_sensors", "run_rav4_log"]
 
@@ -48,7 +49,9 @@ def run_rav4_log(path: str | None = None, inject_spec: str = "none", **design_kw
     -------
     dict
         ``announcements`` (time, fault: the onset of each episode); ``changes`` (time, fault,
-        previous: an open episode's name revised, e.g. its fault type); ``injected`` (what each
+        previous: an open episode's name revised, e.g. its fault type); ``type_confidence_end``
+        (sensor -> the fault-type stage's confidence in its type at the last sample; a bias at most
+        0.5: a gain not ruled out); ``injected`` (what each
         fault applies, per CAN signal in its DBC unit); the sensors of all injected faults
         (``expected_sensors``; a run is judged against all of them, from the earliest onset), the
         first fault's sensor (``expected_sensor``) and its MHSSPT hypothesis (``expected``), the
@@ -119,6 +122,11 @@ def run_rav4_log(path: str | None = None, inject_spec: str = "none", **design_kw
                 "false_announcements": [a for a, te in zip(res["announcements"], ev_t)
                                         if lo <= te <= hi and (te < t0 or not ok(a["fault"]))]}
 
+    # the fault-type stage's confidence in the type it announces for each sensor, at the last sample
+    # (bias <= 0.5: a gain is not ruled out, the data cannot tell them apart; issue 27)
+    res["type_confidence_end"] = {
+        s: round(float(out.statistics[f"{m}:confidence"][0, -1]), 4)
+        for m, s in PEER_SENSORS.items() if f"{m}:confidence" in out.statistics.names}
     half = mon.record["half_s"]
     warm = t >= 0.0
     res["max_wrong_probability"] = wrong_in(warm)
