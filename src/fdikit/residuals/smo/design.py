@@ -235,6 +235,15 @@ def design_reconstructor(
     ``predicted_by = "simulation"``, every candidate in ``info["noise"]["candidates"]``). A
     predicted error above ``NOISE_WARN * fault_bound`` warns with the number. The noise-free
     layers are candidates, so at negligible noise the design is no worse than the default one.
+    Clean branch: the low-pass such noise needs lags a noise-free signal, so the default design
+    (the ladder below) is kept beside the noise-aware one (``clean_branch`` of the runtime) and
+    the runtime chooses per sample by its own estimate of the noise
+    (:func:`~fdikit.residuals.smo.estimate_noise_std`): the default design while the noise is
+    below ``switch * noise_std``, the noise-aware design above (a blend within a factor
+    ``NOISE_BAND``). ``switch`` is where the noise-aware design becomes the better one, found by
+    running both on the scenario above with the noise scaled down from ``noise_std``; both the
+    switched reconstructor's simulated errors, on clean data and at ``noise_std``, are in
+    ``info["noise"]["adaptive"]``. On clean data the output is then the default design's.
     With ``check=False`` the analytic design is used: layers from the noise (``delta >= 3
     ||noise||`` at the primary, ``>= 3`` RMS output errors at the secondary) and a loop bandwidth
     ``5 / lpf_tau``, ``lpf_tau`` minimising the linear-model error ``sqrt((fault_rate * lag)^2 +
