@@ -15,6 +15,18 @@ predicted error 1.78 (7/7 warned; the prediction 3-800x off); after (chosen by s
 median predicted 0.092 (3/8 warned). The default design's clean-data rmse is 6e-5 to 1e-3:
 no noise design reaches it on clean data, because the low-pass lag its noise needs remains.
 
+With the clean branch (the default design run beside the noise design, switched per sample by
+the runtime's noise estimate; issue 31, third session), 8 systems, levels 1e-5 / 1e-4 / 1e-3:
+clean-data rmse of the noise design = the default's on 8/8 systems at every level (median
+7.19e-5 both; the noise branch alone: 0.038 / 0.071 / 0.119); noisy rmse median 0.057 / 0.111 /
+0.188 (max 0.558 / 1.07 / 0.556, the slow-zero system 3), the same as the noise branch alone,
+against 29 / 33 / 34 for the default design on the same noisy data; switch levels 3e-9 to 4e-6
+of the stated noise; predicted error median 0.052 / 0.092 / 0.200 (1 / 3 / 7 of 8 warned).
+Columns: ``clean`` (noise design on clean data), ``clean_noise_branch``, ``rmse`` and
+``rmse_default`` (noisy data); ``predicted_rel`` is the predicted error over the fault's RMS (the
+prediction is for a step and a sinusoid at ``fault_rate``, not this 0.5 Hz sinusoid: a rough
+comparison).
+
 Run: ``python benchmarks/bench_smo_noise.py [--systems 8] [--levels 1e-5,1e-4,1e-3]``; the last
 line is one JSON object.
 """
