@@ -26,6 +26,10 @@ the design and its numbers are the same (same layer, same self-check). The secon
 Clarabel's 31 interior-point iterations on PSD cones of 46 and 56 rows; ``direct_solve_method=
 "faer"`` measured the same (24 CPU s) and looser tolerances (1e-6) end 16 iterations early at a
 17x larger gamma-bar with ``P`` indefinite (then re-solved with the cone): kept as is.
+This benchmark after both changes (load 5-7): n = 60 31.7 CPU s, 44 s wall (secondary LMI 20.3,
+self-check 9.8); n = 30 4.1 CPU s, 6.1 s wall. A cold numba cache (first run after an install)
+added about 37 CPU s of compilation, 8.5 CPU s since the kernel's helpers are no longer
+numba-IR inlined (same numbers, bitwise).
 
 Run: ``python benchmarks/bench_smo_large.py [--sizes 30,60] [--form auto|full] [--phases]``; the
 last line is one JSON object.

@@ -60,14 +60,14 @@ def _track_py(y, ybuf, count, lmean, window):
     return c - 3.0 if c >= 4.0 else 0.0
 
 
-_track = njit(cache=True, inline="always")(_track_py)
+_track = njit(cache=True)(_track_py)
 
 
 def _std_of(lmean, j):
     return np.exp(lmean[j] - LOG_ABS_NORMAL_MEAN) / np.sqrt(D4_VARIANCE)
 
 
-_std = njit(cache=True, inline="always")(_std_of)
+_std = njit(cache=True)(_std_of)
 
 
 def _estimate_py(Y, window, ybuf, count, lmean, out):
