@@ -20,8 +20,9 @@ the runtime's noise estimate; issue 31, third session), 8 systems, levels 1e-5 /
 clean-data rmse of the noise design = the default's on 8/8 systems at every level (median
 7.19e-5 both; the noise branch alone: 0.038 / 0.071 / 0.119); noisy rmse median 0.057 / 0.111 /
 0.188 (max 0.558 / 1.07 / 0.556, the slow-zero system 3; at 1e-4 the 0.111 / 1.07 measured
-before the clean branch), against 29 / 33 / 34 for the default design on the same noisy data; switch levels 3e-9 to 4e-6
-of the stated noise; predicted error median 0.052 / 0.092 / 0.200 (1 / 3 / 7 of 8 warned).
+before the clean branch), against 29 / 33 / 34 for the default design on the same noisy
+data; switch levels 3e-9 to 4e-6 of the stated noise; predicted error median 0.052 / 0.092 /
+0.200 (1 / 3 / 7 of 8 warned).
 Columns: ``clean`` (noise design on clean data), ``clean_noise_branch``, ``rmse`` and
 ``rmse_default`` (noisy data); ``predicted_rel`` is the predicted error over the fault's RMS (the
 prediction is for a step and a sinusoid at ``fault_rate``, not this 0.5 Hz sinusoid: a rough
