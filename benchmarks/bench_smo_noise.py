@@ -15,6 +15,19 @@ predicted error 1.78 (7/7 warned; the prediction 3-800x off); after (chosen by s
 median predicted 0.092 (3/8 warned). The default design's clean-data rmse is 6e-5 to 1e-3:
 no noise design reaches it on clean data, because the low-pass lag its noise needs remains.
 
+With the clean branch (the default design run beside the noise design, switched per sample by
+the runtime's noise estimate; issue 31, third session), 8 systems, levels 1e-5 / 1e-4 / 1e-3:
+clean-data rmse of the noise design = the default's on 8/8 systems at every level (median
+7.19e-5 both; the noise branch alone: 0.038 / 0.071 / 0.119); noisy rmse median 0.057 / 0.111 /
+0.188 (max 0.558 / 1.07 / 0.556, the slow-zero system 3; at 1e-4 the 0.111 / 1.07 measured
+before the clean branch), against 29 / 33 / 34 for the default design on the same noisy
+data; switch levels 3e-9 to 4e-6 of the stated noise; predicted error median 0.052 / 0.092 /
+0.200 (1 / 3 / 7 of 8 warned).
+Columns: ``clean`` (noise design on clean data), ``clean_noise_branch``, ``rmse`` and
+``rmse_default`` (noisy data); ``predicted_rel`` is the predicted error over the fault's RMS (the
+prediction is for a step and a sinusoid at ``fault_rate``, not this 0.5 Hz sinusoid: a rough
+comparison).
+
 Run: ``python benchmarks/bench_smo_noise.py [--systems 8] [--levels 1e-5,1e-4,1e-3]``; the last
 line is one JSON object.
 """
@@ -66,6 +79,7 @@ def main(n_systems: int = 8, levels=NOISE_LEVELS) -> dict:
         for lv in levels:
             s = lv * scale
             ent = {"noise_std": s}
+            f_rms = float(np.sqrt(np.mean(f[sel] ** 2, axis=0)).min())
             try:
                 with warnings.catch_warnings(record=True) as caught:
                     warnings.simplefilter("always")
@@ -80,15 +94,25 @@ def main(n_systems: int = 8, levels=NOISE_LEVELS) -> dict:
                 row["levels"][str(lv)] = ent
                 continue
             nz = recn.info["noise"]
+            fd = integrate_observers(rec0, U0, Y0 + s * w)[0]
+            nb = recn.noise_branch()
+            fbc = integrate_observers(nb, U0, Y0)[0]
+            ad = nz.get("adaptive") or {}
             ent.update(rmse=max(rmse_ratio(fh[:, j], f[:, j], sel) for j in range(q)),
                        clean=max(rmse_ratio(fc[:, j], f[:, j], sel) for j in range(q)),
-                       predicted_error=nz["predicted_error"], lpf_tau=nz["lpf_tau"],
-                       delta=nz["delta"], delta2=nz["delta2"])
+                       rmse_default=max(rmse_ratio(fd[:, j], f[:, j], sel) for j in range(q)),
+                       clean_noise_branch=max(rmse_ratio(fbc[:, j], f[:, j], sel) for j in range(q)),
+                       switch=ad.get("switch"), predicted_error=nz["predicted_error"],
+                       predicted_rel=nz["predicted_error"] / f_rms, clean_default=clean_default,
+                       lpf_tau=nz["lpf_tau"], delta=nz["delta"], delta2=nz["delta2"])
             row["levels"][str(lv)] = ent
         rows.append(row)
-        print(f"seed {seed}: clean default {clean_default:.2e} " + "  ".join(
-            f"{k}: rmse {v.get('rmse', float('nan')):.3g} clean {v.get('clean', float('nan')):.3g} "
-            f"pred {v.get('predicted_error', float('nan')):.3g} warn {v.get('warned')}"
+        nan = float("nan")
+        print(f"seed {seed}: clean default {clean_default:.3g} " + "  ".join(
+            f"| {k}: clean noise-design {v.get('clean', nan):.3g} (its noise branch alone "
+            f"{v.get('clean_noise_branch', nan):.3g}); noisy default {v.get('rmse_default', nan):.3g} "
+            f"noise-design {v.get('rmse', nan):.3g} pred {v.get('predicted_error', nan):.3g} "
+            f"switch {v.get('switch') or nan:.3g} warn {v.get('warned')}"
             for k, v in row["levels"].items()), flush=True)
     summ = {}
     for lv in levels:
@@ -98,9 +122,15 @@ def main(n_systems: int = 8, levels=NOISE_LEVELS) -> dict:
                          "max_rmse": float(np.max([x["rmse"] for x in v])) if v else None,
                          "within_1pct": sum(x["rmse"] <= 0.01 for x in v),
                          "median_clean": float(np.median([x["clean"] for x in v])) if v else None,
+                         "median_clean_noise_branch": (float(np.median([x["clean_noise_branch"] for x in v]))
+                                                       if v else None),
+                         "median_rmse_default": (float(np.median([x["rmse_default"] for x in v]))
+                                                 if v else None),
+                         "clean_within_1e-6_of_default": sum(
+                             x["clean"] <= x["clean_default"] + 1e-6 for x in v),
+                         "within_1_5x_predicted": sum(x["rmse"] <= 1.5 * x["predicted_rel"] for x in v),
                          "clean_no_worse_than_default": sum(
-                             x["clean"] <= max(r["clean_default"], 1e-3) * 1.0001
-                                                            for x, r in zip(v, rows)),
+                             x["clean"] <= max(x["clean_default"], 1e-3) * 1.0001 for x in v),
                          "median_predicted": (float(np.median([x["predicted_error"] for x in v]))
                                               if v else None),
                          "warned": sum(bool(x["warned"]) for x in v)}

@@ -35,9 +35,11 @@ Modules (each imports only the ones above it):
 * :mod:`.gains` - H-infinity norm and peak-to-peak gains;
 * :mod:`.kernel` - the compiled observer step, sliding status and integration;
 * :mod:`.status` - the sliding status codes and :func:`sliding_episodes`;
+* :mod:`.noise_estimate` - the online noise estimate and the switch between a noise-aware
+  design's branches (compiled);
 * :mod:`.runtime` - :class:`SlidingModeReconstructor` and :func:`integrate_observers`;
 * :mod:`.plant` - :func:`simulate_plant` (exact ZOH simulation of the design model);
-* :mod:`.noise` - measurement-noise response and noise-driven boundary layers;
+* :mod:`.noise` - measurement-noise response, noise-driven boundary layers and the switch rule;
 * :mod:`.selfcheck` - :func:`self_check`, the design run on its own model;
 * :mod:`.design` - :func:`design_reconstructor`.
 """
@@ -69,6 +71,9 @@ from .gains import (
 from .noise import (
     noise_response,
 )
+from .noise_estimate import (
+    estimate_noise_std,
+)
 from .plant import (
     simulate_plant,
 )
@@ -98,6 +103,7 @@ __all__ = [
     "band_frequencies",
     "check_conditions",
     "design_reconstructor",
+    "estimate_noise_std",
     "fictitious_system",
     "hinf_norm",
     "injection_peak_gains",

@@ -15,7 +15,7 @@ from ...model.linear import LinearFaultModel
 from .canonical import augment, fictitious_system, lemma1_form, lemma4_form
 from .conditions import check_conditions
 from .gains import hinf_norm, injection_peak_gains
-from .noise import _noise_design, _simulated_noise_design, noise_response
+from .noise import _noise_design, _simulated_noise_design, _switch_design, noise_response
 from .runtime import SlidingModeReconstructor
 from .selfcheck import self_check
 from .validation import _mat, _pos, _spd
@@ -235,6 +235,15 @@ def design_reconstructor(
     ``predicted_by = "simulation"``, every candidate in ``info["noise"]["candidates"]``). A
     predicted error above ``NOISE_WARN * fault_bound`` warns with the number. The noise-free
     layers are candidates, so at negligible noise the design is no worse than the default one.
+    Clean branch: the low-pass such noise needs lags a noise-free signal, so the default design
+    (the ladder below) is kept beside the noise-aware one (``clean_branch`` of the runtime) and
+    the runtime chooses per sample by its own estimate of the noise
+    (:func:`~fdikit.residuals.smo.estimate_noise_std`): the default design while the noise is
+    below ``switch * noise_std``, the noise-aware design above (a blend within a factor
+    ``NOISE_BAND``). ``switch`` is where the noise-aware design becomes the better one, found by
+    running both on the scenario above with the noise scaled down from ``noise_std``; both the
+    switched reconstructor's simulated errors, on clean data and at ``noise_std``, are in
+    ``info["noise"]["adaptive"]``. On clean data the output is then the default design's.
     With ``check=False`` the analytic design is used: layers from the noise (``delta >= 3
     ||noise||`` at the primary, ``>= 3`` RMS output errors at the secondary) and a loop bandwidth
     ``5 / lpf_tau``, ``lpf_tau`` minimising the linear-model error ``sqrt((fault_rate * lag)^2 +
@@ -561,66 +570,79 @@ def design_reconstructor(
                                             else 1.0)
     gam = g2.gamma
 
-    def checked(d1, d2, tau, step_error_max=None):
+    def checked(d1, d2, tau, step_error_max=None, xi_first=None):
         rec_ = build(d1, d2, tau)
+        # a layer of the ladder stops its xi runs at the first that shows it cannot claim gamma-bar
         sc = self_check(rec_, fault_bound=f_chk, xi_amplitude=xi_chk if h else 0.0,
-                        horizon=check_horizon, step_error_max=step_error_max) if check else None
+                        horizon=check_horizon, step_error_max=step_error_max,
+                        xi_gain_max=gam if step_error_max is not None else None,
+                        xi_first=xi_first) if check else None
         return rec_, sc
 
-    if sig is None:
-        tau0 = 0.0 if lpf_tau is None else lpf_tau
-        ladder = ([None] if user["delta"] is not None and user["delta2"] is not None
-                  else list(DELTA_LADDER))
-        tried = []
-        for dl in ladder:
-            d1 = user["delta"] if user["delta"] is not None else dl
-            d2 = user["delta2"] if user["delta2"] is not None else dl
-            # a layer that misses the accuracy skips its xi runs (most of a large plant's check)
-            rec, sc = checked(d1, d2, tau0, accuracy if len(ladder) > 1 else None)
-            tried.append((d1, d2, rec, sc))
-            if not _finite_check(sc):
-                continue  # a NaN / inf self-check is never chosen (recorded in info)
-            # the first accurate layer that claims gamma-bar is the one picked below: stop there
-            if sc is None or (sc["step_error"] <= accuracy and
-                              (sc["xi_gain"] is None or sc["xi_gain"] <= gam)):
-                break
-        usable = [x for x in tried if _finite_check(x[3])]
-        if not usable:
-            raise _step_refusal(tried, dt, details, "every boundary layer tried gives a non-finite "
-                                "self-check (the observers diverge at this step)")
-        if usable[-1][3] is not None and len(usable) > 1:
-            # the largest layer that is accurate and claims gamma-bar; else accurate; else the best
-            acc = [x for x in usable if x[3]["step_error"] <= accuracy]
-            claim = [x for x in acc if x[3]["xi_gain"] is None or x[3]["xi_gain"] <= gam]
-            if claim:
-                pick = claim[0]
-            elif acc and acc[0][3]["xi_gain"] is not None:
-                # no layer claims gamma-bar: the largest whose xi gain is within 10 % of the least
-                g_min = min(x[3]["xi_gain"] for x in acc)
-                pick = next(x for x in acc if x[3]["xi_gain"] <= 1.1 * g_min)
-            elif acc:
-                pick = acc[0]
-            else:
-                pick = min(usable, key=lambda x: x[3]["step_error"])
-            d1, d2, rec, sc = pick
+    # the default (noise-free) design: the boundary-layer ladder; with noise_std it is the
+    # clean branch of the noise-aware design
+    tau0 = 0.0 if lpf_tau is None or sig is not None else lpf_tau
+    ladder = ([None] if user["delta"] is not None and user["delta2"] is not None
+              else list(DELTA_LADDER))
+    tried = []
+    for dl in ladder:
+        d1 = user["delta"] if user["delta"] is not None else dl
+        d2 = user["delta2"] if user["delta2"] is not None else dl
+        # a layer that misses the accuracy skips its xi runs (most of a large plant's check)
+        prev = [x[3] for x in tried if x[3] is not None and x[3].get("xi_worst_index") is not None]
+        rec, sc = checked(d1, d2, tau0, accuracy if len(ladder) > 1 else None,
+                          prev[-1]["xi_worst_index"] if prev else None)
+        tried.append((d1, d2, rec, sc))
+        if not _finite_check(sc):
+            continue  # a NaN / inf self-check is never chosen (recorded in info)
+        # the first accurate layer that claims gamma-bar is the one picked below: stop there
+        if sc is None or (sc["step_error"] <= accuracy and
+                          (sc["xi_gain"] is None or sc["xi_gain"] <= gam)):
+            break
+    usable = [x for x in tried if _finite_check(x[3])]
+    if not usable:
+        raise _step_refusal(tried, dt, details, "every boundary layer tried gives a non-finite "
+                            "self-check (the observers diverge at this step)")
+    if usable[-1][3] is not None and len(usable) > 1:
+        # the largest layer that is accurate and claims gamma-bar; else accurate; else the best
+        acc = [x for x in usable if x[3]["step_error"] <= accuracy]
+        claim = [x for x in acc if x[3]["xi_gain"] is None or x[3]["xi_gain"] <= gam]
+        if claim:
+            pick = claim[0]
+        elif acc and acc[0][3]["xi_gain"] is not None:
+            # no layer claims gamma-bar: the largest whose xi gain is within 10 % of the least
+            # (a layer whose xi runs stopped at the first that missed gamma-bar is completed)
+            for x in acc:
+                if x[3].get("xi_partial"):
+                    full = self_check(x[2], fault_bound=f_chk, xi_amplitude=xi_chk, horizon=check_horizon)
+                    x[3].clear()
+                    x[3].update(full)
+            g_min = min(x[3]["xi_gain"] for x in acc)
+            pick = next(x for x in acc if x[3]["xi_gain"] <= 1.1 * g_min)
+        elif acc:
+            pick = acc[0]
         else:
-            d1, d2, rec, sc = usable[-1]
-        if sc is not None and sc.get("xi_skipped"):
-            sc = self_check(rec, fault_bound=f_chk, xi_amplitude=xi_chk, horizon=check_horizon)
-        if sc is not None and sc["step_error"] > MAX_STEP_ERROR:
-            raise _step_refusal(tried, dt, details, f"the best self-check leaves a step error of "
-                                f"{sc['step_error']:.3g} (relative to the fault, > {MAX_STEP_ERROR:g})")
-        info["noise"] = None
-        info["boundary_layers"] = {
-            "delta": d1, "delta2": d2, "sized": user["delta"] is None or user["delta2"] is None,
-            "accuracy": accuracy,
-            "tried": [{"delta": a, "delta2": b_, **(c or {}),
-                       **({} if _finite_check(c) else {"skipped": "non-finite self-check"})}
-                      for a, b_, _r, c in tried],
-            "note": "largest layer of DELTA_LADDER whose self-check step error is <= accuracy "
-                    "(relative to fault_bound) and whose xi gain allows claiming gamma-bar; a layer "
-                    "whose self-check is not finite is skipped"}
+            pick = min(usable, key=lambda x: x[3]["step_error"])
+        d1, d2, rec, sc = pick
     else:
+        d1, d2, rec, sc = usable[-1]
+    if sc is not None and (sc.get("xi_skipped") or sc.get("xi_partial")):
+        sc = self_check(rec, fault_bound=f_chk, xi_amplitude=xi_chk, horizon=check_horizon)
+    if sc is not None and sc["step_error"] > MAX_STEP_ERROR:
+        raise _step_refusal(tried, dt, details, f"the best self-check leaves a step error of "
+                            f"{sc['step_error']:.3g} (relative to the fault, > {MAX_STEP_ERROR:g})")
+    info["noise"] = None
+    info["boundary_layers"] = {
+        "delta": d1, "delta2": d2, "sized": user["delta"] is None or user["delta2"] is None,
+        "accuracy": accuracy,
+        "tried": [{"delta": a, "delta2": b_, **(c or {}),
+                   **({} if _finite_check(c) else {"skipped": "non-finite self-check"})}
+                  for a, b_, _r, c in tried],
+        "note": "largest layer of DELTA_LADDER whose self-check step error is <= accuracy "
+                "(relative to fault_bound) and whose xi gain allows claiming gamma-bar; a layer "
+                "whose self-check is not finite is skipped"}
+    if sig is not None:
+        rec0, sc0 = rec, sc
         rec, info["noise"] = _noise_choice(build, sig, user, lpf_tau, fault_rate, rho_v, rho2_v,
                                            g1 if case == "cascade" else None, g2, dt, f_chk,
                                            check_horizon if check else None)
@@ -647,6 +669,17 @@ def design_reconstructor(
                           f"lpf_tau {info['noise']['lpf_tau']:.3g} s, noise std of fhat "
                           f"{np.linalg.norm(info['noise']['fhat_noise_std']):.3g}): the estimate is "
                           f"not accurate at this noise level; info['noise']", stacklevel=2)
+        if check and (rec.primary["delta"], rec.secondary["delta"], rec.lpf_tau) != (
+                rec0.primary["delta"], rec0.secondary["delta"], rec0.lpf_tau):
+            sw = _switch_design(rec, rec0, sig, f_chk, fault_rate, check_horizon)
+            rec.clean_branch = rec0
+            rec.noise_switch = {k: sw[k] for k in ("noise_std", "switch", "band", "window", "warmup")}
+            rec._check_branch()
+            info["noise"]["adaptive"] = {**sw, "clean_branch_self_check": sc0}
+        else:
+            info["noise"]["adaptive"] = {"switch": None, "note": (
+                "the noise-aware design is the default design" if check else
+                "no clean branch: the switch is designed by simulation, which check=False turns off")}
     info["self_check"] = sc
     if sc is not None:
         if sig is None and sc["step_error"] > accuracy:
@@ -672,5 +705,6 @@ def design_reconstructor(
     else:
         info["l2_bound_claimed"] = None
         info["l2_bound_implemented"] = None
+    details.pop("self_check_plant_runs", None)  # the self-check's plant runs (memory)
     info["design_seconds"] = time.perf_counter() - t0
     return rec

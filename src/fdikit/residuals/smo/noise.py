@@ -285,3 +285,116 @@ def _simulated_noise_design(build, sig, user, lpf_tau, f_amp, fault_rate, dt, ho
         return None
     d1, d2, tau, score, err = best
     return d1, d2, tau, score, table, np.std(err[0], axis=0).tolist()
+
+
+#: Noise levels (multiples of ``noise_std``) at which :func:`_switch_design` compares the branches
+#: (from the stated level down), before it bisects the crossing.
+SWITCH_LEVELS = tuple(10.0 ** -k for k in range(11))
+
+#: Bisection steps of the switch level (each halves its log-bracket; 4: within a factor 1.16).
+SWITCH_BISECT = 4
+
+#: Switch level used when the clean branch is better even at the stated noise: above any ratio
+#: the estimate reaches, so the clean branch is always used.
+SWITCH_NEVER = 1e12
+
+
+def _switch_design(noisy, clean, sig, f_amp, fault_rate, horizon) -> dict:
+    """The switch rule of a noise-aware reconstructor with a clean branch, by simulation.
+
+    Both branches (``noisy``: the noise-aware design; ``clean``: the default design) run on the
+    scenario of the simulated noise design (:func:`_noise_scenario`: a step and a sinusoid at
+    ``fault_rate``) with white noise ``s * sig`` for ``s`` in :data:`SWITCH_LEVELS`, from 1 down,
+    until the clean branch is the better one; the crossing is then bisected in ``log s``
+    (:data:`SWITCH_BISECT` steps) and ``switch`` is its geometric middle. The score is that of the
+    noise design (largest RMS of ``||fhat - f||`` over the runs' second halves, fault units).
+    The reconstructor with the switch (:mod:`.noise_estimate`) is then run on the clean scenario
+    and at the stated noise, and both errors are recorded next to the branches' own.
+
+    Returns
+    -------
+    dict
+        ``switch``, ``noise_std``, ``band``, ``window``, ``warmup`` (the runtime's
+        ``noise_switch``), ``levels`` (per level tried: ``s``, ``noise_branch_error``,
+        ``clean_branch_error``), ``clean_data`` and ``at_noise_std`` (``error`` of the switched
+        reconstructor, ``noise_branch_error``, ``clean_branch_error``, ``noise_branch_share``: the
+        fraction of scored samples on the noise branch alone), ``note``.
+    """
+    from .noise_estimate import NOISE_BAND, NOISE_WARMUP, NOISE_WINDOW, _blend, estimate_noise_std
+
+    dt = noisy.dt
+    pos = sig > 0
+    F, Y0, k0 = _noise_scenario(noisy.details, dt, np.zeros_like(sig), f_amp, fault_rate, horizon)
+    W = np.random.default_rng(NOISE_SEED).standard_normal(Y0.shape)
+    U0 = np.zeros((Y0.shape[0], Y0.shape[1], len(noisy.u_names)))
+    q = noisy.n_faults
+    runs_at = {}
+
+    def noisy_y(s):
+        return Y0 + (s * sig)[None, None, :] * W
+
+    def outputs(s):
+        """Both branches' outputs (estimates and status) at noise level ``s`` (cached)."""
+        if s not in runs_at:
+            Y = noisy_y(s)
+            outs = []
+            for rec in (noisy, clean):
+                rec.reset(Y.shape[0])
+                outs.append(rec._advance(U0, Y))
+            runs_at[s] = (Y, *outs)
+        return runs_at[s]
+
+    def score(out):
+        fh = out[:, :, :q]
+        if not np.all(np.isfinite(fh)):
+            return float("inf")
+        return float(np.sqrt(np.mean(np.sum((fh[:, k0:] - F[:, k0:]) ** 2, axis=2), axis=1)).max())
+
+    levels = []
+
+    def compare(s):
+        _Y, on, oc = outputs(s)
+        en, ec = score(on), score(oc)
+        levels.append({"s": s, "noise_branch_error": en, "clean_branch_error": ec})
+        return en < ec
+
+    hi = lo = None
+    for s in SWITCH_LEVELS:
+        if not compare(s):
+            lo = s
+            break
+        hi = s
+    if hi is None:
+        switch = SWITCH_NEVER
+    elif lo is None:
+        switch = SWITCH_LEVELS[-1]
+    else:
+        for _ in range(SWITCH_BISECT):
+            mid = float(np.sqrt(lo * hi))
+            if compare(mid):
+                hi = mid
+            else:
+                lo = mid
+        switch = float(np.sqrt(lo * hi))
+    ns = {"noise_std": np.where(pos, sig, 0.0).tolist(), "switch": switch, "band": NOISE_BAND,
+          "window": NOISE_WINDOW, "warmup": NOISE_WARMUP}
+    out = {**ns, "levels": levels}
+    for key, s in (("clean_data", 0.0), ("at_noise_std", 1.0)):
+        Y, on, oc = outputs(s)
+        R = Y.shape[0]
+        mixed, ratio = np.empty_like(on), np.empty(Y.shape[:2])
+        _blend(np.ascontiguousarray(Y), on, oc, np.asarray(ns["noise_std"]), switch, NOISE_BAND,
+               float(NOISE_WINDOW), float(NOISE_WARMUP), np.zeros((R, 4, Y.shape[2])),
+               np.zeros((R, 1)), np.zeros((R, Y.shape[2])), mixed, ratio)
+        est = estimate_noise_std(Y, NOISE_WINDOW)[:, k0:, pos] / sig[pos]
+        out[key] = {"error": score(mixed), "noise_branch_error": score(on),
+                    "clean_branch_error": score(oc),
+                    "noise_branch_share": float(np.mean(ratio[:, k0:] >= switch * NOISE_BAND)),
+                    "median_noise_ratio": float(np.median(est.max(axis=2)))}
+    out["note"] = ("per sample the runtime estimates the noise on each output (estimate_noise_std) and "
+                   "uses the default design (clean branch) while max_j estimate_j / noise_std_j <= "
+                   "switch / band, the noise-aware design above switch * band, a log-linear blend "
+                   "between; switch: the noise level (in multiples of noise_std) where the noise-aware "
+                   "design becomes the better one, found by simulation (levels); clean_data and "
+                   "at_noise_std: the switched reconstructor simulated (error in fault units)")
+    return out

@@ -8,7 +8,7 @@ streaming :meth:`step` call the same compiled kernel and agree to the last bit."
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -16,6 +16,7 @@ from ...base.stage import ResidualGenerator
 from ...errors import ConditionError, DataError, ModelError
 from ...signals import Signals, check_finite
 from .kernel import _kernel
+from .noise_estimate import NOISE_BAND, NOISE_WARMUP, NOISE_WINDOW, _blend
 from .validation import _mat, _pos
 
 __all__ = ["TRANSIENT_HOLD", "TRANSIENT_LEVEL", "SlidingModeReconstructor", "integrate_observers"]
@@ -85,6 +86,18 @@ class SlidingModeReconstructor(ResidualGenerator):
         After a loss of sliding, the status stays "not sliding" until the error has stayed inside
         the boundary layer this long (s): the time the sliding motion needs to wash out what the
         loss left (:func:`design_reconstructor` sets three time constants of its slowest mode).
+    clean_branch : SlidingModeReconstructor, optional
+        A noise-aware design (``design_reconstructor(..., noise_std=...)``) also runs the default
+        (noise-free) design on the same samples and uses it while the measured noise is small:
+        per sample, the noise estimate of :func:`~fdikit.residuals.smo.estimate_noise_std`
+        (``s_j`` on output ``j``) gives the ratio ``max_j s_j / noise_std_j``; below
+        ``switch / band`` the output (estimates and status) is the clean branch's, above
+        ``switch * band`` this reconstructor's own (the noise branch), log-linear blend between
+        (status: the worse of the two). None: the noise branch alone.
+    noise_switch : dict, optional
+        With ``clean_branch``: ``noise_std`` (p), ``switch`` (the ratio at which the noise branch
+        becomes the better one, found by simulation at design time), ``band``, ``window`` and
+        ``warmup`` (samples; the noise branch is used until that many differences are averaged).
     """
 
     cascade: bool
@@ -107,6 +120,8 @@ class SlidingModeReconstructor(ResidualGenerator):
     settle: float = 0.0
     transient_level: float = TRANSIENT_LEVEL
     transient_hold: int = TRANSIENT_HOLD
+    clean_branch: SlidingModeReconstructor | None = field(default=None, repr=False)
+    noise_switch: dict | None = None
 
     STATUS_NAMES = ("sliding_status", "sliding_status:primary", "sliding_status:secondary")
 
@@ -183,6 +198,55 @@ class SlidingModeReconstructor(ResidualGenerator):
             else:
                 d["SV"], d["Smu"] = np.zeros((0, 0)), np.zeros(0)
         self._dims = (n1, p1, n2, p2)
+        self._check_branch()
+
+    def _check_branch(self) -> None:
+        """Validate ``clean_branch`` / ``noise_switch`` (see the class docstring)."""
+        cb, ns = self.clean_branch, self.noise_switch
+        if cb is None and ns is None:
+            return
+        if not isinstance(cb, SlidingModeReconstructor) or not isinstance(ns, dict):
+            raise DataError("clean_branch (a SlidingModeReconstructor) and noise_switch (a dict) go "
+                            f"together, got {type(cb).__name__} and {type(ns).__name__}")
+        if cb.clean_branch is not None:
+            raise DataError("the clean branch of a reconstructor cannot have a clean branch itself")
+        for key in ("dt", "u_names", "y_names", "output_names"):
+            if getattr(cb, key) != getattr(self, key):
+                raise DataError(f"clean_branch.{key} = {getattr(cb, key)!r} differs from "
+                                f"{getattr(self, key)!r}")
+        ns = {"band": NOISE_BAND, "window": NOISE_WINDOW, "warmup": NOISE_WARMUP, **ns}
+        miss = [k for k in ("noise_std", "switch") if k not in ns]
+        if miss:
+            raise DataError(f"noise_switch lacks the keys {miss}")
+        sig = np.asarray(ns["noise_std"], dtype=float).reshape(-1)
+        if sig.size != len(self.y_names) or not np.all(np.isfinite(sig)) or sig.min() < 0 \
+                or not sig.any():
+            raise DataError(f"noise_switch['noise_std'] must be {len(self.y_names)} finite values >= 0, "
+                            f"not all 0 (one per output {self.y_names}), got {ns['noise_std']!r}")
+        ns["noise_std"] = sig.tolist()
+        ns["switch"] = _pos(ns["switch"], "noise_switch['switch']")
+        ns["band"] = _pos(ns["band"], "noise_switch['band']")
+        if not ns["band"] >= 1.0:
+            raise DataError(f"noise_switch['band'] must be >= 1, got {ns['band']}")
+        for key in ("window", "warmup"):
+            v = ns[key]
+            if isinstance(v, bool) or not float(v).is_integer() or v < 1:
+                raise DataError(f"noise_switch[{key!r}] must be an integer >= 1 (samples), got {v!r}")
+            ns[key] = int(v)
+        self.noise_switch = ns
+
+    def noise_branch(self) -> SlidingModeReconstructor:
+        """This reconstructor without its clean branch: the noise-aware design alone.
+
+        Returns
+        -------
+        SlidingModeReconstructor
+            Same observers, low-pass and status settings; ``clean_branch`` and ``noise_switch``
+            None (``self`` when it has no clean branch).
+        """
+        if self.clean_branch is None:
+            return self
+        return replace(self, clean_branch=None, noise_switch=None)
 
     @property
     def fault_names(self) -> list[str]:
@@ -232,6 +296,9 @@ class SlidingModeReconstructor(ResidualGenerator):
             "lpf_tau": self.lpf_tau, "settle": self.settle, "transient_level": self.transient_level,
             "transient_hold": self.transient_hold,
             "info": plain(self.info),
+            **({} if self.clean_branch is None else {
+                "clean_branch": {**self.clean_branch.to_dict(), "info": {}},
+                "noise_switch": plain(self.noise_switch)}),
         }
 
     @classmethod
@@ -269,7 +336,9 @@ class SlidingModeReconstructor(ResidualGenerator):
             level=float(d.get("level", 0.9)), lpf_tau=float(d.get("lpf_tau", 0.0)),
             settle=float(d.get("settle", 0.0)),
             transient_level=float(d.get("transient_level", TRANSIENT_LEVEL)),
-            transient_hold=int(d.get("transient_hold", 0)))
+            transient_hold=int(d.get("transient_hold", 0)),
+            clean_branch=cls.from_dict(d["clean_branch"]) if d.get("clean_branch") else None,
+            noise_switch=dict(d["noise_switch"]) if d.get("noise_switch") else None)
 
     def error_transfer(self):
         """``G(s)`` of ng-tan-edwards-kuang eq. (40): ``xi`` -> reconstruction error ``f^ - f``.
@@ -311,6 +380,13 @@ class SlidingModeReconstructor(ResidualGenerator):
             "flp": np.zeros((runs, self.n_faults)), "V1": np.zeros((runs, 2)),
             "V2": np.zeros((runs, 2)), "k": np.zeros(1, dtype=np.int64),
         }
+        if self.clean_branch is not None:
+            # the clean branch's state lives inside this one (one state to checkpoint), and the
+            # noise estimator's: the last four samples, the samples seen, the log-mean of |d4|
+            py = len(self.y_names)
+            self.clean_branch.reset(runs)
+            self._state.update(clean=self.clean_branch._state, ybuf=np.zeros((runs, 4, py)),
+                               nseen=np.zeros((runs, 1)), lmean=np.zeros((runs, py)))
 
     def _check(self, U: np.ndarray, Y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Shapes and finiteness of a block of samples, before any state changes."""
@@ -347,7 +423,17 @@ class SlidingModeReconstructor(ResidualGenerator):
                 float(np.ceil(self.settle / self.dt - 1e-9)) if self.settle > 0 else 0.0,
                 float(self.transient_level), float(self.transient_hold))
         st["k"][0] += Y.shape[1]
-        return out
+        if self.clean_branch is None:
+            return out
+        cb, ns = self.clean_branch, self.noise_switch
+        cb._state = st["clean"]  # a restored checkpoint replaces the dict
+        out_c = cb._advance(U, Y)
+        mixed = np.empty_like(out)
+        ratio = np.empty(Y.shape[:2])
+        _blend(Y, out, out_c, np.asarray(ns["noise_std"], float), float(ns["switch"]),
+               float(ns["band"]), float(ns["window"]), float(ns["warmup"]), st["ybuf"], st["nseen"],
+               st["lmean"], mixed, ratio)
+        return mixed
 
     def _step(self, u: np.ndarray, y: np.ndarray) -> np.ndarray:
         return self._advance(u[:, None, :], y[:, None, :])[:, 0, :]
