@@ -111,7 +111,8 @@ class CarPeerSignals(ResidualGenerator):
                         "w_front_diff", "w_rear_diff"]
         self.output_names = ([m for ms in CAR_PEER_GROUPS.values() for m in ms] + ["sig:throttle"]
                              + [f"raw:{y}" for y in sorted(set(_MEASURED.values()))])
-        self.output_units = (["rad/s"] * 8 + ["deg"] + [_RAW_UNITS[y] for y in sorted(set(_MEASURED.values()))])
+        self.output_units = (["rad/s"] * 8 + ["deg"]
+                             + [_RAW_UNITS[y] for y in sorted(set(_MEASURED.values()))])
         self.reset(1)
 
     def __repr__(self) -> str:
@@ -191,13 +192,15 @@ def design_car_peer_stages(nominal: Signals, dt: float, *, groups: Sequence[str]
     per, pfa, margin : float
         Thresholds for ``pfa`` false alarms per ``per`` seconds, times ``1 + margin``
         (:func:`~fdikit.detect.design_peer_check`).
-    window_s, lookback_s, clear_after_s, block_s, gain_crit, gain_margin, stuck_margin, revise_after_s, revise_conf, prefer
+    window_s, lookback_s, clear_after_s, block_s, gain_crit, gain_margin, stuck_margin : float
         The fault-type classifier (:class:`~fdikit.isolate.FaultTypeClassifier`): its window, the
         look-back before the first isolation, the seconds below ``release`` that end a fault, the
         gain test's block length and level (at least ``gain_margin`` times the largest gain
         statistic of the nominal residual over a window), the stuck check (zero increments for
         ``1 + stuck_margin`` times the longest nominal run, at least 0.5 s), the type's
         hysteresis and the GLR margin a drift must beat a bias by.
+    revise_after_s, revise_conf, prefer : float
+        The classifier's type hysteresis (seconds, confidence) and its drift-over-bias GLR margin.
 
     Returns
     -------
@@ -310,7 +313,8 @@ def with_peer_checks(mon, nominal: Signals, *, hold: int | None = None, confirm_
     """
     groups = [g for g, b in _BLOCK.items() if b == mon.block]
     if not groups:
-        raise ModelError(f"no redundant group checks the {mon.block!r} block; blocks: {sorted(set(_BLOCK.values()))}")
+        raise ModelError(f"no redundant group checks the {mon.block!r} block; "
+                         f"blocks: {sorted(set(_BLOCK.values()))}")
     dt = mon.design.dt
     psig, pc, ftc, type_names = design_car_peer_stages(nominal, dt, groups=groups, **design_kw)
     old = mon.monitor
@@ -320,12 +324,14 @@ def with_peer_checks(mon, nominal: Signals, *, hold: int | None = None, confirm_
     chans = [*old.decision.alarm_channels, *type_hold.output_names]
     kw = {"confirm_after": confirm_after, "unconfirmed": "announce"} if confirm_after > 0 else {}
     dec = Decision(chans, level=old.decision.level, names=names, clear_level=old.decision.clear_level,
-                   clear_after=old.decision.clear_after, groups=sensor_groups({c: names.get(c, c) for c in chans}),
+                   clear_after=old.decision.clear_after,
+                   groups=sensor_groups({c: names.get(c, c) for c in chans}),
                    **kw)
     new = Monitor([*old.generators, psig], [*old.processors, pc, ftc, type_hold], dec)
-    info = {**mon.info, "peer_checks": {"groups": {g: CAR_PEER_GROUPS[g] for g in groups}, "k": [psig.k_f, psig.k_r],
-                                        "thresholds": pc.thresholds, "sigma": ftc.sigma,
-                                        "stuck_after": ftc.stuck_after, "gain_crit": ftc.gain_crit}}
+    info = {**mon.info, "peer_checks": {"groups": {g: CAR_PEER_GROUPS[g] for g in groups},
+                                        "k": [psig.k_f, psig.k_r], "thresholds": pc.thresholds,
+                                        "sigma": ftc.sigma, "stuck_after": ftc.stuck_after,
+                                        "gain_crit": ftc.gain_crit}}
     return dataclasses.replace(mon, monitor=new, info=info)
 
 
@@ -345,4 +351,5 @@ def nominal_drives(speed: float = 20.0, *, duration: float = 20.0, seed: int = 1
 
     sigs = [car_signals(simulate_drive(k, float(speed), duration=duration, runs=1, seed=seed, dt=2.5e-3,
                                        noise=sensor_noise())) for k in ("curve", "speed_change", "straight")]
-    return Signals(sigs[0].t, np.concatenate([s.values for s in sigs]), sigs[0].names, sigs[0].units, check=False)
+    return Signals(sigs[0].t, np.concatenate([s.values for s in sigs]), sigs[0].names, sigs[0].units,
+                   check=False)
