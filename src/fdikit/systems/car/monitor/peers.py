@@ -7,8 +7,10 @@ paper's sensors, ng-chen-speyer Section II; not four wheel speeds). Two groups f
 measures:
 
 * **speed** (wheel-sum units, rad/s): the front and rear wheel-speed sums and the engine speed
-  through the gear (``2 w_engine / (i_gear i_final)``; the torque converter's slip is the peer
-  check's fitted gain, the throttle its reference); each against the other two;
+  through the gear (``2 w_engine / (i_gear i_final)``); each against the other two, with the
+  manifold pressure as the group's reference (the engine's load, which sets the torque
+  converter's slip: with the throttle as the reference the speed steps' slip transients set the
+  thresholds at 8.6 / 9.6 / 21 rad/s, with the manifold pressure at 1.6 / 1.2 / 3.3 rad/s);
 * **yaw** (rad/s): the yaw-rate gyro, the lateral accelerometer (``a_y / U``), the steering model
   (``delta U / (L + K_us U^2)``, the command: a peer only, a steering fault is an actuator fault
   the MHSSPT names) and each axle's wheel-speed difference (``w_diff / k``, ``k`` fitted); each
@@ -48,7 +50,7 @@ CAR_PEER_GROUPS: dict[str, list[str]] = {
             "sig:rear_wheel_diff"],
 }
 #: Group -> reference channels of each member's affine fit.
-CAR_PEER_REFERENCES: dict[str, list[str]] = {"speed": ["sig:throttle"], "yaw": []}
+CAR_PEER_REFERENCES: dict[str, list[str]] = {"speed": ["sig:p_man"], "yaw": []}
 #: Members that name a sensor -> its name (the MHSSPT hypothesis of that sensor); the steering
 #: model is a peer only.
 CAR_PEER_SENSORS: dict[str, str] = {
@@ -71,8 +73,8 @@ class CarPeerSignals(ResidualGenerator):
     ``sig:engine_speed`` (``2 w_engine / (i_gear i_final)``, rad/s), ``sig:yaw_rate`` (rad/s),
     ``sig:lateral_accelerometer`` (``a_y / U``), ``sig:steering`` (``steer U / (L + K_us U^2)``),
     ``sig:front_wheel_diff`` / ``sig:rear_wheel_diff`` (``w_*_diff / k_f`` / ``k_r``), with
-    ``U = r_w w_rear_sum / 2`` (at least 1 m/s); ``sig:throttle`` (the throttle measurement, deg;
-    the speed group's reference) and ``raw:<sensor>`` the measurements themselves. Stateless.
+    ``U = r_w w_rear_sum / 2`` (at least 1 m/s); ``sig:p_man`` (the manifold pressure, kPa; the
+    speed group's reference) and ``raw:<sensor>`` the measurements themselves. Stateless.
 
     Parameters
     ----------
@@ -107,11 +109,11 @@ class CarPeerSignals(ResidualGenerator):
         self.L = q["a"] + q["b"]
         self.K_us = q["m"] / self.L * (q["b"] / (2 * q["C_alpha_f"]) - q["a"] / (2 * q["C_alpha_r"]))
         self.u_names = ["steer"]
-        self.y_names = ["throttle_meas", "w_engine", "w_front_sum", "w_rear_sum", "a_x", "a_y", "yaw_rate",
+        self.y_names = ["p_man", "w_engine", "w_front_sum", "w_rear_sum", "a_x", "a_y", "yaw_rate",
                         "w_front_diff", "w_rear_diff"]
-        self.output_names = ([m for ms in CAR_PEER_GROUPS.values() for m in ms] + ["sig:throttle"]
+        self.output_names = ([m for ms in CAR_PEER_GROUPS.values() for m in ms] + ["sig:p_man"]
                              + [f"raw:{y}" for y in sorted(set(_MEASURED.values()))])
-        self.output_units = (["rad/s"] * 8 + ["deg"]
+        self.output_units = (["rad/s"] * 8 + ["kPa"]
                              + [_RAW_UNITS[y] for y in sorted(set(_MEASURED.values()))])
         self.reset(1)
 
@@ -130,11 +132,11 @@ class CarPeerSignals(ResidualGenerator):
 
     def _compute(self, u: np.ndarray, y: np.ndarray) -> np.ndarray:
         q = self.params
-        thr, we, fs, rs, _ax, ay, r, fd, rd = (y[..., i] for i in range(9))
+        pm, we, fs, rs, _ax, ay, r, fd, rd = (y[..., i] for i in range(9))
         U = np.maximum(q["r_w"] * np.abs(rs) / 2.0, 1.0)
         meas = dict(zip(self.y_names, (y[..., i] for i in range(9))))
         cols = [fs, rs, 2.0 * we / (q["i_gear"] * q["i_final"]), r, ay / U,
-                u[..., 0] * U / (self.L + self.K_us * U * U), fd / self.k_f, rd / self.k_r, thr]
+                u[..., 0] * U / (self.L + self.K_us * U * U), fd / self.k_f, rd / self.k_r, pm]
         cols += [meas[n] for n in sorted(set(_MEASURED.values()))]
         out = np.stack(cols, axis=-1)
         if not np.all(np.isfinite(out)):
@@ -171,7 +173,7 @@ def design_car_peer_stages(nominal: Signals, dt: float, *, groups: Sequence[str]
                            window_s: float = 10.0, lookback_s: float = 2.0, clear_after_s: float = 2.0,
                            block_s: float = 0.5, gain_crit: float = 25.0, gain_margin: float = 1.5,
                            stuck_margin: float = 1.0, revise_after_s: float = 1.0, revise_conf: float = 0.6,
-                           prefer: float = 6.0):
+                           prefer: float = 20.0, min_len_s: float = 0.05):
     """The peer check and the fault-type classifier of the simulated car, designed on nominal
     (fault-free) drives.
 
@@ -199,8 +201,15 @@ def design_car_peer_stages(nominal: Signals, dt: float, *, groups: Sequence[str]
         statistic of the nominal residual over a window), the stuck check (zero increments for
         ``1 + stuck_margin`` times the longest nominal run, at least 0.5 s), the type's
         hysteresis and the GLR margin a drift must beat a bias by.
-    revise_after_s, revise_conf, prefer : float
-        The classifier's type hysteresis (seconds, confidence) and its drift-over-bias GLR margin.
+    revise_after_s, revise_conf, prefer, min_len_s : float
+        The classifier's type hysteresis (seconds, confidence) and its drift-over-bias GLR margin
+        (20: the first type is decided at the isolation, 0.15 s after a step of 3 noise standard
+        deviations, and a drift never falls back to a bias; with the classifier's default 6 a
+        0.15 rad/s bias of ``w_front_diff`` was first typed a drift in 2 of 3 drives, with 20 in
+        none, and true drifts are typed a bias first and revised to a drift 1-3 s later); the
+        shortest segment a change point may leave (s; the type is first decided at the isolation,
+        which a large fault reaches a few samples after its onset: with 0.2 s a step then had too
+        few samples after its change point and was typed a drift, for good).
 
     Returns
     -------
@@ -253,7 +262,7 @@ def design_car_peer_stages(nominal: Signals, dt: float, *, groups: Sequence[str]
                 longest = max(longest, run)
         stuck_after[m] = max(int(np.ceil((longest + 1) * (1.0 + stuck_margin))), n(0.5))
     ftc = FaultTypeClassifier(ann, sigma, n(window_s), raw={m: f"raw:{_MEASURED[m]}" for m in ann},
-                              stuck_after=stuck_after, lookback=n(lookback_s), min_len=n(0.2),
+                              stuck_after=stuck_after, lookback=n(lookback_s), min_len=n(min_len_s),
                               spike_max=n(0.2), burst_gap=n(0.5), clear_after=n(clear_after_s), block=blk,
                               sigma_block=sig_blk, gain_crit=crit,
                               revise_after=n(revise_after_s) if revise_after_s > 0 else 0,

@@ -1,0 +1,115 @@
+"""Issue 27, item 7: the simulated car's redundant groups (peer checks) and the fault-type stage:
+the peer signals in closed form, their design refusing what it cannot fit, a synthetic fault
+named and typed, and (slow) faults injected into simulated drives named with the right sensor and
+type, with no false announcement on nominal drives."""
+
+import numpy as np
+import pytest
+
+from fdikit import Signals
+from fdikit.errors import DataError, ModelError
+from fdikit.systems.car.model import DEFAULT_PARAMS
+from fdikit.systems.car.monitor import CarPeerSignals, design_car_peer_stages
+
+CHANNELS = ["throttle", "brake", "steer", "p_man", "w_engine", "a_x", "w_front_sum", "w_rear_sum",
+            "throttle_meas", "brake_meas", "a_y", "yaw_rate", "w_front_diff", "w_rear_diff"]
+
+
+def _synthetic_drives(runs=2, T=4000, dt=0.01, seed=0):
+    """Monitor inputs of a car that weaves and changes speed, made from the relations the peer
+    signals invert (with sensor noise): yaw rate r, speed U, a_y = U r, w_*_diff = k r, the steering
+    of the single track, the engine through the gear with a slip that follows the manifold pressure."""
+    rng = np.random.default_rng(seed)
+    p = DEFAULT_PARAMS
+    L = p["a"] + p["b"]
+    K = p["m"] / L * (p["b"] / (2 * p["C_alpha_f"]) - p["a"] / (2 * p["C_alpha_r"]))
+    t = np.arange(T) * dt
+    out = np.zeros((runs, T, len(CHANNELS)))
+    for i in range(runs):
+        ph = rng.uniform(0, 2 * np.pi, 3)
+        U = 20 + 2 * np.sin(2 * np.pi * t / 17 + ph[0])
+        r = 0.05 * np.sin(2 * np.pi * t / 9 + ph[1]) + 0.02 * np.sin(2 * np.pi * t / 4 + ph[2])
+        pm = 40 + 5 * np.sin(2 * np.pi * t / 6 + ph[2])
+        ws = 2 * U / p["r_w"]
+        v = {"throttle": 8 + 0 * t, "brake": 0 * t, "steer": r * (L + K * U**2) / U, "p_man": pm,
+             "w_engine": ws * p["i_gear"] * p["i_final"] / 2 * (1.03 + 0.001 * (pm - 40)), "a_x": 0 * t,
+             "w_front_sum": ws, "w_rear_sum": ws, "throttle_meas": 8 + 0 * t, "brake_meas": 0 * t,
+             "a_y": U * r, "yaw_rate": r, "w_front_diff": -8.0 * r, "w_rear_diff": -7.0 * r}
+        noise = {"w_engine": 1.0, "w_front_sum": 0.1, "w_rear_sum": 0.1, "a_y": 0.05, "yaw_rate": 0.002,
+                 "w_front_diff": 0.05, "w_rear_diff": 0.05, "p_man": 0.3}
+        for j, c in enumerate(CHANNELS):
+            out[i, :, j] = v[c] + noise.get(c, 0.0) * rng.standard_normal(T)
+    return Signals(t, out, CHANNELS)
+
+
+def test_peer_signals_closed_form_batch_equals_streaming_and_round_trip():
+    g = CarPeerSignals(-8.0, -7.0)
+    sig = _synthetic_drives(runs=2, T=300)
+    out = g.run(sig)
+    p = DEFAULT_PARAMS
+    U = p["r_w"] * sig["w_rear_sum"] / 2
+    assert np.allclose(out["sig:lateral_accelerometer"], sig["a_y"] / U)
+    assert np.allclose(out["sig:front_wheel_diff"], sig["w_front_diff"] / -8.0)
+    assert np.allclose(out["sig:engine_speed"], 2 * sig["w_engine"] / (p["i_gear"] * p["i_final"]))
+    assert np.array_equal(out["raw:yaw_rate"], sig["yaw_rate"])
+    # the noise-free steering model is the yaw rate itself (the single track's steady turn)
+    clean = CarPeerSignals(-8.0, -7.0).run(_synthetic_drives(runs=1, T=300, seed=3))
+    assert np.abs(clean["sig:steering"] - clean["sig:yaw_rate"]).max() < 0.01
+    g.reset(2)
+    u, y = sig.values[:, :, sig.index(g.u_names)], sig.values[:, :, sig.index(g.y_names)]
+    stream = np.stack([g.step(u[:, k], y[:, k]) for k in range(sig.n_samples)], axis=1)
+    assert np.array_equal(stream, out.values)
+    again = CarPeerSignals.from_dict(g.to_dict())
+    assert np.array_equal(again.run(sig).values, out.values)
+    assert g.settling_time == 0.0       # stateless: the monitor's default warm-up stays the filters'
+
+
+def test_peer_signals_refuse_bad_coefficients_and_name_the_bad_sample():
+    with pytest.raises(ModelError, match="k_f and k_r"):
+        CarPeerSignals(0.0, -7.0)
+    sig = _synthetic_drives(runs=1, T=50)
+    v = sig.values.copy()
+    v[0, 7, CHANNELS.index("a_y")] = np.nan
+    with pytest.raises(DataError, match="lateral_accelerometer.*sample 7"):
+        CarPeerSignals(-8.0, -7.0).run(Signals(sig.t, v, CHANNELS, check=False))
+
+
+def test_design_refuses_unknown_groups_short_and_straight_drives():
+    nom = _synthetic_drives(runs=1, T=2000)
+    with pytest.raises(ModelError, match="unknown peer groups"):
+        design_car_peer_stages(nom, 0.01, groups=["wheels"])
+    with pytest.raises(DataError, match="at least"):
+        design_car_peer_stages(Signals(nom.t[:500], nom.values[:, :500], CHANNELS), 0.01)
+    v = nom.values.copy()
+    v[..., CHANNELS.index("yaw_rate")] = 0.0
+    with pytest.raises(DataError, match="never turn"):
+        design_car_peer_stages(Signals(nom.t, v, CHANNELS), 0.01)
+
+
+@pytest.mark.parametrize("channel, member, size", [("yaw_rate", "sig:yaw_rate", 0.01),
+                                                   ("w_front_diff", "sig:front_wheel_diff", 0.15),
+                                                   ("w_rear_sum", "sig:rear_wheel_sum", 3.0)])
+def test_a_synthetic_bias_is_isolated_on_its_member_and_typed_a_bias(channel, member, size):
+    """Designed on two synthetic drives, silent on a third; a bias on one sensor from 20 s is
+    isolated on that sensor's member alone and typed ``bias``; a sensor frozen from 20 s ``stuck``."""
+    from fdikit.faults import Bias, Stuck, apply_faults
+
+    psig, pc, ftc, names = design_car_peer_stages(_synthetic_drives(runs=2, seed=1), 0.01)
+    test = _synthetic_drives(runs=1, seed=2)
+
+    def run(sig):
+        x = psig.run(sig)
+        out = pc.run(x)
+        return out, ftc.run(x.concat_channels(out))
+
+    out, ty = run(test)
+    assert max(float(out[f"peer:{m}:isolated"].max()) for m in pc.announce) == 0.0
+    assert max(float(ty[f"{m}:active"].max()) for m in ftc.members) == 0.0
+    out, ty = run(apply_faults(test, [Bias(channel, size, start=20.0)]))
+    k = test.t >= 25.0
+    assert out[f"peer:{member}:isolated"][0, k].mean() > 0.9
+    assert all(out[f"peer:{m}:isolated"][0].max() == 0.0 for m in pc.announce if m != member)
+    assert ty[f"{member}:bias"][0, -1] == 1.0
+    _out, ty = run(apply_faults(test, [Stuck(channel, start=20.0)]))
+    assert ty[f"{member}:stuck"][0, -1] == 1.0
+    assert names[f"{member}:stuck"] == member[4:] + ":stuck"
