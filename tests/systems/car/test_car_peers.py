@@ -113,3 +113,13 @@ def test_a_synthetic_bias_is_isolated_on_its_member_and_typed_a_bias(channel, me
     _out, ty = run(apply_faults(test, [Stuck(channel, start=20.0)]))
     assert ty[f"{member}:stuck"][0, -1] == 1.0
     assert names[f"{member}:stuck"] == member[4:] + ":stuck"
+
+
+def test_codegen_refuses_the_peer_signals_by_name():
+    """The car's generated C covers the paper's fused monitor; the peer stages are opt-in and their
+    car-specific generator has no C emitter: code generation refuses it by name (the core PeerCheck
+    and FaultTypeClassifier have emitters)."""
+    from fdikit.codegen.stages import stage_emitter
+
+    with pytest.raises(DataError, match="stage CarPeerSignals cannot be generated"):
+        stage_emitter(CarPeerSignals(-8.0, -7.0), "p0")
