@@ -123,3 +123,109 @@ def test_codegen_refuses_the_peer_signals_by_name():
 
     with pytest.raises(DataError, match="stage CarPeerSignals cannot be generated"):
         stage_emitter(CarPeerSignals(-8.0, -7.0), "p0")
+
+
+# ---------------------------------------------------------------------------------- simulated drives
+@pytest.fixture(scope="module")
+def simulated():
+    """Both calibrated blocks with the peer stages (designed on :func:`nominal_drives`, seed 1001) and
+    held-out drives (seed 2002, three runs of each kind, 20 s)."""
+    from fdikit.systems.car.driving import simulate_drive
+    from fdikit.systems.car.monitor import (
+        calibrate_monitor,
+        car_signals,
+        nominal_drives,
+        sensor_noise,
+        with_peer_checks,
+    )
+
+    nom = nominal_drives(20.0)
+    mons = {b: with_peer_checks(calibrate_monitor(b, 20.0), nom) for b in ("longitudinal", "lateral")}
+    drives = {k: car_signals(simulate_drive(k, 20.0, duration=20.0, runs=3, seed=2002, dt=2.5e-3,
+                                            noise=sensor_noise()))
+              for k in ("curve", "speed_change", "straight")}
+    return mons, drives
+
+
+@pytest.mark.slow
+def test_no_false_announcement_on_held_out_nominal_drives(simulated):
+    mons, drives = simulated
+    ev = [(k, b, e.run, round(e.t, 2), e.hypothesis) for k, s in drives.items() for b, m in mons.items()
+          for e in m.run(s).events]
+    assert ev == []
+
+
+ONSET = 3.0
+
+
+def _episodes(mon, sig, component):
+    """Per run: the first sensor named by a typed announcement (onset or change) after the onset,
+    the final name of ``component``'s episode, and the typed onsets naming another sensor."""
+    r = mon.run(sig)
+    out = []
+    for run in range(sig.runs):
+        ons = [e for e in r.events if e.run == run and e.t >= ONSET]
+        ch = [e for e in r.changes if e.run == run]
+        typed = sorted([(e.t, e.hypothesis) for e in ons + ch if ":" in e.hypothesis])
+        final = None
+        for _t, h in sorted([(e.t, e.hypothesis) for e in ons + ch]):
+            if h.split(":")[0] == component:
+                final = h
+        wrong = [h for _t, h in typed if h.split(":")[0] != component]
+        out.append((typed[0][1].split(":")[0] if typed else None, final, wrong))
+    return out
+
+
+def _faults(kind):
+    from fdikit.faults import Bias, Gain, Ramp, Stuck
+
+    mk = {"bias": lambda c, v: Bias(c, v, start=ONSET), "gain": lambda c, v: Gain(c, v, start=ONSET),
+          "drift": lambda c, v: Ramp(c, v, start=ONSET), "stuck": lambda c, _v: Stuck(c, start=ONSET)}
+    return mk[kind]
+
+
+#: (channel, sensor name, block, drive, type, size): the yaw rate and the front wheel-speed difference
+#: on the curve (the fault from 3 s, on the straight before it), the front wheel-speed sum on the
+#: speed steps (a gain is told from a bias only where the signal moves other than with time)
+INJECTED = [(ch, comp, blk, drive, kind, size)
+            for ch, comp, blk, drive, sizes in [
+                ("yaw_rate", "yaw_rate", "lateral", "curve", {"bias": 0.01, "drift": 0.002, "stuck": None}),
+                ("w_front_diff", "front_wheel_diff", "lateral", "curve",
+                 {"bias": 0.15, "drift": 0.03, "stuck": None}),
+                ("w_front_sum", "front_wheel_sum", "longitudinal", "speed_change",
+                 {"bias": 2.5, "gain": 1.03, "drift": 0.3, "stuck": None})]
+            for kind, size in sizes.items()]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("channel, component, block, drive, kind, size", INJECTED,
+                         ids=[f"{c[0]}-{c[4]}" for c in INJECTED])
+def test_injected_sensor_fault_named_with_its_sensor_and_type(simulated, channel, component, block, drive,
+                                                               kind, size):
+    """Measured on six held-out drives (seeds 2002 and 3003): every case named with its sensor and
+    its type in 6 of 6 runs; a front wheel-speed sum fault also names the rear sum once, at the speed
+    step down (13.5 s: the rear's peers are the front and the engine, whose mean the faulty front
+    moves by half its fault) in 6/6 bias, 6/6 drift, 2/6 gain and 2/6 stuck runs."""
+    from fdikit.faults import apply_faults
+
+    mons, drives = simulated
+    sig = apply_faults(drives[drive], [_faults(kind)(channel, size)])
+    for first, final, wrong in _episodes(mons[block], sig, component):
+        assert first == component and final == f"{component}:{kind}", (first, final, wrong)
+        assert len(wrong) <= 1, wrong
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason=(
+    "known limit: a yaw-rate gain (x1.3 from 3 s) shows only at the curve entry, where the yaw rate "
+    "rises once and then stays constant on the 300 m curve; its residual is a step, typed a bias (6 of 6 "
+    "held-out drives, the sensor right in 6 of 6). The simulated drives have no yaw excitation that would "
+    "tell a gain from a bias (a gain of the wheel-speed sum on the speed steps is typed a gain, 6 of 6)"))
+def test_yaw_gain_on_the_constant_curve_is_typed_a_gain(simulated):
+    mons, drives = simulated
+    from fdikit.faults import apply_faults
+
+    sig = apply_faults(drives["curve"], [_faults("gain")("yaw_rate", 1.3)])
+    res = _episodes(mons["lateral"], sig, "yaw_rate")
+    assert all(first == "yaw_rate" for first, _f, _w in res), res
+    assert all(final == "yaw_rate:gain" for _first, final, _w in res), res
