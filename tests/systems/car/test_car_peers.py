@@ -64,6 +64,20 @@ def test_peer_signals_closed_form_batch_equals_streaming_and_round_trip():
     assert g.settling_time == 0.0       # stateless: the monitor's default warm-up stays the filters'
 
 
+def test_peer_stages_save_and_load_as_artifacts(tmp_path):
+    from fdikit.base.artifacts import load_artifact, save_artifact
+
+    sig = _synthetic_drives(runs=1, seed=1)
+    stages = design_car_peer_stages(sig, 0.01)[:3]
+    x = stages[0].run(sig)
+    for i, st in enumerate(stages):
+        save_artifact(tmp_path / f"s{i}", st)
+        again = load_artifact(tmp_path / f"s{i}")
+        assert type(again) is type(st)
+        inp = sig if i == 0 else (x if i == 1 else x.concat_channels(stages[1].run(x)))
+        assert np.array_equal(again.run(inp).values, st.run(inp).values)
+
+
 def test_peer_signals_refuse_bad_coefficients_and_name_the_bad_sample():
     with pytest.raises(ModelError, match="k_f and k_r"):
         CarPeerSignals(0.0, -7.0)

@@ -303,4 +303,4 @@ def demo_summary(details: dict | None = None) -> dict:
     s = out["summary"]
     return {"scenario": s["description"], "detection_delay_s": s["detection_delay_s"],
             "isolated": s["isolated"], "false_announcements": s["false_announcements"],
-            "seconds": round(time.perf_counter() - t0, 2)}
+            "sensor_faults": s["sensor_faults"], "seconds": round(time.perf_counter() - t0, 2)}
