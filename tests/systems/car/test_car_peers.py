@@ -243,3 +243,24 @@ def test_yaw_gain_on_the_constant_curve_is_typed_a_gain(simulated):
     res = _episodes(mons["lateral"], sig, "yaw_rate")
     assert all(first == "yaw_rate" for first, _f, _w in res), res
     assert all(final == "yaw_rate:gain" for _first, final, _w in res), res
+
+
+@pytest.mark.slow
+def test_scenarios_with_and_without_the_sensor_stages():
+    """On by default where the paper's announcements are unchanged (the longitudinal block: the
+    brake-actuator scenario announces exactly as without, probabilities bitwise equal); the lateral
+    block's yaw group is opt-in: with it the intermittent front-wheel fault is one episode whose type
+    is revised to intermittent, where the paper's monitor announces each burst apart."""
+    from fdikit.systems.car.scenarios import SENSOR_STAGES_DEFAULT, run_scenario
+
+    assert SENSOR_STAGES_DEFAULT == {"longitudinal": True, "lateral": False}
+    on, off = (run_scenario("brake_actuator_short", sensor_stages=v) for v in (None, False))
+    assert on["summary"]["sensor_faults"] == [] and off["summary"]["sensor_faults"] is None
+    for k in ("isolated", "detection_delay_s", "false_announcements", "peak_probability"):
+        assert on["summary"][k] == off["summary"][k], k
+    assert np.array_equal(on["probabilities"].values, off["probabilities"].values)
+    a, b = (run_scenario("intermittent_front_wheel", sensor_stages=v) for v in (False, True))
+    assert [e.hypothesis for e in a["events"]] == ["front_wheel_diff", "front_wheel_diff"]
+    assert [e.hypothesis for e in b["events"]] == ["front_wheel_diff"]
+    assert b["summary"]["sensor_faults"][-1]["hypothesis"] == "front_wheel_diff:intermittent"
+    assert a["summary"]["windows"] == b["summary"]["windows"]
