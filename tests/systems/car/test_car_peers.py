@@ -217,9 +217,10 @@ INJECTED = [(ch, comp, blk, drive, kind, size)
 def test_injected_sensor_fault_named_with_its_sensor_and_type(simulated, channel, component, block, drive,
                                                                kind, size):
     """Measured on six held-out drives (seeds 2002 and 3003): every case named with its sensor and
-    its type in 6 of 6 runs; a front wheel-speed sum fault also names the rear sum once, at the speed
-    step down (13.5 s: the rear's peers are the front and the engine, whose mean the faulty front
-    moves by half its fault) in 6/6 bias, 6/6 drift, 2/6 gain and 2/6 stuck runs."""
+    its type in 6 of 6 runs; a front wheel-speed sum bias also names the rear sum once in 1 of 6, at
+    the speed step down (13.5 s: the rear's peers are the front and the engine, whose mean the faulty
+    front moves by half its fault; before the two sums shared one threshold, in 16 of 24 front-sum
+    runs of the four types)."""
     from fdikit.faults import apply_faults
 
     mons, drives = simulated
