@@ -109,7 +109,7 @@ class CarPeerSignals(ResidualGenerator):
     >>> g.reset(1)
     >>> y = [5.0, 130.0, 121.0, 121.0, 5.0, 1.3, 0.066, -0.52, -0.46]
     >>> out = dict(zip(g.output_names, g.step([0.01], y)[0]))
-    >>> round(out["sig:front_wheel_diff"], 4), round(out["sig:lateral_accelerometer"], 4)
+    >>> round(float(out["sig:front_wheel_diff"]), 4), round(float(out["sig:lateral_accelerometer"]), 4)
     (0.0667, 0.0651)
     """
 
