@@ -344,7 +344,13 @@ def with_peer_checks(mon, nominal: Signals, *, hold: int | None = None, confirm_
     confirm_after : float
         Seconds an MHSSPT sensor hypothesis waits for its typed name (0, default: announced at
         once, as in the paper; > 0: :class:`~fdikit.monitor.Decision` ``confirm_after`` with
-        ``unconfirmed="announce"``).
+        ``unconfirmed="announce"``: it is dropped when another sensor's typed name comes first).
+        Measured with 3 s on the held-out drives of the module docstring: the MHSSPT's wrong
+        ``front_wheel_diff`` at a yaw-rate bias or drift is no longer announced (6 of 6 drives each,
+        before 6), the right sensor and type unchanged; the first announcement of a front-sum gain
+        comes 0.06 s later (the typed name's 0.20 s instead of the MHSSPT's 0.14 s); names outside
+        the groups (``steering_actuator`` at a frozen yaw rate, ``accelerometer`` at a front-sum
+        drift) are not affected.
 
     Returns
     -------
