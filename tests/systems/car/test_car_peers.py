@@ -198,6 +198,9 @@ def _faults(kind):
     return mk[kind]
 
 
+#: The faults are applied to the recorded (noisy) measurements, as a sensor's own output: a frozen
+#: sensor repeats its last reading exactly (the simulator's Stuck acts before the measurement noise,
+#: which would then hide the frozen value). Neither sensor is in the speed or path control loop.
 #: (channel, sensor name, block, drive, type, size): the yaw rate and the front wheel-speed difference
 #: on the curve (the fault from 3 s, on the straight before it), the front wheel-speed sum on the
 #: speed steps (a gain is told from a bias only where the signal moves other than with time)
