@@ -46,8 +46,9 @@ One concept per module, every name importable from this package as before the sp
 :mod:`.settings` (filter sets, monitored faults, magnitudes, block settings, sensor noise),
 :mod:`.design` (:func:`design_car_monitor`), :mod:`.generators` (offset filters, parity equations,
 a block's generators), :mod:`.calibration` (:func:`calibrate_monitor`, :func:`build_monitor`),
-:mod:`.studies` (:func:`pattern_table`, :func:`isolation_study`) and :mod:`.sensor_checks`
-(:class:`CarSensorChannels`, :func:`with_sensor_checks`).
+:mod:`.studies` (:func:`pattern_table`, :func:`isolation_study`), :mod:`.sensor_checks`
+(:class:`CarSensorChannels`, :func:`with_sensor_checks`) and :mod:`.peers` (the redundant groups,
+their peer checks and fault types, :func:`with_peer_checks`; issue 27).
 """
 
 from __future__ import annotations
@@ -70,6 +71,14 @@ from .generators import (  # noqa: F401
     _generators_and_features,
     _parity_kernel,
     _tau_b,
+)
+from .peers import (
+    CAR_PEER_GROUPS,
+    CAR_PEER_SENSORS,
+    CarPeerSignals,
+    design_car_peer_stages,
+    nominal_drives,
+    with_peer_checks,
 )
 from .sensor_checks import (  # noqa: F401
     CAR_SENSOR_CHANNELS,
@@ -96,6 +105,8 @@ from .studies import isolation_study, pattern_table
 
 __all__ = [
     "BLOCK_SETTINGS",
+    "CAR_PEER_GROUPS",
+    "CAR_PEER_SENSORS",
     "CAR_SENSOR_CHANNELS",
     "FILTER_SETS",
     "LATERAL_FAULTS",
@@ -104,6 +115,7 @@ __all__ = [
     "SENSOR_NOISE_STD",
     "CarMonitor",
     "CarMonitorDesign",
+    "CarPeerSignals",
     "CarSensorChannels",
     "OffsetFilter",
     "ParityEquations",
@@ -111,8 +123,11 @@ __all__ = [
     "calibrate_monitor",
     "car_signals",
     "design_car_monitor",
+    "design_car_peer_stages",
     "fit_car_sensor_channels",
     "isolation_study",
+    "nominal_drives",
     "pattern_table",
+    "with_peer_checks",
     "with_sensor_checks",
 ]
