@@ -367,8 +367,11 @@ def own_system_toml(train0: np.ndarray, test: dict, faults, folder: Path) -> dic
     ident = (f'{{ logs = ["d00.csv"], inputs = {json.dumps(ins)}, outputs = {json.dumps(outs)}, '
              f'method = "n4sid", rate = {1 / 180.0!r} }}')
     out = {}
-    for label, logs, structure in (("d00", '"d00.csv"', True), ("d00+pre", '["d00.csv", "pre*.csv"]', True),
-                                   ("d00+pre, 22 residuals", '["d00.csv", "pre*.csv"]', False)):
+    ewma = '[design.detect]\nsmoothing = "ewma"\nlambda = "auto"\n'
+    for label, logs, structure, detect in (
+            ("d00", '"d00.csv"', True, ""), ("d00+pre", '["d00.csv", "pre*.csv"]', True, ""),
+            ("d00+pre, 22 residuals", '["d00.csv", "pre*.csv"]', False, ""),
+            ("d00 ewma", '"d00.csv"', True, ewma), ("d00+pre ewma", '["d00.csv", "pre*.csv"]', True, ewma)):
         path = folder / f"monitor_{len(out)}.toml"
         path.write_text(f"""[monitor]
 name = "TEP from its nominal set"
@@ -385,7 +388,7 @@ identify = {ident}
 [design.faults]
 names = [{", ".join(f'"sensor:{n}"' for n in outs)}]
 {"[design.structure]" + chr(10) + "detect = []" if structure else ""}
-[design.alarm]
+{detect}[design.alarm]
 pfa = 0.01
 per = "sample"
 hold = 1
@@ -408,7 +411,8 @@ hold = 1
             return np.any(st.values[0][:, idx] > 0.5, axis=1)
         fam = next(c for c in rep["claims"] if c["kind"] == "family")
         out[label] = {"alarm": {k: alarm(X) for k, X in test.items()}, "claim": fam["interval"],
-                      "method": rep["threshold_design"].get("method"), "records": rep.get("nominal_records")}
+                      "method": rep["threshold_design"].get("method"), "records": rep.get("nominal_records"),
+                      "lambda": (rep.get("smoothing") or {}).get("lambda")}
     return out
 
 
