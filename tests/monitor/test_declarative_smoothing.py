@@ -113,7 +113,8 @@ def test_the_smoothed_monitor_is_the_same_in_batch_and_streaming_and_its_artifac
     j = next(k for k, n in enumerate(names) if n.endswith(":ewma"))
     i = names.index(names[j][:-len(":ewma")])
     # (the monitor resets its processors when the filter's start-up warm-up ends: from there)
-    feat, zm, x0 = batch.statistics.values[0][:, i], batch.statistics.values[0][:, j], rep["smoothing"]["start"][0]
+    feat, zm = batch.statistics.values[0][:, i], batch.statistics.values[0][:, j]
+    x0 = rep["smoothing"]["start"][0]
     k0 = int(np.flatnonzero(zm == 0.2 * feat + (1.0 - 0.2) * x0)[-1])
     z = EWMA("f", 0.2, x0).run(type(sig)(sig.t[k0:], feat[None, k0:, None], ["f"])).values[0][:, 0]
     np.testing.assert_array_equal(zm[k0:], z)

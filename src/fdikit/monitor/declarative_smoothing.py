@@ -111,7 +111,7 @@ def smoothing_from_config(design: Mapping[str, Any], *, where: str = "design") -
     spec = design.get("detect", {})
     if not isinstance(spec, Mapping):
         raise DataError(f"config: [{where}.detect] must be a table, got {type(spec).__name__}")
-    for k, v in spec.items():
+    for k in spec:
         if k not in DETECT_KEYS:
             raise DataError(f"config: unknown key {k!r} in [{where}.detect]; allowed: {sorted(DETECT_KEYS)}")
     if not isinstance(spec.get("smoothing", ""), str):
