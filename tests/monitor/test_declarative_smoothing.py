@@ -79,6 +79,8 @@ def test_a_smoothed_declarative_design_holds_its_rate_on_a_held_out_log(logs):
     assert len(th) == 4 and all(c["channels"][0].endswith(":ewma:alarm") for c in th)
     assert all(c["verdict"] == "inside" and c["smoothing"]["lambda"] == 0.05 for c in rep["claims"])
     assert all("EWMA lambda 0.05" in c["basis"] for c in rep["claims"])
+    assert all("effective samples" in c["rests_on"] and "2 nominal record(s)" in c["rests_on"]
+               for c in rep["claims"])
     out = validate(cfg, [logs["held_out"]])
     assert out["contradicted"] == [], [(c["name"], c["interval"], c["measured"]) for c in out["claims"]]
     fam = next(c for c in out["claims"] if c["kind"] == "family")
@@ -92,6 +94,13 @@ def test_a_smoothed_declarative_design_holds_its_rate_on_a_held_out_log(logs):
     # a constant the data cannot support is refused, naming it and the effective samples
     with pytest.raises(DataError, match=r"EWMA at lambda = 0.01: lambda 0.01: \d+ effective samples"):
         run_design(_cfg(logs, "tiny", lam=0.01, pfa=0.01))
+    # a target per hour with a hold goes to design_threshold on the smoothed features; these 3 min
+    # cannot show 120 an hour: refused with the hours it needs, never the chi bound
+    cfg = _cfg(logs, "hour", lam=0.2)
+    cfg.path.write_text(cfg.path.read_text().replace('per = "sample"\nhold = 1', 'per = "hour"\nhold = 5')
+                        .replace("pfa = 0.1", "pfa = 120.0"))
+    with pytest.raises(DataError, match=r"\[design.detect\].* per hour \(hold 5\) .*lambda = 0.2.* h of"):
+        run_design(load_config(cfg.path))
 
 
 def test_the_smoothed_monitor_is_the_same_in_batch_and_streaming_and_its_artifact_round_trips(logs):

@@ -303,8 +303,18 @@ def logged_thresholds(raw, groups: dict[str, list[str]], alarm, dt: float, nomin
         claims = _claims(names, td, alarm, f"nominal logs ({td['method']}, EWMA lambda "
                                            f"{td['smoothing']['lambda']:g})")
         f_meas = [smooth.run(f) for f in f_meas]
+        ne = np.atleast_1d(td.get("effective_samples", np.nan)).astype(float)
+        tau = np.atleast_1d(td.get("tau", np.nan)).astype(float)
         for c in claims:
             c["smoothing"] = {"kind": "ewma", "lambda": td["smoothing"]["lambda"]}
+            i = names.index(c["channels"][0][:-len(":alarm")]) if c["kind"] == "threshold" else None
+            n_i = ne[min(i, ne.size - 1)] if i is not None else float(np.min(ne))
+            t_i = tau[min(i, tau.size - 1)] if i is not None else float(np.max(tau))
+            c["rests_on"] = (f"the EWMA (lambda {td['smoothing']['lambda']:g}, {td['smoothing']['chosen']}) "
+                             f"of the features on the fit halves of {len(parts)} nominal record(s): "
+                             f"{n_i:.0f} effective samples at an autocorrelation time of {t_i:.1f} samples "
+                             "(the EWMA's, the data's and the records' own levels, the largest); measured "
+                             "on the held-out halves, smoothed the same way")
     else:
         thr = td = claims = None
     try:
