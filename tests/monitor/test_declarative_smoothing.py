@@ -55,6 +55,11 @@ def test_the_detect_table_is_parsed_and_wrong_keys_are_named(logs):
     # the config refuses a wrong key when it is loaded, before any design runs
     with pytest.raises(DataError, match=r"unknown key 'lamda' in \[design.detect\]"):
         load_config(_config(logs["dir"], "typo", extra='[design.detect]\nsmoothing = "ewma"\nlamda = 0.1\n'))
+    recipe = logs["dir"] / "recipe.toml"
+    recipe.write_text('[monitor]\nname = "r"\n[channels.x]\n[[generators]]\nartifact = "g"\n'
+                      '[design]\nrecipe = "m:f"\n[design.detect]\nsmoothing = "ewma"\n')
+    with pytest.raises(DataError, match=r"\[design.detect\] smooths a declarative \[design.plant\]"):
+        load_config(recipe)
     assert _cfg(logs, "stages").processors == ["features", "smooth", "hold", "isolate"]
     assert load_config(_config(logs["dir"], "plain")).processors == ["features", "hold", "isolate"]
     # smoothed limits come from real logs only: no chi bound of simulated noise for an EWMA

@@ -278,6 +278,9 @@ def load_config(path: str | Path) -> MonitorConfig:
                 raise DataError(f"config: [[{sec}]] number {i + 1} needs an 'artifact' name")
         stages[sec] = [it["artifact"] for it in items]
     declarative = "plant" in raw.get("design", {})
+    if "detect" in raw.get("design", {}) and not declarative:
+        raise DataError("config: [design.detect] smooths a declarative [design.plant]'s features; a recipe "
+                        "makes its own processors")
     identified = [c.name for c in chans if c.offset_identified]
     if identified and not (isinstance(raw.get("design", {}).get("plant"), dict)
                            and "identify" in raw["design"]["plant"]):
