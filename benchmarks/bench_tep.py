@@ -59,7 +59,18 @@ in one run:
   by ``d00_te``, a nominal run unlike the logs); the default 22-residual bank family-wise at
   1 %/sample is refused (4.5e-4 per residual on 225 effective samples). Against the best fdikit
   detector (CVA~+pre: 0.045 at 0.000) the missed detection is within 2x (0.079 <= 0.090) but the
-  false-alarm rate is not within 2 %: target NOT met.
+  false-alarm rate is not within 2 %: target NOT met. Smoothed beside it (``[design.detect]
+  smoothing = "ewma"``, ``lambda = "auto"``: the smallest of 0.05, 0.1, 0.2, 0.3, 1 whose 1 %
+  limit the fit halves of the nominal logs support, records' own levels counted in the effective
+  samples; the same logs, halves and held-out check as the raw rows): with ``d00`` alone and with
+  ``d00+pre`` auto finds no smoothing supported and takes lambda = 1, i.e. the raw numbers (4.5 %
+  and 3.0 % on ``d00_te``; the ``+pre`` claim widens to 0.19-2.5 %, still contradicted). The
+  feature's mean differs from record to record (4.3-5.0 over the pre-onset records, 4.7 on
+  ``d00_te``, 4.15 on ``d00``'s fit half, which the model was identified on): an EWMA averages the
+  noise down but not that level, so at lambda 0.2 the 22 records count as 73 effective samples
+  (0.73 effective exceedances of 1 %) and ``lambda = 0.2`` given explicitly is refused. Without
+  that record-level count, lambda 0.2 was chosen and claimed 0.1-2.9 %, then measured 4.8 % on
+  ``d00_te`` (mean missed detection 0.041): a claim the data contradict, now refused instead.
 * per fault: missed-detection rate after the onset, false-alarm rate before it and on ``d00_te``,
   isolation accuracy (trained on ``d00`` + ``d01..d21``, tested on the ``_te`` sets after the
   onset). Published values: the README of the data names the sources (``PUBLISHED_SOURCES``) but
@@ -367,8 +378,12 @@ def own_system_toml(train0: np.ndarray, test: dict, faults, folder: Path) -> dic
     ident = (f'{{ logs = ["d00.csv"], inputs = {json.dumps(ins)}, outputs = {json.dumps(outs)}, '
              f'method = "n4sid", rate = {1 / 180.0!r} }}')
     out = {}
-    for label, logs, structure in (("d00", '"d00.csv"', True), ("d00+pre", '["d00.csv", "pre*.csv"]', True),
-                                   ("d00+pre, 22 residuals", '["d00.csv", "pre*.csv"]', False)):
+    ewma = '[design.detect]\nsmoothing = "ewma"\nlambda = "auto"\n'
+    for label, logs, structure, detect in (
+            ("d00", '"d00.csv"', True, ""), ("d00+pre", '["d00.csv", "pre*.csv"]', True, ""),
+            ("d00+pre, 22 residuals", '["d00.csv", "pre*.csv"]', False, ""),
+            ("d00 ewma", '"d00.csv"', True, ewma), ("d00+pre ewma", '["d00.csv", "pre*.csv"]', True, ewma),
+            ("d00+pre ewma 0.2", '["d00.csv", "pre*.csv"]', True, ewma.replace('"auto"', "0.2"))):
         path = folder / f"monitor_{len(out)}.toml"
         path.write_text(f"""[monitor]
 name = "TEP from its nominal set"
@@ -385,7 +400,7 @@ identify = {ident}
 [design.faults]
 names = [{", ".join(f'"sensor:{n}"' for n in outs)}]
 {"[design.structure]" + chr(10) + "detect = []" if structure else ""}
-[design.alarm]
+{detect}[design.alarm]
 pfa = 0.01
 per = "sample"
 hold = 1
@@ -408,7 +423,8 @@ hold = 1
             return np.any(st.values[0][:, idx] > 0.5, axis=1)
         fam = next(c for c in rep["claims"] if c["kind"] == "family")
         out[label] = {"alarm": {k: alarm(X) for k, X in test.items()}, "claim": fam["interval"],
-                      "method": rep["threshold_design"].get("method"), "records": rep.get("nominal_records")}
+                      "method": rep["threshold_design"].get("method"), "records": rep.get("nominal_records"),
+                      "lambda": (rep.get("smoothing") or {}).get("lambda")}
     return out
 
 

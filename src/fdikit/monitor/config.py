@@ -115,7 +115,7 @@ _SCHEMA: dict[str, dict[str, type | tuple[type, ...]]] = {
     "log": {"format": str, "time": str, "dbc": str, "rate": (int, float), "time_unit": str, "resample": str},
     "design": {"recipe": str, "params": dict, "sample_time": (int, float), "plant": dict, "faults": dict,
                "disturbances": dict, "noise": dict, "alarm": dict, "structure": dict,
-               "nominal_log": (str, list), "accept_miscalibrated": bool},
+               "nominal_log": (str, list), "accept_miscalibrated": bool, "detect": dict},
     "decision": {"channels": list, "level": (int, float), "names": dict, "clear_level": (int, float),
                  "clear_after": (int, float), "sizes": dict, "processor": str, "groups": dict,
                  "confirm_after": (int, float), "unconfirmed": str},
@@ -278,13 +278,16 @@ def load_config(path: str | Path) -> MonitorConfig:
                 raise DataError(f"config: [[{sec}]] number {i + 1} needs an 'artifact' name")
         stages[sec] = [it["artifact"] for it in items]
     declarative = "plant" in raw.get("design", {})
+    if "detect" in raw.get("design", {}) and not declarative:
+        raise DataError("config: [design.detect] smooths a declarative [design.plant]'s features; a recipe "
+                        "makes its own processors")
     identified = [c.name for c in chans if c.offset_identified]
     if identified and not (isinstance(raw.get("design", {}).get("plant"), dict)
                            and "identify" in raw["design"]["plant"]):
         raise DataError(f"config: [channels.{identified[0]}].offset = \"identified\" needs an identified "
                         "plant ([design.plant] identify = {...})")
     if declarative:
-        from .declarative import DESIGN_KEYS, GENERATORS, PROCESSORS, decision_for
+        from .declarative import DESIGN_KEYS, GENERATORS, decision_for, processors_for
 
         for key in DESIGN_KEYS:
             if key in raw["design"] and not isinstance(raw["design"][key], dict):
@@ -292,7 +295,7 @@ def load_config(path: str | Path) -> MonitorConfig:
         if raw["design"].get("recipe"):
             raise DataError("config: [design] declares a plant and a recipe; give one of them")
         if not stages["generators"] and not stages["processors"]:
-            stages["generators"], stages["processors"] = list(GENERATORS), list(PROCESSORS)
+            stages["generators"], stages["processors"] = list(GENERATORS), processors_for(raw["design"])
     if not stages["generators"]:
         raise DataError("config: at least one [[generators]] entry is needed (or a declarative "
                         "[design.plant], which makes them)")

@@ -53,6 +53,10 @@ The ``[design]`` table of a monitor config (:mod:`fdikit.monitor.config`) may de
                                        # and every claimed rate is measured on held-out data
     # accept_miscalibrated = true      # keep a design whose held-out rate misses its interval
 
+    [design.detect]                    # optional: the EWMA of every feature before the hold,
+    smoothing = "ewma"                 # limits on the nominal logs' fit halves; lambda = "auto":
+    lambda = "auto"                    # the strongest smoothing they support (declarative_smoothing)
+
     [design.alarm]                     # the false-alarm target
     pfa = 1e-3                         # per "hour": expected false alarms (onsets) per hour;
     per = "hour"                       # per "sample" or "run": a probability in (0, 1)
@@ -83,7 +87,7 @@ from ..signals import Signals
 
 __all__ = ["DESIGN_KEYS", "GENERATORS", "PROCESSORS", "AlarmTarget", "alarm_from_config", "decision_for",
            "design_monitor", "estimate_noise", "identification_from_config", "import_object",
-           "noise_from_config", "plant_from_config", "sample_time"]
+           "noise_from_config", "plant_from_config", "processors_for", "sample_time"]
 
 #: Keys of the declarative ``[design]`` sub-tables and their types.
 DESIGN_KEYS: dict[str, dict[str, type | tuple[type, ...]]] = {
@@ -96,6 +100,7 @@ DESIGN_KEYS: dict[str, dict[str, type | tuple[type, ...]]] = {
               "time": str},
     "alarm": {"pfa": (int, float), "per": str, "run_length": (int, float), "hold": int},
     "structure": {},
+    "detect": {"smoothing": str, "lambda": (int, float, str), "candidates": list},
 }
 
 
@@ -577,6 +582,16 @@ GENERATORS = ["bank"]
 PROCESSORS = ["features", "hold", "isolate"]
 
 
+def processors_for(design: Mapping[str, Any], *, where: str = "design") -> list[str]:
+    """The processor artifacts of a declarative design: :data:`PROCESSORS`, with ``"smooth"`` (the
+    EWMA of the features) before the hold when ``[design.detect]`` smoothing = "ewma"."""
+    from .declarative_smoothing import smoothing_from_config
+
+    if smoothing_from_config(design, where=where).active:
+        return ["features", "smooth", "hold", "isolate"]
+    return list(PROCESSORS)
+
+
 def sample_time(design: Mapping[str, Any], model: LinearFaultModel, *, where: str = "design") -> float:
     """The monitor's sample time: ``[design].sample_time``, or the discrete plant's ``dt``."""
     dt = design.get("sample_time")
@@ -657,8 +672,10 @@ def design_monitor(design: Mapping[str, Any], base_dir: str | Path = ".", *, whe
     from ..detect import Hold
     from ..isolate import SignatureDecision
     from ..residuals import design_residual_bank
+    from .declarative_smoothing import smoothing_from_config
     from .declarative_thresholds import logged_thresholds, simulated_thresholds
 
+    smoothing = smoothing_from_config(design, where=where)
     model, ident, id_logs = _plant(design, base_dir, where, log)
     noise = noise_from_config(design, model, base_dir, where=where, identification=ident, log=log)
     alarm = alarm_from_config(design, where=where)
@@ -691,19 +708,23 @@ def design_monitor(design: Mapping[str, Any], base_dir: str | Path = ".", *, whe
                                accept_miscalibrated=bool(design.get("accept_miscalibrated", False)),
                                fallback=not nominal,
                                source="[design].nominal_log" if nominal else
-                               "the logs the plant was identified from ([design.plant].identify.logs)")
+                               "the logs the plant was identified from ([design.plant].identify.logs)",
+                               smoothing=smoothing)
+    elif smoothing.active:
+        raise DataError(f"config: [{where}.detect].smoothing = \"ewma\" sets its limits on real nominal "
+                        f"logs: give [{where}].nominal_log (or identify the plant from logs)")
     else:         # simulated noise of the declared model: the rates are model-based
         th = simulated_thresholds(md, raw, groups, R, Q, alarm, dt, nominal_hours=nominal_hours, seed=seed)
     white, feats, thr, td = th["white"], th["features"], th["thr"], th["td"]
-    hold = Hold(feats.output_names, thr if thr.size > 1 else float(thr[0]), Z=alarm.hold, absolute=True)
+    names = th.get("names") or list(feats.output_names)
+    hold = Hold(names, thr if thr.size > 1 else float(thr[0]), Z=alarm.hold, absolute=True)
     sig = bank.signature
     iso = SignatureDecision(np.asarray(sig.matrix, int), list(sig.faults), hold.output_names)
     report = {"faults": list(sig.faults), "residuals": list(bank.residual_names),
               "signature": np.asarray(sig.matrix, int).tolist(), "isolability": str(bank.isolability()),
               "weak": weak, "sample_time": dt,
               "alarm": {"pfa": alarm.pfa, "per": alarm.per, "hold": alarm.hold},
-              "thresholds": dict(zip(feats.output_names, thr.tolist() if thr.size > 1 else
-                                     [float(thr[0])] * len(feats.output_names))),
+              "thresholds": dict(zip(names, thr.tolist() if thr.size > 1 else [float(thr[0])] * len(names))),
               "threshold_design": {k: v for k, v in td.items() if k != "threshold"
                                    and not isinstance(v, np.ndarray)},
               "claims": th["claims"]}
@@ -724,6 +745,10 @@ def design_monitor(design: Mapping[str, Any], base_dir: str | Path = ".", *, whe
         report["identification"] = {k: i[k] for k in ("method", "order", "criterion", "order_scores", "fit",
                                                       "fit_per_record", "u_offset", "y_offset", "records",
                                                       "integrators", "kalman") if k in i}
+    if th.get("smooth") is not None:
+        report["smoothing"] = td["smoothing"]
+        return {"bank": white, "features": feats, "smooth": th["smooth"], "hold": hold, "isolate": iso,
+                "_report": report}
     return {"bank": white, "features": feats, "hold": hold, "isolate": iso, "_report": report}
 
 

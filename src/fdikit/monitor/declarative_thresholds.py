@@ -187,7 +187,8 @@ def _halves(x: np.ndarray, warm: int) -> tuple[slice, slice]:
 
 def logged_thresholds(raw, groups: dict[str, list[str]], alarm, dt: float, nominal: list,
                       *, accept_miscalibrated: bool = False, level: float = 0.95,
-                      fallback: bool = False, source: str = "[design].nominal_log") -> dict[str, Any]:
+                      fallback: bool = False, source: str = "[design].nominal_log",
+                      smoothing=None) -> dict[str, Any]:
     """Whitening and thresholds set on real nominal logs, time-blocked, with claims measured on
     held-out data.
 
@@ -222,12 +223,19 @@ def logged_thresholds(raw, groups: dict[str, list[str]], alarm, dt: float, nomin
         threshold data.
     source : str
         What the logs are, for messages.
+    smoothing : SmoothingSpec, optional
+        ``[design.detect]`` (:func:`fdikit.monitor.declarative_smoothing.smoothing_from_config`):
+        when active, the thresholds are those of the EWMA of the features, set on the fit halves
+        (:func:`~fdikit.monitor.declarative_smoothing.smoothed_thresholds`; never the chi bound), and
+        the held-out halves are smoothed the same way (each half from the EWMA's start) to measure
+        them.
 
     Returns
     -------
     dict
         As :func:`simulated_thresholds`, with ``claims`` carrying ``measured`` (the held-out
-        measurement) and ``verdict``, and ``records``/``fit_hours``/``measure_hours``.
+        measurement) and ``verdict``, and ``records``/``fit_hours``/``measure_hours``; ``smooth``
+        (the :class:`~fdikit.detect.EWMA` stage or None) and ``names`` (the hold's inputs).
 
     Raises
     ------
@@ -286,10 +294,34 @@ def logged_thresholds(raw, groups: dict[str, list[str]], alarm, dt: float, nomin
     f_fit = [features(p[0]) for p in parts]
     f_meas = [features(p[1]) for p in parts]
     per = _per(alarm)
+    names, smooth = list(feats.output_names), None
+    if smoothing is not None and smoothing.active:
+        from .declarative_smoothing import smoothed_thresholds
+
+        sm = smoothed_thresholds(smoothing, names, f_fit, alarm, dt, level=level, source=source)
+        smooth, names, thr, td = sm["ewma"], sm["names"], sm["thr"], sm["td"]
+        claims = _claims(names, td, alarm, f"nominal logs ({td['method']}, EWMA lambda "
+                                           f"{td['smoothing']['lambda']:g})")
+        f_meas = [smooth.run(f) for f in f_meas]
+        ne = np.atleast_1d(td.get("effective_samples", np.nan)).astype(float)
+        tau = np.atleast_1d(td.get("tau", np.nan)).astype(float)
+        for c in claims:
+            c["smoothing"] = {"kind": "ewma", "lambda": td["smoothing"]["lambda"]}
+            i = names.index(c["channels"][0][:-len(":alarm")]) if c["kind"] == "threshold" else None
+            n_i = ne[min(i, ne.size - 1)] if i is not None else float(np.min(ne))
+            t_i = tau[min(i, tau.size - 1)] if i is not None else float(np.max(tau))
+            c["rests_on"] = (f"the EWMA (lambda {td['smoothing']['lambda']:g}, {td['smoothing']['chosen']}) "
+                             f"of the features on the fit halves of {len(parts)} nominal record(s): "
+                             f"{n_i:.0f} effective samples at an autocorrelation time of {t_i:.1f} samples "
+                             "(the EWMA's, the data's and the records' own levels, the largest); measured "
+                             "on the held-out halves, smoothed the same way")
+    else:
+        thr = td = claims = None
     try:
-        td = dict(design_threshold(f_fit, alarm.pfa, per=per, Z=alarm.hold, dt=dt, family_wise=True))
-        thr = np.atleast_1d(np.asarray(td["threshold"], float))
-        claims = _claims(feats.output_names, td, alarm, "nominal logs")
+        if td is None:
+            td = dict(design_threshold(f_fit, alarm.pfa, per=per, Z=alarm.hold, dt=dt, family_wise=True))
+            thr = np.atleast_1d(np.asarray(td["threshold"], float))
+            claims = _claims(feats.output_names, td, alarm, "nominal logs")
     except DataError as exc:
         conf = _conformal(feats.output_names, f_fit, alarm, level) if per == "sample" and alarm.hold == 1 \
             else None
@@ -311,7 +343,7 @@ def logged_thresholds(raw, groups: dict[str, list[str]], alarm, dt: float, nomin
                           f"{p_each:.3g} per residual; the held-out halves measure it (give more nominal "
                           "logs, [design].nominal_log, to set the thresholds on data)", UserWarning,
                           stacklevel=3)
-    hold = Hold(feats.output_names, thr, Z=alarm.hold, absolute=True)
+    hold = Hold(names, thr, Z=alarm.hold, absolute=True)
     alarms = [hold.run(f).values[0] for f in f_meas]     # (T_i, channels)
     for c in claims:
         if c["kind"] == "decision":
@@ -335,5 +367,6 @@ def logged_thresholds(raw, groups: dict[str, list[str]], alarm, dt: float, nomin
         warnings.warn(f"design: {msg}. Kept because [design].accept_miscalibrated = true", UserWarning,
                       stacklevel=3)
     return {"white": white, "features": feats, "thr": thr, "td": td, "claims": claims, "records": len(parts),
+            "smooth": smooth, "names": names,
             "fit_hours": sum(f.n_samples for f in f_fit) * dt / 3600.0,
             "measure_hours": sum(f.n_samples for f in f_meas) * dt / 3600.0}
