@@ -255,12 +255,12 @@ def emit_monitor(mon: Any, *, name: str = "fdk_monitor", precision: str = "doubl
           f"{{ status = {N}_OK; if (s->reset_due[0]) {{ fdk_reset_processors(s); s->reset_due[0] = 0; }} }}",
           *body]
     if dec is not None:
-        c += ["    {", f"        fdk_real v[{A}];",
-              f"        for (i = 0; i < {A}; ++i) v[i] = pool[FDK_EP_DEC[i]];",
-              f"        if (status == {N}_OK) fdk_decide(s, t, v, pool, events, n_events);",
+        c += ["    {",
+              f"        if (status == {N}_OK) fdk_decide(s, t, pool, events, n_events);",
               f"        if (status == {N}_WARMUP && s->quiet[0] >= 0) {{",
               "            int quiet = 1;",
-              f"            for (i = 0; i < {A}; ++i) if (!(v[i] < {rl(dec.low_level)})) quiet = 0;",
+              f"            for (i = 0; i < {A}; ++i)",
+              f"                if (!(pool[FDK_EP_DEC[i]] < {rl(dec.low_level)})) quiet = 0;",
               "            s->quiet[0] = quiet ? s->quiet[0] + 1 : 0;",
               f"            if (s->warm_min[0] == 0 && s->quiet[0] >= {n_clear}) s->warm_left[0] = 0;",
               "        }", "    }"]
