@@ -207,10 +207,17 @@ class EpisodeCode:
             c += [f"    int rise[{H}], chg[{A}], h, n_rise = 0, n_chg = 0;"]
         c += ["    for (j = 0; j < FDK_EP_W; ++j) { on[j] = 0; hi[j] = 0; }",
               "    /* per alarm channel: at or above the level, not below the clear level */"]
+        # (clear_level <= level, so a value at the level is not below the clear level: the usual
+        # value, below both, costs one comparison; rounding to float keeps the order)
+        nested = self.dec.low_level <= self.dec.level
         for a, p in enumerate(self.dec_idx):
             bit = f"UINT64_C({1 << (a & 63):#x})"
-            c += [f"    if (pool[{p}] >= {lvl}) on[{a >> 6}] |= {bit};",
-                  f"    if (!(pool[{p}] < {low})) hi[{a >> 6}] |= {bit};"]
+            if nested:
+                c += [f"    if (!(pool[{p}] < {low})) {{ hi[{a >> 6}] |= {bit}; "
+                      f"if (pool[{p}] >= {lvl}) on[{a >> 6}] |= {bit}; }}"]
+            else:
+                c += [f"    if (pool[{p}] >= {lvl}) on[{a >> 6}] |= {bit};",
+                      f"    if (!(pool[{p}] < {low})) hi[{a >> 6}] |= {bit};"]
         if self.n_confirm > 0:
             c += self._confirm_code()
         if not self.simple:   # per name: on, and turned on since the last judged sample
