@@ -273,3 +273,24 @@ def test_more_than_64_channels_c_equals_python(wide, key):
     st = c_to_py_state(c64.layout, c64.checkpoint(), mon, em)
     for k, v in mon.state()["episodes"].items():
         assert np.array_equal(st["episodes"][k], v), k
+
+
+def test_restore_over_another_record_rebuilds_the_names(built):
+    """The C decision skips the names' pass while the same channels are on as at the last judged
+    sample; a restored state (here over a C monitor that ran another record, ending with the same
+    channels on) must not inherit that shortcut: the rise of x:bias after the cut is a change."""
+    mon, _gen, c64, _c32, em = built
+    T, cut = 400, 200
+    t = np.arange(T) * DT
+    xa, xb = np.zeros((T, len(CH))), np.zeros((T, len(CH)))
+    xa[150:T, CH.index("c")] = xa[150:T, CH.index("a")] = 1.0   # record A: x and x:bias on before the cut
+    xb[150:300, CH.index("c")] = 1.0                             # record B: x open, x:bias on at the cut
+    xb[cut:260, CH.index("a")] = 1.0
+    full_out, full_ev = _py(mon, t, xb)
+    assert (cut, "change", "x:bias") in [e[:3] for e in full_ev]
+    _py(mon, t[:cut], xb[:cut])
+    c64.run(t[:cut], xa[:cut])
+    c64.restore(py_to_c_state(c64.layout, mon.state(), em))
+    res = c64.run(t[cut:], xb[cut:], reset=False)
+    assert _c(res) == [e for e in full_ev if e[0] >= cut]
+    assert np.array_equal(res["out"], full_out[cut:])

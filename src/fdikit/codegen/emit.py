@@ -136,6 +136,7 @@ def emit_monitor(mon: Any, *, name: str = "fdk_monitor", precision: str = "doubl
          f"}} {name}_event;", "", "typedef struct {"]
     h += [f"    {_ctype(f.kind).replace('fdk_real', name + '_real')} {f.name}[{f.n}];" for f in fields]
     h += ["    int64_t last_gap;  /* samples missing in the gap that ended at the last step (0: none) */",
+          *(epi.cache_members() if epi is not None else []),
           f"}} {name}_state;", "",
           f"void {name}_init({name}_state *s);",
           f"void {name}_reset({name}_state *s);",
@@ -206,7 +207,8 @@ def emit_monitor(mon: Any, *, name: str = "fdk_monitor", precision: str = "doubl
         off += f.n
     c += [f"void {name}_checkpoint(const {name}_state *s, double *buf)", "{", "    int i;", *ck, "}", "",
           f"void {name}_restore({name}_state *s, const double *buf)", "{", "    int i;", *rs,
-          "    s->last_gap = 0;", "}", ""]
+          "    s->last_gap = 0;", *([epi.restore_code()] if epi is not None and epi.restore_code() else []),
+          "}", ""]
     # hold: components keep their state, outputs repeat the last good ones
     c += [f"static int fdk_hold({name}_state *s, double *out, int has_t, double t)", "{", "    int i;",
           "    s->held[0] += 1;",

@@ -80,8 +80,23 @@ class EpisodeCode:
                 Field("cur", "i64", U), Field("prev_on", "i64", H),
                 *([Field("confirm", "i64", self.T)] if self.n_confirm > 0 else [])]
 
+    def cache_members(self) -> list[str]:
+        """State struct members outside the checkpoint: the alarm channels on at the last judged
+        sample (after the wait), valid since the last reset and not after a restore; the names' on
+        and off (``prev_on``) follow from them, so an unchanged mask skips the names' pass."""
+        if self.simple:
+            return []
+        return [f"    uint64_t ep_on_last[{self.W}];  /* (a cache: not in the checkpoint) */",
+                "    int64_t ep_on_valid;"]
+
+    def restore_code(self) -> str:
+        """After a restore the cache is rebuilt at the next judged sample."""
+        return "" if self.simple else "    s->ep_on_valid = 0;"
+
     def reset_code(self) -> str:
-        return (f"    for (i = 0; i < {max(self.U, 1)}; ++i) "
+        cache = "" if self.simple else (f"    for (i = 0; i < {self.W}; ++i) s->ep_on_last[i] = 0;\n"
+                                        "    s->ep_on_valid = 1;\n")
+        return (cache + f"    for (i = 0; i < {max(self.U, 1)}; ++i) "
                 "{ s->active[i] = 0; s->below[i] = 0; s->ep_id[i] = 0; s->cur[i] = 0; }\n"
                 f"    for (i = 0; i < {max(self.H, 1)}; ++i) s->prev_on[i] = 0;"
                 + (f"\n    for (i = 0; i < {self.T}; ++i) s->confirm[i] = -1;" if self.n_confirm > 0 else ""))
@@ -221,11 +236,17 @@ class EpisodeCode:
         if self.n_confirm > 0:
             c += self._confirm_code()
         if not self.simple:   # per name: on, and turned on since the last judged sample
-            c += [f"    for (h = 0; h < {H}; ++h) {{",
-                  "        int o = fdk_ep_any(on, FDK_EP_HM + h * FDK_EP_W);",
-                  "        rise[h] = o && !s->prev_on[h];",
-                  "        n_rise += rise[h];",
-                  "        s->prev_on[h] = o;", "    }"]
+            c += ["    /* (the same channels on as at the last judged sample: the names are as they were) */",
+                  "    i = !s->ep_on_valid;",
+                  "    for (j = 0; j < FDK_EP_W; ++j) if (on[j] != s->ep_on_last[j]) i = 1;",
+                  "    if (i) {",
+                  f"        for (h = 0; h < {H}; ++h) {{",
+                  "            int o = fdk_ep_any(on, FDK_EP_HM + h * FDK_EP_W);",
+                  "            rise[h] = o && !s->prev_on[h];",
+                  "            n_rise += rise[h];",
+                  "            s->prev_on[h] = o;", "        }",
+                  "        for (j = 0; j < FDK_EP_W; ++j) s->ep_on_last[j] = on[j];",
+                  "        s->ep_on_valid = 1;", "    }"]
         c += [f"    for (u = 0; u < {U}; ++u) {{",
               "        on_u[u] = fdk_ep_any(on, FDK_EP_UM + u * FDK_EP_W);",
               "        if (on_u[u] || s->active[u]) any = 1;", "    }",
