@@ -108,12 +108,17 @@ class FilterEmitter(StageEmitter):
 
     def step_code(self, inp, out):
         nf, q = self.nf, self.q
-        decl = f"fdk_real z[{max(nf + self.m, 1)}], " + (f"nx[{nf}], " if nf else "") + "acc;"
+        # (the state is read in place, the inputs through z: every new state is computed before
+        # the state is written, so no row sees a new value)
+        decl = f"fdk_real z[{max(self.m, 1)}], " + (f"nx[{nf}], " if nf else "") + "acc;"
         lines = ["    {", f"        {decl}"]
-        lines += [f"        z[{a}] = {self.f('xi')}[{a}];" for a in range(nf)]
-        lines += [f"        z[{nf + j}] = {e};" for j, e in enumerate(inp)]
+        lines += [f"        z[{j}] = {e};" for j, e in enumerate(inp)]
+        xi = self.f("xi")
+
+        def z(col):
+            return f"{xi}[{col}]" if col < nf else f"z[{col - nf}]"
         for row in range(q + nf):
-            terms = [f"        acc += {rl(self.val[e])} * z[{self.col[e]}];"
+            terms = [f"        acc += {rl(self.val[e])} * {z(self.col[e])};"
                      for e in range(self.ptr[row], self.ptr[row + 1])]
             dst = out[row] if row < q else f"nx[{row - q}]"
             lines += ["        acc = FDK_R(0.0);", *terms, f"        {dst} = acc;"]
