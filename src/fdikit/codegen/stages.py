@@ -43,6 +43,31 @@ def rl(x: float) -> str:
     return f"FDK_R({lit(x)})"
 
 
+def refuse_nonfinite(var: str, n: int, idx: str = "i", test: str = "FDK_FINITE") -> str:
+    """The C statement refusing a stage's inputs ``var[0..n)`` when one is not finite (``return
+    FDK_ERR_STAT``, before any state change, as the Python stage raises).
+
+    Parameters
+    ----------
+    var : str
+        The C array of the inputs.
+    n : int
+        How many.
+    idx : str
+        The (declared) loop variable; it ends at ``n``.
+    test : str
+        The finiteness macro or function (``FDK_FINITE`` or ``isfinite``).
+
+    Returns
+    -------
+    str
+        One line (indented for a stage's block): every element is tested and the flags or-ed, then
+        one branch, instead of a branch per element.
+    """
+    return (f"        {{ int bad = 0; for ({idx} = 0; {idx} < {n}; ++{idx}) bad |= !{test}({var}[{idx}]); "
+            "if (bad) return FDK_ERR_STAT; }")
+
+
 class StageEmitter:
     """Base of the stage emitters. ``prefix`` names the stage's fields in the state struct."""
 
