@@ -192,3 +192,105 @@ def test_subset_keeps_the_groups():
     sub = subset_monitor(mon, 1, alarms=["ra:alarm", "rc:alarm", "rd:alarm"])
     assert sub.decision.groups == {"x": ["x", "x:bias"]}
     assert subset_monitor(mon, 1, alarms=["rd:alarm"]).decision.groups is None
+
+
+# ---------------------------------------------------------------- more than 64 alarm channels
+#: 70 channels in 10 groups of 7 (the last group straddles the 64-bit word boundary of the
+#: generated masks): the group's own name, a name of two channels, two more specific names and two
+#: names outside every group.
+WIDE = [f"w{j:02d}" for j in range(70)]
+
+
+def _wide_monitor(confirm_after=0.0, unconfirmed="announce"):
+    n = len(WIDE)
+    d = FilterDesign(np.zeros((0, 0)), np.zeros((0, 0)), np.zeros((0, n)), np.zeros((n, 0)), np.zeros((n, 0)),
+                     np.eye(n), DT, [], WIDE, [f"r{c}" for c in WIDE])
+    hold = Hold([f"r{c}" for c in WIDE], 0.5, Z=1, absolute=False)
+    kinds = ["", ":bias", ":bias", ":gain", ":drift"]
+    names, groups = {}, {}
+    for j in range(70):
+        g, i = divmod(j, 7)
+        names[f"r{WIDE[j]}:alarm"] = f"g{g}{kinds[i]}" if i < 5 else f"n{j}"
+        groups[f"g{g}"] = [f"g{g}{k}" for k in dict.fromkeys(kinds)]
+    dec = Decision([f"r{c}:alarm" for c in WIDE], 0.5, names, clear_after=0.1,
+                   size_channels={"g9:gain": "rw01", "g0:bias": "rw66"}, groups=groups,
+                   confirm_after=confirm_after, unconfirmed=unconfirmed)
+    return Monitor([FaultDetectionFilter(d)], [hold], dec, on_invalid="hold", dt=DT)
+
+
+def _wide_random(seed, T=2500):
+    """Bursts per group (its channels switching on and off inside the burst) and a gap."""
+    rng = np.random.default_rng(seed)
+    x = rng.normal(scale=0.05, size=(T, len(WIDE)))
+    for g in range(10):
+        for a in rng.integers(0, T - 80, size=8):
+            for j in rng.choice(7, size=rng.integers(1, 4), replace=False):
+                b = a + rng.integers(0, 20)
+                x[b:b + rng.integers(1, 50), 7 * g + j] = rng.uniform(0.6, 2.0)
+    x[900, 66] = np.nan
+    t = np.arange(T) * DT
+    t[1500:] += 0.05
+    return t, x
+
+
+def _wide_py(mon, t, x, k0=0):
+    if k0 == 0:
+        mon.reset(1)
+    out, ev = [], []
+    for k in range(k0, len(t)):
+        r, s, e = mon.step(float(t[k]), x[k][None], WIDE)
+        out.append(np.concatenate([r[0], s[0]]))
+        ev += [(e_.k, e_.kind, e_.hypothesis, e_.episode, e_.value, e_.size, e_.previous) for e_ in e]
+    return np.array(out), ev
+
+
+@pytest.fixture(scope="module")
+def wide(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("wide")
+    out = {}
+    for key, kw in {"plain": {}, "drop": {"confirm_after": 0.1, "unconfirmed": "drop"}}.items():
+        mon = _wide_monitor(**kw)
+        out[key] = (mon, *_build(mon, tmp / key, f"fdk_wide_{key}", f32=False))
+    return out
+
+
+@pytest.mark.parametrize("key", ["plain", "drop"])
+def test_more_than_64_channels_c_equals_python(wide, key):
+    """Two words of channel masks: onsets, changes and cleared events of every group (the last
+    straddling the words), sizes from either word, the wait of the groups' own names."""
+    mon, gen, c64, _c32, em = wide[key]
+    assert "#define FDK_EP_W 2" in (Path(gen["files"][0]).parent / f"fdk_wide_{key}.c").read_text()
+    t, x = _wide_random(5)
+    py_out, py_ev = _wide_py(mon, t, x)
+    res = c64.run(t, x)
+    assert np.array_equal(res["out"], py_out)
+    assert _c(res) == py_ev
+    kinds = {e[1] for e in py_ev}
+    assert kinds == {"onset", "cleared", "change"} and len(py_ev) > 100
+    assert {e[2].split(":")[0] for e in py_ev} >= {"g9", "g0", "n68"}
+    assert any(e[5] is not None and e[2] == "g9:gain" for e in py_ev)
+    # the state after the record (episodes, names on, waits) equals the streaming path's
+    st = c_to_py_state(c64.layout, c64.checkpoint(), mon, em)
+    for k, v in mon.state()["episodes"].items():
+        assert np.array_equal(st["episodes"][k], v), k
+
+
+def test_restore_over_another_record_rebuilds_the_names(built):
+    """The C decision skips the names' pass while the same channels are on as at the last judged
+    sample; a restored state (here over a C monitor that ran another record, ending with the same
+    channels on) must not inherit that shortcut: the rise of x:bias after the cut is a change."""
+    mon, _gen, c64, _c32, em = built
+    T, cut = 400, 200
+    t = np.arange(T) * DT
+    xa, xb = np.zeros((T, len(CH))), np.zeros((T, len(CH)))
+    xa[150:T, CH.index("c")] = xa[150:T, CH.index("a")] = 1.0   # record A: x and x:bias on before the cut
+    xb[150:300, CH.index("c")] = 1.0                             # record B: x open, x:bias on at the cut
+    xb[cut:260, CH.index("a")] = 1.0
+    full_out, full_ev = _py(mon, t, xb)
+    assert (cut, "change", "x:bias") in [e[:3] for e in full_ev]
+    _py(mon, t[:cut], xb[:cut])
+    c64.run(t[:cut], xa[:cut])
+    c64.restore(py_to_c_state(c64.layout, mon.state(), em))
+    res = c64.run(t[cut:], xb[cut:], reset=False)
+    assert _c(res) == [e for e in full_ev if e[0] >= cut]
+    assert np.array_equal(res["out"], full_out[cut:])

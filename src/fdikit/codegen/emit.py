@@ -136,6 +136,7 @@ def emit_monitor(mon: Any, *, name: str = "fdk_monitor", precision: str = "doubl
          f"}} {name}_event;", "", "typedef struct {"]
     h += [f"    {_ctype(f.kind).replace('fdk_real', name + '_real')} {f.name}[{f.n}];" for f in fields]
     h += ["    int64_t last_gap;  /* samples missing in the gap that ended at the last step (0: none) */",
+          *(epi.cache_members() if epi is not None else []),
           f"}} {name}_state;", "",
           f"void {name}_init({name}_state *s);",
           f"void {name}_reset({name}_state *s);",
@@ -206,7 +207,8 @@ def emit_monitor(mon: Any, *, name: str = "fdk_monitor", precision: str = "doubl
         off += f.n
     c += [f"void {name}_checkpoint(const {name}_state *s, double *buf)", "{", "    int i;", *ck, "}", "",
           f"void {name}_restore({name}_state *s, const double *buf)", "{", "    int i;", *rs,
-          "    s->last_gap = 0;", "}", ""]
+          "    s->last_gap = 0;", *([epi.restore_code()] if epi is not None and epi.restore_code() else []),
+          "}", ""]
     # hold: components keep their state, outputs repeat the last good ones
     c += [f"static int fdk_hold({name}_state *s, double *out, int has_t, double t)", "{", "    int i;",
           "    s->held[0] += 1;",
@@ -255,12 +257,12 @@ def emit_monitor(mon: Any, *, name: str = "fdk_monitor", precision: str = "doubl
           f"{{ status = {N}_OK; if (s->reset_due[0]) {{ fdk_reset_processors(s); s->reset_due[0] = 0; }} }}",
           *body]
     if dec is not None:
-        c += ["    {", f"        fdk_real v[{A}];",
-              f"        for (i = 0; i < {A}; ++i) v[i] = pool[FDK_EP_DEC[i]];",
-              f"        if (status == {N}_OK) fdk_decide(s, t, v, pool, events, n_events);",
+        c += ["    {",
+              f"        if (status == {N}_OK) fdk_decide(s, t, pool, events, n_events);",
               f"        if (status == {N}_WARMUP && s->quiet[0] >= 0) {{",
               "            int quiet = 1;",
-              f"            for (i = 0; i < {A}; ++i) if (!(v[i] < {rl(dec.low_level)})) quiet = 0;",
+              f"            for (i = 0; i < {A}; ++i)",
+              f"                if (!(pool[FDK_EP_DEC[i]] < {rl(dec.low_level)})) quiet = 0;",
               "            s->quiet[0] = quiet ? s->quiet[0] + 1 : 0;",
               f"            if (s->warm_min[0] == 0 && s->quiet[0] >= {n_clear}) s->warm_left[0] = 0;",
               "        }", "    }"]

@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from .registry import class_path, register_emitter
-from .stages import Field, StageEmitter, lit
+from .stages import Field, StageEmitter, lit, refuse_nonfinite
 
 __all__ = ["FTC_HELPERS", "FaultTypeEmitter"]
 
@@ -276,7 +276,7 @@ class FaultTypeEmitter(StageEmitter):
                  "        int64_t i, slot, done, j, c, k;",
                  "        int is_stuck, iso, decide;"]
         lines += [f"        v[{i}] = (double){e};" for i, e in enumerate(inp)]
-        lines += [f"        for (j = 0; j < {n_in}; ++j) if (!isfinite(v[j])) return FDK_ERR_STAT;",
+        lines += [refuse_nonfinite("v", n_in, "j", "isfinite"),
                   f"        k = {f('k')}[0];",
                   f"        i = k % {B};",
                   f"        slot = (k / {B}) % {NR};",

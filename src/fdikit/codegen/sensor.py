@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 
 from .registry import class_path, register_emitter
-from .stages import Field, StageEmitter, rl
+from .stages import Field, StageEmitter, refuse_nonfinite, rl
 
 __all__ = ["MEDIAN_HELPER", "PeerCUSUMEmitter", "PeerCheckEmitter", "StuckEmitter", "median_code"]
 
@@ -129,7 +129,7 @@ class PeerCheckEmitter(StageEmitter):
         lines = ["    {", f"        fdk_real px[{n_in}], e[{M}], st[{M}], iso[{M}], med;",
                  "        int i;"]
         lines += [f"        px[{i}] = {v};" for i, v in enumerate(inp)]
-        lines += [f"        for (i = 0; i < {n_in}; ++i) if (!FDK_FINITE(px[i])) return FDK_ERR_STAT;"]
+        lines += [refuse_nonfinite("px", n_in)]
         for j in range(M):
             c = o._c[j]
             lines += median_code("med", [f"px[{int(p)}]" for p in o._peers[j]])
@@ -195,7 +195,7 @@ class PeerCUSUMEmitter(StageEmitter):
         up, lo, k = f("up"), f("lo"), f("k")
         lines = ["    {", f"        fdk_real px[{len(inp)}], g[{M}], iso[{M}], x;", "        int i;"]
         lines += [f"        px[{i}] = {v};" for i, v in enumerate(inp)]
-        lines += [f"        for (i = 0; i < {len(inp)}; ++i) if (!FDK_FINITE(px[i])) return FDK_ERR_STAT;",
+        lines += [refuse_nonfinite("px", len(inp)),
                   f"        {k}[0] += 1;", f"        if ({k}[0] > {int(o.warmup)}) {{"]
         # np.maximum(0.0, x): 0.0 where 0.0 >= x, else x; (up + (e - mu)) - nu, (lo - (e - mu)) - nu
         for j in range(M):

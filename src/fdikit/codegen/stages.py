@@ -43,6 +43,31 @@ def rl(x: float) -> str:
     return f"FDK_R({lit(x)})"
 
 
+def refuse_nonfinite(var: str, n: int, idx: str = "i", test: str = "FDK_FINITE") -> str:
+    """The C statement refusing a stage's inputs ``var[0..n)`` when one is not finite (``return
+    FDK_ERR_STAT``, before any state change, as the Python stage raises).
+
+    Parameters
+    ----------
+    var : str
+        The C array of the inputs.
+    n : int
+        How many.
+    idx : str
+        The (declared) loop variable; it ends at ``n``.
+    test : str
+        The finiteness macro or function (``FDK_FINITE`` or ``isfinite``).
+
+    Returns
+    -------
+    str
+        One line (indented for a stage's block): every element is tested and the flags or-ed, then
+        one branch, instead of a branch per element.
+    """
+    return (f"        {{ int bad = 0; for ({idx} = 0; {idx} < {n}; ++{idx}) bad |= !{test}({var}[{idx}]); "
+            "if (bad) return FDK_ERR_STAT; }")
+
+
 class StageEmitter:
     """Base of the stage emitters. ``prefix`` names the stage's fields in the state struct."""
 
@@ -108,12 +133,17 @@ class FilterEmitter(StageEmitter):
 
     def step_code(self, inp, out):
         nf, q = self.nf, self.q
-        decl = f"fdk_real z[{max(nf + self.m, 1)}], " + (f"nx[{nf}], " if nf else "") + "acc;"
+        # (the state is read in place, the inputs through z: every new state is computed before
+        # the state is written, so no row sees a new value)
+        decl = f"fdk_real z[{max(self.m, 1)}], " + (f"nx[{nf}], " if nf else "") + "acc;"
         lines = ["    {", f"        {decl}"]
-        lines += [f"        z[{a}] = {self.f('xi')}[{a}];" for a in range(nf)]
-        lines += [f"        z[{nf + j}] = {e};" for j, e in enumerate(inp)]
+        lines += [f"        z[{j}] = {e};" for j, e in enumerate(inp)]
+        xi = self.f("xi")
+
+        def z(col):
+            return f"{xi}[{col}]" if col < nf else f"z[{col - nf}]"
         for row in range(q + nf):
-            terms = [f"        acc += {rl(self.val[e])} * z[{self.col[e]}];"
+            terms = [f"        acc += {rl(self.val[e])} * {z(self.col[e])};"
                      for e in range(self.ptr[row], self.ptr[row + 1])]
             dst = out[row] if row < q else f"nx[{row - q}]"
             lines += ["        acc = FDK_R(0.0);", *terms, f"        {dst} = acc;"]

@@ -22,7 +22,7 @@ from ....codegen.mhsspt_c import MHSSPT_HELPERS, MHSSPTCode
 from ....codegen.registry import class_path, register_emitter
 from ....codegen.scheduled import ScheduledFilterEmitter
 from ....codegen.sensor import MEDIAN_HELPER, median_code
-from ....codegen.stages import Field, StageEmitter, lit, rl
+from ....codegen.stages import Field, StageEmitter, lit, refuse_nonfinite, rl
 from ....errors import DataError
 from ..rav4 import RAV4
 from .filters import Rav4LateralFilter
@@ -85,7 +85,7 @@ class Rav4SensorChannelsEmitter(StageEmitter):
                  f"        raw[3] = pre_fd - {rl(c['k_f'])} * pre_yaw;",
                  f"        raw[4] = pre_rd - {rl(c['k_r'])} * pre_yaw;",
                  f"        raw[5] = pre_fd - {rl(c['k_f'] / c['k_r'])} * pre_rd;",
-                 "        for (i = 0; i < 6; ++i) if (!FDK_FINITE(raw[i])) return FDK_ERR_STAT;",
+                 refuse_nonfinite("raw", 6),
                  f"        if ({self.f('started')}[0] == 0) {{"]
         for ch in range(6):
             x0 = f"raw[{ch}]" if o._first[ch] else "FDK_R(0.0)"
@@ -135,7 +135,7 @@ class Rav4PeerSignalsEmitter(StageEmitter):
         n = len(o.output_names)
         if n != 17:
             raise DataError(f"stage {type(o).__name__} with {n} outputs cannot be generated (17 expected)")
-        lines += [f"        for (i = 0; i < {n}; ++i) if (!FDK_FINITE(v[i])) return FDK_ERR_STAT;"]
+        lines += [refuse_nonfinite("v", n)]
         lines += [f"        {out[i]} = v[{i}];" for i in range(n)]
         lines.append("    }")
         return "\n".join(lines)
