@@ -100,7 +100,8 @@ def test_a_left_out_record_at_its_own_level_is_measured():
 
 def test_the_identification_log_never_measures_its_own_claim(tmp_path):
     """A nominal log that is also the identification log: its estimation samples are named in the
-    report as in-sample and no claim is measured on them (only its held-out tail is)."""
+    report as in-sample and neither set nor measure a claim (only its held-out tail does, in halves);
+    a log the plant was identified on whole is refused, naming it."""
     rng = np.random.default_rng(0)
     n = 3000
     u = rng.normal(size=n)
@@ -127,7 +128,13 @@ def test_the_identification_log_never_measures_its_own_claim(tmp_path):
     rep = d["_report"]
     assert rep["in_sample"] == {str(tmp_path / "a.csv"): [0, 2100]}     # 70 % estimates (default)
     fam = next(c for c in rep["claims"] if c["kind"] == "family")
-    assert fam["measured"]["samples"] == 900            # the held-out 30 %, not the half from 1500
+    assert fam["measured"]["samples"] == 450            # half the held-out 30 %, not the half from 1500
+    assert d["_report"]["nominal_hours_fit"] * 3600 == pytest.approx(450 * 0.02)
     assert log.n_samples == n
     # the identification's own logs as threshold data (no nominal_log) say so too
     assert list(d0["_report"]["in_sample"].values()) == [[0, 2100]]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        with pytest.raises(DataError, match=r"plant was identified on them: .*a\.csv: samples 0\.\.2099 of"):
+            design_monitor({**design, "alarm": {"pfa": 0.001, "per": "sample", "hold": 1}}, tmp_path,
+                           log={"format": "csv", "time": "t"}, nominal={str(tmp_path / "a.csv"): dev})

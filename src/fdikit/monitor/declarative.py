@@ -737,7 +737,7 @@ def design_monitor(design: Mapping[str, Any], base_dir: str | Path = ".", *, whe
                       split="each log's first half (after the filter's warm-up) fits the whitening and the "
                             "thresholds; its second half measures them; with two records or more, each "
                             "record is also left out in turn (refitted without it, measured on it); samples "
-                            "the plant was identified on never measure",
+                            "the plant was identified on (in_sample) neither fit nor measure",
                       in_sample=th["in_sample"], record_check=th["record_check"],
                       accepted_miscalibrated=any(c.get("verdict", "inside") != "inside"
                                                  for c in th["claims"]))

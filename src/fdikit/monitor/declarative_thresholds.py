@@ -320,10 +320,11 @@ def logged_thresholds(raw, groups: dict[str, list[str]], alarm, dt: float, nomin
     :func:`~fdikit.detect.design_threshold`, family-wise; the records' own levels counted in the
     claimed intervals, :func:`~fdikit.monitor.declarative_smoothing.record_tau`), its second half
     measures them. The thresholds are the fit part's. With two records or more, every record is also
-    left out in turn: whitening and thresholds are refitted on the fit halves of the others and
+    left out in turn: whitening and thresholds are refitted on the others (each whole, after the warm-up) and
     measured on the whole left-out record (after the warm-up), which the refitted design never saw;
     the pooled rate over the left-out records is a second measurement of every claim
-    (``measured_records``). Samples a plant was identified on (``in_sample``) fit but never measure.
+    (``measured_records``). Samples a plant was identified on (``in_sample``) neither fit nor measure
+    (a record with too few others is left out; none left: refused, naming the logs).
 
     Parameters
     ----------
@@ -360,7 +361,7 @@ def logged_thresholds(raw, groups: dict[str, list[str]], alarm, dt: float, nomin
     in_sample : dict, optional
         Log name -> the number of leading samples of its first run that the plant model was
         identified on (estimated from): those samples are in-sample for the model, its residuals
-        smaller there than on new data, so they never measure a claim.
+        smaller there than on new data, so they neither fit nor measure a claim.
 
     Returns
     -------
@@ -369,7 +370,7 @@ def logged_thresholds(raw, groups: dict[str, list[str]], alarm, dt: float, nomin
         halves), ``measured_records`` (on the left-out records, two records or more) and
         ``verdict`` (the worse of the two), and ``records``/``fit_hours``/``measure_hours``;
         ``smooth`` (the :class:`~fdikit.detect.EWMA` stage or None), ``names`` (the hold's inputs),
-        ``in_sample`` (log -> the samples never measured) and ``record_check`` (per left-out record:
+        ``in_sample`` (log -> the samples left out, ``[0, n]``) and ``record_check`` (per left-out record:
         its rate, or why it was not refitted).
 
     Raises
@@ -414,25 +415,35 @@ def logged_thresholds(raw, groups: dict[str, list[str]], alarm, dt: float, nomin
             where_of.append(where if r.runs == 1 else f"{where} (run {j})")
             n_in.append(int(in_sample.get(where, 0)) if j == 0 else 0)
     warm = round(10.0 / dt) if dt < 1 else 10
-    parts = []
-    for x, k0 in zip(recs, n_in):
-        w = min(x.shape[0] // 2, warm)
+    parts, kept = [], []
+    for i, (x, k0) in enumerate(zip(recs, n_in)):
+        # the samples the plant was identified on neither fit nor measure: its residuals are
+        # smaller there than on new data
+        w = max(min(x.shape[0] // 2, warm), k0)
         f, m = _halves(x, w)
         if f.stop - f.start < 2 * alarm.hold or m.stop - m.start < 2 * alarm.hold:
+            if k0:
+                continue
             raise DataError(f"a nominal log of {x.shape[0]} samples is too short: after the filter's "
                             f"warm-up ({w} samples) each half needs more than {2 * alarm.hold} samples")
-        # the model's own samples fit but never measure
-        parts.append((x[f], x[max(m.start, k0):], x[max(w, k0):]))
-    short = [i for i, p in enumerate(parts) if p[1].shape[0] < 2 * alarm.hold]
-    if len(short) == len(parts):
-        named = "; ".join(f"{where_of[i]}: samples 0..{n_in[i] - 1} of {recs[i].shape[0]}" for i in short)
-        raise DataError(f"config: {source}: no held-out sample is out of the plant model's own: the plant "
-                        f"was identified on them ({named}), where its residuals are smaller than on new "
-                        "data. "
+        parts.append((x[f], x[m], x[w:]))
+        kept.append(i)
+    own = "; ".join(f"{where_of[i]}: samples 0..{n_in[i] - 1} of {recs[i].shape[0]}"
+                    for i in range(len(recs)) if n_in[i])
+    if not parts:
+        raise DataError(f"config: {source}: too few samples out of the plant model's own: the plant was "
+                        f"identified on them ({own}), where its residuals are smaller than on new data. "
                         "Give a nominal log the plant was not identified from ([design].nominal_log), or "
                         "identify on fewer samples ([design.plant].identify.validation)")
-    d = _design_on(raw, groups, [p[0] for p in parts], alarm, dt, level=level, fallback=fallback,
-                   source=source, smoothing=smoothing)
+    names_all, where_of = where_of, [where_of[i] for i in kept]
+    try:
+        d = _design_on(raw, groups, [p[0] for p in parts], alarm, dt, level=level, fallback=fallback,
+                       source=source, smoothing=smoothing)
+    except DataError as exc:
+        if not own:
+            raise
+        raise DataError(f"{exc} (left out of the thresholds and their check, because the plant was "
+                        f"identified on them: {own})") from None
     if d["warn"]:
         warnings.warn(d["warn"], UserWarning, stacklevel=3)
     per, names, thr, td, claims, smooth = _per(alarm), d["names"], d["thr"], d["td"], d["claims"], d["smooth"]
@@ -441,7 +452,7 @@ def logged_thresholds(raw, groups: dict[str, list[str]], alarm, dt: float, nomin
         f = dd["featurise"](x)
         return dd["smooth"].run(f) if dd["smooth"] is not None else f
 
-    f_meas = [statistics(d, p[1]) for p in parts if p[1].shape[0] >= 2 * alarm.hold]
+    f_meas = [statistics(d, p[1]) for p in parts]
     hold = Hold(names, thr, Z=alarm.hold, absolute=True)
     for c, m in zip(claims, _measure(claims, hold, f_meas, per, dt, level)):
         if m is not None:
@@ -452,14 +463,10 @@ def logged_thresholds(raw, groups: dict[str, list[str]], alarm, dt: float, nomin
         loro = []
         for i, p in enumerate(parts):
             row = {"record": where_of[i], "samples": int(p[2].shape[0])}
-            if p[2].shape[0] < 2 * alarm.hold:
-                row["skipped"] = "every sample after the warm-up is in-sample for the model"
-                record_check.append(row)
-                continue
             try:
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore")
-                    di = _design_on(raw, groups, [q[0] for j, q in enumerate(parts) if j != i], alarm, dt,
+                    di = _design_on(raw, groups, [q[2] for j, q in enumerate(parts) if j != i], alarm, dt,
                                     level=level, fallback=fallback, source=source, smoothing=smoothing)
             except DataError as exc:
                 row["skipped"] = f"the other records cannot support the target: {str(exc)[:300]}"
@@ -479,7 +486,7 @@ def logged_thresholds(raw, groups: dict[str, list[str]], alarm, dt: float, nomin
             c["measured_records"] = {**{k: m[k] for k in ("rate", "interval", "events", "samples", "hours",
                                                           "interval_method")}, "records": len(loro),
                                      "how": "each record left out in turn: whitening and thresholds refitted "
-                                            "on the fit halves of the others, measured on it"}
+                                            "on the others (whole, after the warm-up), measured on it"}
             c["verdict_records"] = verdict(c["interval"], m["interval"])
             if c.get("verdict", "inside") == "inside":
                 c["verdict"] = c["verdict_records"]
@@ -502,7 +509,7 @@ def logged_thresholds(raw, groups: dict[str, list[str]], alarm, dt: float, nomin
                             "[design].accept_miscalibrated = true to keep it anyway (with a warning)")
         warnings.warn(f"design: {msg}. Kept because [design].accept_miscalibrated = true", UserWarning,
                       stacklevel=3)
-    never = {where_of[i]: [0, n_in[i]] for i in range(len(parts)) if n_in[i] > 0}
+    never = {name: [0, k] for name, k in zip(names_all, n_in) if k > 0}
     return {"white": d["white"], "features": d["features"], "thr": thr, "td": td, "claims": claims,
             "records": len(parts), "smooth": smooth, "names": names, "in_sample": never,
             "record_check": record_check,
