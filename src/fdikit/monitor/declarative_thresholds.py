@@ -1,6 +1,9 @@
 """The thresholds of a declarative design and the false-alarm claims they state: set on simulated
 noise of the declared model (model-based rates), or on real nominal logs, time-blocked (each log's
-first half fits the whitening and the thresholds, its second half measures them).
+first half fits the whitening and the thresholds, its second half measures them; with two records
+or more, each record left out in turn is measured by a design refitted on the others). The claimed
+intervals count the records' own levels (:func:`~fdikit.monitor.declarative_smoothing.record_tau`),
+and the samples a plant was identified on neither fit nor measure.
 
 Each design returns its *claims*: plain dicts that :func:`fdikit.evaluate.validate` re-measures on
 new nominal logs and the design report lists::
