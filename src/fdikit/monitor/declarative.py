@@ -709,7 +709,8 @@ def design_monitor(design: Mapping[str, Any], base_dir: str | Path = ".", *, whe
                                fallback=not nominal,
                                source="[design].nominal_log" if nominal else
                                "the logs the plant was identified from ([design.plant].identify.logs)",
-                               smoothing=smoothing)
+                               smoothing=smoothing,
+                               in_sample=_in_sample(design, base_dir, ident, nominal or implicit, implicit))
     elif smoothing.active:
         raise DataError(f"config: [{where}.detect].smoothing = \"ewma\" sets its limits on real nominal "
                         f"logs: give [{where}].nominal_log (or identify the plant from logs)")
@@ -734,7 +735,10 @@ def design_monitor(design: Mapping[str, Any], base_dir: str | Path = ".", *, whe
                       nominal_records=th["records"], nominal_hours_fit=th["fit_hours"],
                       nominal_hours_measured=th["measure_hours"],
                       split="each log's first half (after the filter's warm-up) fits the whitening and the "
-                            "thresholds; its second half measures them",
+                            "thresholds; its second half measures them; with two records or more, each "
+                            "record is also left out in turn (refitted without it, measured on it); samples "
+                            "the plant was identified on (in_sample) neither fit nor measure",
+                      in_sample=th["in_sample"], record_check=th["record_check"],
                       accepted_miscalibrated=any(c.get("verdict", "inside") != "inside"
                                                  for c in th["claims"]))
     else:
@@ -750,6 +754,31 @@ def design_monitor(design: Mapping[str, Any], base_dir: str | Path = ".", *, whe
         return {"bank": white, "features": feats, "smooth": th["smooth"], "hold": hold, "isolate": iso,
                 "_report": report}
     return {"bank": white, "features": feats, "hold": hold, "isolate": iso, "_report": report}
+
+
+def _in_sample(design: Mapping[str, Any], base_dir: str | Path, ident: Any, logs: Any,
+               implicit: Any) -> dict[str, int]:
+    """Threshold log name -> the leading samples the plant was identified on (estimated from): the
+    identification's own logs, and a ``[design].nominal_log`` that is one of them (same file)."""
+    if ident is None or not isinstance(logs, Mapping):
+        return {}
+    per_rec = list(ident.info.get("estimation_samples_per_record") or [])
+    if implicit:
+        return {f"identification log {k}": n for k, n in enumerate(per_rec)}
+    spec = design["plant"]["identify"]
+    files = [spec["logs"]] if isinstance(spec["logs"], str) else list(spec["logs"])
+    own = {}
+    for k, f in enumerate(files[:len(per_rec)]):
+        own[Path(config_path(base_dir, f, where="[design.plant].identify.logs")).resolve()] = per_rec[k]
+    out = {}
+    for name in logs:
+        try:
+            p = Path(name).resolve()
+        except (OSError, ValueError):
+            continue
+        if p in own:
+            out[name] = own[p]
+    return out
 
 
 def _deviation_logs(ident: Any, logs: Sequence[Signals], names: list[str]) -> dict[str, Signals]:

@@ -16,7 +16,7 @@ plant came from), on the fit halves of the time-blocked split of
 held-out halves, smoothed the same way: the smoothed statistic is strongly autocorrelated, so the
 effective samples count with an autocorrelation time no smaller than that of the EWMA of white
 noise (``(2 - lambda) / lambda``) nor than the spectral estimate (:func:`~fdikit.detect.design_ewma`),
-nor, over many records, than that of records each at their own level (:func:`_record_tau`: the
+nor, over many records, than that of records each at their own level (:func:`record_tau`: the
 EWMA averages the noise down but not a level that differs between nominal runs).
 
 ``lambda = "auto"`` looks at the fit halves only: among the candidates it takes the **smallest**
@@ -40,7 +40,7 @@ import numpy as np
 from ..errors import DataError
 from ..signals import Signals
 
-__all__ = ["DETECT_KEYS", "SmoothingSpec", "smoothed_thresholds", "smoothing_from_config"]
+__all__ = ["DETECT_KEYS", "SmoothingSpec", "record_tau", "smoothed_thresholds", "smoothing_from_config"]
 
 #: Keys of ``[design.detect]`` and their types.
 DETECT_KEYS: dict[str, type | tuple[type, ...]] = {"smoothing": str, "lambda": (int, float, str),
@@ -147,12 +147,36 @@ def _smooth(ew, feats: list[Signals]) -> list[Signals]:
     return [ew.run(f) for f in feats]
 
 
-def _record_tau(z: list[np.ndarray], tau_w: float) -> float:
-    """Autocorrelation time of records that each sit at their own level: ``(1 - rho) tau_w + rho
-    n_mean``, ``rho`` the share of the variance between the records' means (one-way random effects,
-    the within part of their variance removed). A smoothed statistic averages its noise down but not
-    a level that differs from record to record: pooled, such records count as few effective samples.
-    1 record: ``tau_w``."""
+def record_tau(z: list[np.ndarray], tau_w: float) -> float:
+    """Autocorrelation time of records that each sit at their own level.
+
+    ``(1 - rho) tau_w + rho n_mean``, ``rho`` the share of the variance between the records' means
+    (one-way random effects, the within part of their variance removed). A statistic (smoothed or
+    not) averages its noise down but not a level that differs from record to record: pooled, such
+    records count as few effective samples. Used by the smoothed and the raw thresholds of a
+    declarative design alike.
+
+    Parameters
+    ----------
+    z : list of (T_i,) arrays
+        The statistic on every record.
+    tau_w : float
+        Its autocorrelation time within the records, samples.
+
+    Returns
+    -------
+    float
+        The autocorrelation time, samples: ``tau_w`` with fewer than 3 records (they cannot show a
+        spread of levels).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> rng = np.random.default_rng(0)
+    >>> same = [rng.standard_normal(500) for _ in range(6)]
+    >>> record_tau(same, 1.0) < 3.0, record_tau([x + 3 * k for k, x in enumerate(same)], 1.0) > 100.0
+    (True, True)
+    """
     z = [r for r in z if r.size > 1]
     if len(z) < 3:
         return float(tau_w)
@@ -163,6 +187,9 @@ def _record_tau(z: list[np.ndarray], tau_w: float) -> float:
     between = max(0.0, float(np.var(means, ddof=1)) - float(np.mean(within * tau_w / n)))
     rho = min(1.0, between / total) if total > 0 else 0.0
     return float((1.0 - rho) * tau_w + rho * n.mean())
+
+
+_record_tau = record_tau      # the former private name (tests)
 
 
 def _design_one(names: list[str], f_fit: list[Signals], lam: float, alarm, dt: float, level: float,
@@ -182,7 +209,7 @@ def _design_one(names: list[str], f_fit: list[Signals], lam: float, alarm, dt: f
             d = design_ewma([f.values[0][:, i] for f in f_fit], lam, 1.0 - each, confidence=level,
                             start=float(start[i]))
             z = [s.values[0][:, i] for s in sm]
-            t_rec = _record_tau(z, d.tau)
+            t_rec = record_tau(z, d.tau)
             h = held_out_limit(z, 1.0 - each, confidence=level, min_tau=max(d.tau, t_rec))
             ds.append(h)
             rec.append(t_rec)

@@ -1,6 +1,9 @@
 """The thresholds of a declarative design and the false-alarm claims they state: set on simulated
 noise of the declared model (model-based rates), or on real nominal logs, time-blocked (each log's
-first half fits the whitening and the thresholds, its second half measures them).
+first half fits the whitening and the thresholds, its second half measures them; with two records
+or more, each record left out in turn is measured by a design refitted on the others). The claimed
+intervals count the records' own levels (:func:`~fdikit.monitor.declarative_smoothing.record_tau`),
+and the samples a plant was identified on neither fit nor measure.
 
 Each design returns its *claims*: plain dicts that :func:`fdikit.evaluate.validate` re-measures on
 new nominal logs and the design report lists::
@@ -158,24 +161,60 @@ def simulated_thresholds(md, raw, groups: dict[str, list[str]], R: np.ndarray, Q
 def _conformal(names: list[str], f_fit: list, alarm, level: float):
     """Per-sample thresholds at ``pfa / len(names)`` each (Bonferroni) as the split-conformal
     quantile of every feature over the fit halves (:func:`fdikit.detect.held_out_limit`), with the
-    interval of each rate at the effective sample size; None when a feature's records hold less than
-    one effective exceedance (the target is then not supported). A per-sample target without a hold
-    needs no tail model: a quantile is enough where a tail fit (:func:`~fdikit.detect.
-    design_threshold`) asks for hundreds of effective exceedances."""
+    interval of each rate at the effective sample size, the records' own levels counted
+    (:func:`~fdikit.monitor.declarative_smoothing.record_tau`, as for smoothed features); ``(None,
+    why)`` when a feature's records hold less than one effective exceedance (the target is then not
+    supported). A per-sample target without a hold needs no tail model: a quantile is enough where
+    a tail fit (:func:`~fdikit.detect.design_threshold`) asks for hundreds of effective exceedances."""
     from ..detect.calibrated_limits import held_out_limit
+    from .declarative_smoothing import record_tau
 
     each = float(alarm.pfa) / len(names)
-    thr, ci, neff = [], [], []
+    thr, ci, neff, taus, rec = [], [], [], [], []
     for i in range(len(names)):
-        d = held_out_limit([f.values[0][:, i] for f in f_fit], 1.0 - each, confidence=level)
+        z = [f.values[0][:, i] for f in f_fit]
+        d = held_out_limit(z, 1.0 - each, confidence=level)
+        t_rec = record_tau(z, d["tau"])
+        if t_rec > d["tau"]:      # records at their own levels: fewer effective samples
+            d = held_out_limit(z, 1.0 - each, confidence=level, min_tau=t_rec)
         if not d["supported"]:
-            return None
+            ne = d["effective_samples"]
+            return None, (f"feature {names[i]!r}: {ne:.0f} effective samples (autocorrelation time "
+                          f"{d['tau']:.1f} samples, the records' own levels counted: {t_rec:.1f}) hold "
+                          f"{ne * each:.2g} effective exceedances of {each:.3g} per sample (at least 1 "
+                          "needed)")
         thr.append(d["limit"])
         ci.append(d["interval"])
         neff.append(d["effective_samples"])
+        taus.append(d["tau"])
+        rec.append(t_rec)
     td = {"threshold": thr, "ci": ci, "target": each, "method": "split-conformal quantile",
-          "effective_samples": neff, "pfa": float(alarm.pfa), "per": "sample"}
-    return np.asarray(thr, float), td
+          "effective_samples": neff, "tau": taus, "tau_records": rec, "pfa": float(alarm.pfa),
+          "per": "sample"}
+    return (np.asarray(thr, float), td), None
+
+
+def _record_widened(td: dict, f_fit: list) -> dict:
+    """A tail or empirical threshold design's intervals widened for records at their own levels:
+    each half-width around the achieved rate times ``sqrt(tau_records / tau)`` (the design effect of
+    :func:`~fdikit.monitor.declarative_smoothing.record_tau`; unchanged with fewer than 3 records or
+    no spread between them)."""
+    from .declarative_smoothing import record_tau
+
+    ci = np.atleast_2d(np.asarray(td["ci"], float)).copy()
+    tau = np.broadcast_to(np.atleast_1d(np.asarray(td.get("tau", 1.0), float)), (ci.shape[0],))
+    ach = np.broadcast_to(np.atleast_1d(np.asarray(td.get("achieved", np.nan), float)), (ci.shape[0],))
+    rec = []
+    for i in range(ci.shape[0]):
+        t_rec = record_tau([f.values[0][:, i] for f in f_fit], float(tau[i]))
+        rec.append(t_rec)
+        if t_rec > tau[i] and np.isfinite(ach[i]):
+            g = np.sqrt(t_rec / tau[i])
+            ci[i] = [max(0.0, ach[i] - (ach[i] - ci[i, 0]) * g), ach[i] + (ci[i, 1] - ach[i]) * g]
+    if all(r <= t for r, t in zip(rec, tau)):
+        return td
+    return {**td, "ci": ci if ci.shape[0] > 1 else ci[0], "tau_records": rec,
+            "ci_note": "widened by sqrt(tau_records / tau): the records' own levels"}
 
 
 def _halves(x: np.ndarray, warm: int) -> tuple[slice, slice]:
@@ -185,17 +224,110 @@ def _halves(x: np.ndarray, warm: int) -> tuple[slice, slice]:
     return slice(warm, mid), slice(mid, n)
 
 
+def _design_on(raw, groups: dict[str, list[str]], fit_parts: list[np.ndarray], alarm, dt: float, *,
+               level: float, fallback: bool, source: str, smoothing) -> dict[str, Any]:
+    """Whitening, features, thresholds and claims set on the fit parts ``fit_parts`` (raw residuals,
+    (T_i, C) each): one design of :func:`logged_thresholds`, also refitted without a record for the
+    record-blocked check. ``warn``: the chi-bound fallback's message (not yet printed)."""
+    from ..detect import FeatureNorms, design_threshold
+
+    W = _whitening(raw, groups, np.concatenate(fit_parts)[None])
+    white = _white_design(raw, W, groups)
+    feats = FeatureNorms(groups, dt, 0.0)
+
+    def features(x):
+        s = Signals(np.arange(x.shape[0]) * dt, (x @ W.T)[None], list(raw.residual_names), check=False)
+        return feats.run(s)
+
+    f_fit = [features(x) for x in fit_parts]
+    per = _per(alarm)
+    names, smooth, warn = list(feats.output_names), None, None
+    if smoothing is not None and smoothing.active:
+        from .declarative_smoothing import smoothed_thresholds
+
+        sm = smoothed_thresholds(smoothing, names, f_fit, alarm, dt, level=level, source=source)
+        smooth, names, thr, td = sm["ewma"], sm["names"], sm["thr"], sm["td"]
+        claims = _claims(names, td, alarm, f"nominal logs ({td['method']}, EWMA lambda "
+                                           f"{td['smoothing']['lambda']:g})")
+        ne = np.atleast_1d(td.get("effective_samples", np.nan)).astype(float)
+        tau = np.atleast_1d(td.get("tau", np.nan)).astype(float)
+        for c in claims:
+            c["smoothing"] = {"kind": "ewma", "lambda": td["smoothing"]["lambda"]}
+            i = names.index(c["channels"][0][:-len(":alarm")]) if c["kind"] == "threshold" else None
+            n_i = ne[min(i, ne.size - 1)] if i is not None else float(np.min(ne))
+            t_i = tau[min(i, tau.size - 1)] if i is not None else float(np.max(tau))
+            c["rests_on"] = (f"the EWMA (lambda {td['smoothing']['lambda']:g}, {td['smoothing']['chosen']}) "
+                             f"of the features on the fit halves of {len(fit_parts)} nominal record(s): "
+                             f"{n_i:.0f} effective samples at an autocorrelation time of {t_i:.1f} samples "
+                             "(the EWMA's, the data's and the records' own levels, the largest); measured "
+                             "on the held-out halves, smoothed the same way")
+    else:
+        thr = td = claims = None
+    try:
+        if td is None:
+            td = _record_widened(dict(design_threshold(f_fit, alarm.pfa, per=per, Z=alarm.hold, dt=dt,
+                                                       family_wise=True)), f_fit)
+            thr = np.atleast_1d(np.asarray(td["threshold"], float))
+            claims = _claims(feats.output_names, td, alarm, "nominal logs")
+    except DataError as exc:
+        conf, short = _conformal(feats.output_names, f_fit, alarm, level) \
+            if per == "sample" and alarm.hold == 1 else (None, None)
+        why = (f"the fit half of {source} ({sum(f.n_samples for f in f_fit) * dt / 3600:.3g} h in "
+               f"{len(f_fit)} record(s)) cannot support the target pfa = {alarm.pfa:g} per {alarm.per} "
+               f"(hold {alarm.hold}): {exc}" + (f"; nor can its split-conformal quantile: {short}" if short
+                                                else ""))
+        if conf is not None:      # a per-sample target without a hold: the quantile suffices
+            thr, td = conf
+            claims = _claims(feats.output_names, td, alarm, "nominal logs (split-conformal quantile)")
+        elif not fallback:
+            raise DataError(f"config: {source}: {why}. Give more or longer nominal logs, or a larger "
+                            "target") from None
+        else:
+            thr, td, claims = _chi_bound(raw, W, groups, feats, alarm, dt, exc,
+                                         "nominal logs (Gaussian bound)")
+            warn = (f"design: {why}. Falling back to the Gaussian chi bound of the whitened real "
+                    f"residuals: thresholds {np.round(thr, 4).tolist()} at a per-sample probability "
+                    f"{td['per_sample_each']:.3g} per residual; the held-out halves measure it (give more "
+                    "nominal logs, [design].nominal_log, to set the thresholds on data)")
+    return {"white": white, "features": feats, "featurise": features, "f_fit": f_fit, "names": names,
+            "smooth": smooth, "thr": thr, "td": td, "claims": claims, "warn": warn}
+
+
+def _measure(claims: list[dict], hold, stats: list[Signals], per, dt: float,
+             level: float) -> list[dict | None]:
+    """Every non-decision claim's measured rate (:func:`fdikit.detect.rates.measure_alarm_rate`) on
+    the statistics ``stats`` (one run each) under ``hold``; None for a decision claim or no data."""
+    from ..detect.rates import measure_alarm_rate
+
+    alarms = [hold.run(f).values[0] for f in stats if f.n_samples]     # (T_i, channels)
+    out = []
+    for c in claims:
+        if c["kind"] == "decision" or not alarms:
+            out.append(None)   # announcements need the whole monitor: fdikit validate measures them
+            continue
+        idx = [hold.output_names.index(n) for n in c["channels"]]
+        m = measure_alarm_rate([np.any(al[:, idx] > 0.5, axis=1) for al in alarms], per, dt, level=level)
+        out.append({k: m[k] for k in ("rate", "interval", "events", "samples", "hours", "interval_method")})
+    return out
+
+
 def logged_thresholds(raw, groups: dict[str, list[str]], alarm, dt: float, nominal: list,
                       *, accept_miscalibrated: bool = False, level: float = 0.95,
                       fallback: bool = False, source: str = "[design].nominal_log",
-                      smoothing=None) -> dict[str, Any]:
+                      smoothing=None, in_sample: Mapping[str, int] | None = None) -> dict[str, Any]:
     """Whitening and thresholds set on real nominal logs, time-blocked, with claims measured on
-    held-out data.
+    held-out data: held-out halves, and with two records or more, held-out records.
 
     Every record (each run of each log) is run through the raw filter; after the filter's warm-up
     its first half fits the whitening and the thresholds (pooled over the records,
-    :func:`~fdikit.detect.design_threshold`, family-wise), its second half measures them. The
-    thresholds are the fit part's: what was measured is what is saved.
+    :func:`~fdikit.detect.design_threshold`, family-wise; the records' own levels counted in the
+    claimed intervals, :func:`~fdikit.monitor.declarative_smoothing.record_tau`), its second half
+    measures them. The thresholds are the fit part's. With two records or more, every record is also
+    left out in turn: whitening and thresholds are refitted on the others (each whole, after the warm-up) and
+    measured on the whole left-out record (after the warm-up), which the refitted design never saw;
+    the pooled rate over the left-out records is a second measurement of every claim
+    (``measured_records``). Samples a plant was identified on (``in_sample``) neither fit nor measure
+    (a record with too few others is left out; none left: refused, naming the logs).
 
     Parameters
     ----------
@@ -229,21 +361,29 @@ def logged_thresholds(raw, groups: dict[str, list[str]], alarm, dt: float, nomin
         (:func:`~fdikit.monitor.declarative_smoothing.smoothed_thresholds`; never the chi bound), and
         the held-out halves are smoothed the same way (each half from the EWMA's start) to measure
         them.
+    in_sample : dict, optional
+        Log name -> the number of leading samples of its first run that the plant model was
+        identified on (estimated from): those samples are in-sample for the model, its residuals
+        smaller there than on new data, so they neither fit nor measure a claim.
 
     Returns
     -------
     dict
-        As :func:`simulated_thresholds`, with ``claims`` carrying ``measured`` (the held-out
-        measurement) and ``verdict``, and ``records``/``fit_hours``/``measure_hours``; ``smooth``
-        (the :class:`~fdikit.detect.EWMA` stage or None) and ``names`` (the hold's inputs).
+        As :func:`simulated_thresholds`, with ``claims`` carrying ``measured`` (on the held-out
+        halves), ``measured_records`` (on the left-out records, two records or more) and
+        ``verdict`` (the worse of the two), and ``records``/``fit_hours``/``measure_hours``;
+        ``smooth`` (the :class:`~fdikit.detect.EWMA` stage or None), ``names`` (the hold's inputs),
+        ``in_sample`` (log -> the samples left out, ``[0, n]``) and ``record_check`` (per left-out record:
+        its rate, or why it was not refitted).
 
     Raises
     ------
     DataError
         A log lacking a channel, off the sample time, with non-finite values; a target the fit part
-        cannot support; a claim the held-out part contradicts (unless ``accept_miscalibrated``).
+        cannot support; no sample out of the model's own; a claim the held-out part contradicts
+        (unless ``accept_miscalibrated``).
     """
-    from ..detect import FeatureNorms, Hold, design_threshold
+    from ..detect import Hold
     from ..detect.rates import measure_alarm_rate, verdict
     from ..residuals import FaultDetectionFilter
 
@@ -251,9 +391,10 @@ def logged_thresholds(raw, groups: dict[str, list[str]], alarm, dt: float, nomin
         raise DataError("config: [design].nominal_log names no log")
     need = [*raw.u_names, *raw.y_names]
     gen = FaultDetectionFilter(raw)
-    recs = []
+    recs, where_of, n_in = [], [], []
     items = list(nominal.items()) if isinstance(nominal, Mapping) else \
         [(f"nominal log {i}", s) for i, s in enumerate(nominal)]
+    in_sample = dict(in_sample or {})
     for where, log in items:
         missing = [c for c in need if c not in log.names]
         if missing:
@@ -272,101 +413,108 @@ def logged_thresholds(raw, groups: dict[str, list[str]], alarm, dt: float, nomin
             raise DataError(f"{where}: channel {need[c]!r} is not finite at run {run}, sample {k} (t = "
                             f"{log.t[k]:g} s); a nominal log for thresholds must be complete")
         r = gen.run(sel)
-        recs.extend(r.values[j] for j in range(r.runs))
+        for j in range(r.runs):
+            recs.append(r.values[j])
+            where_of.append(where if r.runs == 1 else f"{where} (run {j})")
+            n_in.append(int(in_sample.get(where, 0)) if j == 0 else 0)
     warm = round(10.0 / dt) if dt < 1 else 10
-    parts = []
-    for x in recs:
-        w = min(x.shape[0] // 2, warm)
+    parts, kept = [], []
+    for i, (x, k0) in enumerate(zip(recs, n_in)):
+        # the samples the plant was identified on neither fit nor measure: its residuals are
+        # smaller there than on new data
+        w = max(min(x.shape[0] // 2, warm), k0)
         f, m = _halves(x, w)
         if f.stop - f.start < 2 * alarm.hold or m.stop - m.start < 2 * alarm.hold:
+            if k0:
+                continue
             raise DataError(f"a nominal log of {x.shape[0]} samples is too short: after the filter's "
                             f"warm-up ({w} samples) each half needs more than {2 * alarm.hold} samples")
-        parts.append((x[f], x[m]))
-    fit = np.concatenate([p[0] for p in parts])
-    W = _whitening(raw, groups, fit[None])
-    white = _white_design(raw, W, groups)
-    feats = FeatureNorms(groups, dt, 0.0)
-
-    def features(x):
-        s = Signals(np.arange(x.shape[0]) * dt, (x @ W.T)[None], list(raw.residual_names), check=False)
-        return feats.run(s)
-
-    f_fit = [features(p[0]) for p in parts]
-    f_meas = [features(p[1]) for p in parts]
-    per = _per(alarm)
-    names, smooth = list(feats.output_names), None
-    if smoothing is not None and smoothing.active:
-        from .declarative_smoothing import smoothed_thresholds
-
-        sm = smoothed_thresholds(smoothing, names, f_fit, alarm, dt, level=level, source=source)
-        smooth, names, thr, td = sm["ewma"], sm["names"], sm["thr"], sm["td"]
-        claims = _claims(names, td, alarm, f"nominal logs ({td['method']}, EWMA lambda "
-                                           f"{td['smoothing']['lambda']:g})")
-        f_meas = [smooth.run(f) for f in f_meas]
-        ne = np.atleast_1d(td.get("effective_samples", np.nan)).astype(float)
-        tau = np.atleast_1d(td.get("tau", np.nan)).astype(float)
-        for c in claims:
-            c["smoothing"] = {"kind": "ewma", "lambda": td["smoothing"]["lambda"]}
-            i = names.index(c["channels"][0][:-len(":alarm")]) if c["kind"] == "threshold" else None
-            n_i = ne[min(i, ne.size - 1)] if i is not None else float(np.min(ne))
-            t_i = tau[min(i, tau.size - 1)] if i is not None else float(np.max(tau))
-            c["rests_on"] = (f"the EWMA (lambda {td['smoothing']['lambda']:g}, {td['smoothing']['chosen']}) "
-                             f"of the features on the fit halves of {len(parts)} nominal record(s): "
-                             f"{n_i:.0f} effective samples at an autocorrelation time of {t_i:.1f} samples "
-                             "(the EWMA's, the data's and the records' own levels, the largest); measured "
-                             "on the held-out halves, smoothed the same way")
-    else:
-        thr = td = claims = None
+        parts.append((x[f], x[m], x[w:]))
+        kept.append(i)
+    own = "; ".join(f"{where_of[i]}: samples 0..{n_in[i] - 1} of {recs[i].shape[0]}"
+                    for i in range(len(recs)) if n_in[i])
+    if not parts:
+        raise DataError(f"config: {source}: too few samples out of the plant model's own: the plant was "
+                        f"identified on them ({own}), where its residuals are smaller than on new data. "
+                        "Give a nominal log the plant was not identified from ([design].nominal_log), or "
+                        "identify on fewer samples ([design.plant].identify.validation)")
+    names_all, where_of = where_of, [where_of[i] for i in kept]
     try:
-        if td is None:
-            td = dict(design_threshold(f_fit, alarm.pfa, per=per, Z=alarm.hold, dt=dt, family_wise=True))
-            thr = np.atleast_1d(np.asarray(td["threshold"], float))
-            claims = _claims(feats.output_names, td, alarm, "nominal logs")
+        d = _design_on(raw, groups, [p[0] for p in parts], alarm, dt, level=level, fallback=fallback,
+                       source=source, smoothing=smoothing)
     except DataError as exc:
-        conf = _conformal(feats.output_names, f_fit, alarm, level) if per == "sample" and alarm.hold == 1 \
-            else None
-        why = (f"the fit half of {source} ({sum(f.n_samples for f in f_fit) * dt / 3600:.3g} h in "
-               f"{len(f_fit)} record(s)) cannot support the target pfa = {alarm.pfa:g} per {alarm.per} "
-               f"(hold {alarm.hold}): {exc}")
-        if conf is not None:      # a per-sample target without a hold: the quantile suffices
-            thr, td = conf
-            claims = _claims(feats.output_names, td, alarm, "nominal logs (split-conformal quantile)")
-        elif not fallback:
-            raise DataError(f"config: {source}: {why}. Give more or longer nominal logs, or a larger "
-                            "target") from None
-        else:
-            basis = "nominal logs (Gaussian bound)"
-            thr, td, claims = _chi_bound(raw, W, groups, feats, alarm, dt, exc, basis)
-            p_each = td["per_sample_each"]
-            warnings.warn(f"design: {why}. Falling back to the Gaussian chi bound of the whitened real "
-                          f"residuals: thresholds {np.round(thr, 4).tolist()} at a per-sample probability "
-                          f"{p_each:.3g} per residual; the held-out halves measure it (give more nominal "
-                          "logs, [design].nominal_log, to set the thresholds on data)", UserWarning,
-                          stacklevel=3)
+        if not own:
+            raise
+        raise DataError(f"{exc} (left out of the thresholds and their check, because the plant was "
+                        f"identified on them: {own})") from None
+    if d["warn"]:
+        warnings.warn(d["warn"], UserWarning, stacklevel=3)
+    per, names, thr, td, claims, smooth = _per(alarm), d["names"], d["thr"], d["td"], d["claims"], d["smooth"]
+
+    def statistics(dd, x):
+        f = dd["featurise"](x)
+        return dd["smooth"].run(f) if dd["smooth"] is not None else f
+
+    f_meas = [statistics(d, p[1]) for p in parts]
     hold = Hold(names, thr, Z=alarm.hold, absolute=True)
-    alarms = [hold.run(f).values[0] for f in f_meas]     # (T_i, channels)
-    for c in claims:
-        if c["kind"] == "decision":
-            continue   # announcements need the whole monitor: fdikit validate measures them
-        idx = [hold.output_names.index(n) for n in c["channels"]]
-        a = [np.any(al[:, idx] > 0.5, axis=1) for al in alarms]
-        m = measure_alarm_rate(a, per, dt, level=level)
-        c["measured"] = {k: m[k] for k in ("rate", "interval", "events", "samples", "hours",
-                                           "interval_method")}
-        c["verdict"] = verdict(c["interval"], m["interval"])
+    for c, m in zip(claims, _measure(claims, hold, f_meas, per, dt, level)):
+        if m is not None:
+            c["measured"] = m
+            c["verdict"] = verdict(c["interval"], m["interval"])
+    record_check = []
+    if len(parts) >= 2:
+        loro = []
+        for i, p in enumerate(parts):
+            row = {"record": where_of[i], "samples": int(p[2].shape[0])}
+            try:
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore")
+                    di = _design_on(raw, groups, [q[2] for j, q in enumerate(parts) if j != i], alarm, dt,
+                                    level=level, fallback=fallback, source=source, smoothing=smoothing)
+            except DataError as exc:
+                row["skipped"] = f"the other records cannot support the target: {str(exc)[:300]}"
+                record_check.append(row)
+                continue
+            hi = Hold(di["names"], di["thr"], Z=alarm.hold, absolute=True)
+            al = hi.run(statistics(di, p[2])).values[0]
+            loro.append(al)
+            row["thresholds"] = np.atleast_1d(di["thr"]).tolist()
+            row["rate"] = float(np.mean(np.any(al > 0.5, axis=1)))    # any threshold, per sample
+            record_check.append(row)
+        for c in claims:
+            if c["kind"] == "decision" or not loro:
+                continue
+            idx = [hold.output_names.index(n) for n in c["channels"]]   # same names in every refit
+            m = measure_alarm_rate([np.any(al[:, idx] > 0.5, axis=1) for al in loro], per, dt, level=level)
+            c["measured_records"] = {**{k: m[k] for k in ("rate", "interval", "events", "samples", "hours",
+                                                          "interval_method")}, "records": len(loro),
+                                     "how": "each record left out in turn: whitening and thresholds refitted "
+                                            "on the others (whole, after the warm-up), measured on it"}
+            c["verdict_records"] = verdict(c["interval"], m["interval"])
+            if c.get("verdict", "inside") == "inside":
+                c["verdict"] = c["verdict_records"]
     bad = [c for c in claims if c.get("verdict", "inside") != "inside"]
     if bad:
-        lines = "; ".join(f"{c['name']}: claimed {c['interval'][0]:.3g}..{c['interval'][1]:.3g}, measured "
-                          f"{c['measured']['rate']:.3g} ({c['measured']['interval'][0]:.3g}.."
-                          f"{c['measured']['interval'][1]:.3g}) per {c['per']}, {c['verdict']}" for c in bad)
-        msg = (f"the held-out half of the nominal logs contradicts {len(bad)} claim(s): {lines}. The "
-               "nominal logs are not stationary enough for these thresholds (or too short)")
+        def line(c):
+            out = f"{c['name']}: claimed {c['interval'][0]:.3g}..{c['interval'][1]:.3g} per {c['per']}"
+            for key, what in (("measured", "held-out halves"), ("measured_records", "left-out records")):
+                if key in c:
+                    m = c[key]
+                    out += (f", measured {m['rate']:.3g} ({m['interval'][0]:.3g}..{m['interval'][1]:.3g}) on "
+                            f"the {what}")
+            return out + f", {c['verdict']}"
+        msg = (f"the held-out half of the nominal logs (or a left-out record) contradicts {len(bad)} "
+               f"claim(s): {'; '.join(line(c) for c in bad)}. "
+               "The nominal logs are not stationary enough for these thresholds (records at their own "
+               "levels, or too short)")
         if not accept_miscalibrated:
             raise DataError(f"config: {source}: {msg}. Refused; set "
                             "[design].accept_miscalibrated = true to keep it anyway (with a warning)")
         warnings.warn(f"design: {msg}. Kept because [design].accept_miscalibrated = true", UserWarning,
                       stacklevel=3)
-    return {"white": white, "features": feats, "thr": thr, "td": td, "claims": claims, "records": len(parts),
-            "smooth": smooth, "names": names,
-            "fit_hours": sum(f.n_samples for f in f_fit) * dt / 3600.0,
+    never = {name: [0, k] for name, k in zip(names_all, n_in) if k > 0}
+    return {"white": d["white"], "features": d["features"], "thr": thr, "td": td, "claims": claims,
+            "records": len(parts), "smooth": smooth, "names": names, "in_sample": never,
+            "record_check": record_check,
+            "fit_hours": sum(f.n_samples for f in d["f_fit"]) * dt / 3600.0,
             "measure_hours": sum(f.n_samples for f in f_meas) * dt / 3600.0}

@@ -272,6 +272,7 @@ def identify(
     val = [Segment(s.u - u_off, s.y - y_off, s.record) for s in val]
     p, m = len(outputs), len(inputs)
     info: dict[str, Any] = {"method": method, "estimation_samples": Ne,
+                            "estimation_samples_per_record": [int(s.n) for s in est],
                             "validation_samples": int(sum(s.n for s in val)), "records": nrec,
                             "u_offset": dict(zip(inputs, u_off.tolist())),
                             "y_offset": dict(zip(outputs, y_off.tolist())), "dt": dt, "criterion": criterion,
