@@ -121,7 +121,12 @@ def _design(example: str, tmp: Path, quick: bool = False) -> tuple[Path, list[Pa
             text = "\n".join([*lines[:i + 1], f"{k} = {v}", *lines[i + 1:]]) + "\n"
         cfg.write_text(text)
     cli = [sys.executable, "-m", "fdikit.cli"]
+    flights = ex / "simulate_flights.py"
+    if flights.exists():   # examples/uav: the design identifies the plant from simulated ULog flights
+        subprocess.run([sys.executable, str(flights), str(ex / "flights")], check=True, capture_output=True)
     subprocess.run([*cli, "design", str(cfg)], check=True, capture_output=True)
+    if flights.exists():
+        return cfg, sorted((ex / "flights").glob("failure_*.ulg"))
     logs = tmp / f"{ex.name}-logs"
     sim = ex / "simulate_logs.py"
     if sim.exists():
@@ -327,7 +332,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeat", type=int, default=20, help="passes of the C loop over the log")
     ap.add_argument("--examples", nargs="*",
-                    default=["two-mass", "own-system", "synthetic-mhsspt", "abs", "abs:monitor_extended.toml",
+                    default=["two-mass", "own-system", "synthetic-mhsspt", "abs", "abs:monitor_extended.toml", "uav",
                              "passenger-car", "rav4-lateral", "rav4-lateral-peer", "aircraft-smo"])
     ap.add_argument("--quick-design", action="store_true",
                     help="design the ABS monitors from fewer Monte Carlo runs (QUICK_DESIGN)")
