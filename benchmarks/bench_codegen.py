@@ -332,8 +332,8 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeat", type=int, default=20, help="passes of the C loop over the log")
     ap.add_argument("--examples", nargs="*",
-                    default=["two-mass", "own-system", "synthetic-mhsspt", "abs", "abs:monitor_extended.toml", "uav",
-                             "passenger-car", "rav4-lateral", "rav4-lateral-peer", "aircraft-smo"])
+                    default=["two-mass", "own-system", "synthetic-mhsspt", "abs", "abs:monitor_extended.toml",
+                             "uav", "passenger-car", "rav4-lateral", "rav4-lateral-peer", "aircraft-smo"])
     ap.add_argument("--quick-design", action="store_true",
                     help="design the ABS monitors from fewer Monte Carlo runs (QUICK_DESIGN)")
     args = ap.parse_args(argv)

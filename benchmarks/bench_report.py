@@ -36,7 +36,6 @@ def _open_seconds(path: Path) -> float | None:
     sys.path.insert(0, str(ROOT / "tests"))
     try:
         import websocket  # noqa: F401
-
         from test_report_browser import CHROMIUM, Browser
     except ImportError:
         return None

@@ -109,7 +109,8 @@ def test_config_paths_expand_home_and_variables(tmp_path, monkeypatch):
     monkeypatch.setenv("FDIKIT_TEST_DATA", str(tmp_path / "data"))
     assert config_path("/elsewhere", "~/designs") == (tmp_path / "designs").resolve()
     assert config_path("/elsewhere", "$HOME/x") == (tmp_path / "x").resolve()
-    assert config_path("/elsewhere", "${FDIKIT_TEST_DATA}/car.dbc") == (tmp_path / "data" / "car.dbc").resolve()
+    assert (config_path("/elsewhere", "${FDIKIT_TEST_DATA}/car.dbc")
+            == (tmp_path / "data" / "car.dbc").resolve())
     monkeypatch.delenv("FDIKIT_TEST_UNSET", raising=False)
     with pytest.raises(DataError, match="FDIKIT_TEST_UNSET is not set"):
         config_path("/elsewhere", "$FDIKIT_TEST_UNSET/x", where="[monitor].artifacts")
@@ -133,8 +134,9 @@ def test_monitor_config_artifacts_under_home_and_with_a_bom(tmp_path, monkeypatc
 
 
 def test_svm_test_names_that_collide_are_refused():
-    from fdikit.isolate import SVMIsolator
     from sklearn.svm import SVC
+
+    from fdikit.isolate import SVMIsolator
 
     rng = np.random.default_rng(6)
     X = np.r_[rng.normal(0, 1, (40, 2)), rng.normal(5, 1, (40, 2)), rng.normal(-5, 1, (40, 2))]

@@ -37,7 +37,8 @@ def test_no_command_module_exceeds_the_limit():
     cmds = [p for p in _modules() if p.parent.name == "commands"]
     assert len(cmds) >= 10, "the command modules were not found"
     big = {p.name: n for p in cmds if (n := _lines(p)) > MAX_COMMAND_LINES}
-    assert not big, f"command modules over {MAX_COMMAND_LINES} lines (move their work into the library): {big}"
+    assert not big, (f"command modules over {MAX_COMMAND_LINES} lines (move their work into the library): "
+                     f"{big}")
 
 
 def test_the_check_can_fail(tmp_path):

@@ -367,7 +367,8 @@ class SVMIsolator:
         for c in self.classes_:
             name = self.test_name(c)
             if name in seen:
-                raise DataError(f"classes {str(seen[name])!r} and {str(c)!r} both give the test name {name!r} (the "
+                raise DataError(f"classes {str(seen[name])!r} and {str(c)!r} both give the test name "
+                                f"{name!r} (the "
                                 "default drops underscores); name the tests with test_names={label: name}")
             seen[name] = c
 

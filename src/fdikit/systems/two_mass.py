@@ -72,7 +72,8 @@ def design(params: dict | None = None) -> dict[str, Any]:
            for name in gen.output_names]
     thr = [td.threshold for td in tds]
     hold = Hold(gen.output_names, thr, Z=int(p["Z"]))
-    return {"observer": obs, "hold": hold, "_report": {"rates": "model-based", "claims": _claims(hold.output_names, tds, p)}}
+    return {"observer": obs, "hold": hold,
+            "_report": {"rates": "model-based", "claims": _claims(hold.output_names, tds, p)}}
 
 
 def _claims(alarms: list[str], tds: list, p: dict) -> list[dict]:
