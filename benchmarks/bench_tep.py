@@ -353,7 +353,7 @@ def model_based(train0: np.ndarray, test: dict, extra: dict | None = None):
             {k: t2(X) for k, X in (extra or {}).items()})
 
 
-def own_system_toml(train0: np.ndarray, test: dict, faults, folder: Path) -> dict:
+def own_system_toml(train0: np.ndarray, test: dict, faults, folder: Path, pools=None) -> dict:
     """The own-system TOML path a user gets from ``[design]`` alone (``fdikit design``, then the
     monitor the config builds), on TEP: the plant identified from ``d00`` (``[design.plant].identify``,
     N4SID, XMV 1-11 -> XMEAS 1-22, channel offsets at the ``d00`` means), the sensor faults of the 22
@@ -389,6 +389,8 @@ def own_system_toml(train0: np.ndarray, test: dict, faults, folder: Path) -> dic
             ("d00+pre, 22 residuals", '["d00.csv", "pre*.csv"]', False, ""),
             ("d00 ewma", '"d00.csv"', True, ewma), ("d00+pre ewma", '["d00.csv", "pre*.csv"]', True, ewma),
             ("d00+pre ewma 0.2", '["d00.csv", "pre*.csv"]', True, ewma.replace('"auto"', "0.2"))):
+        if pools is not None and label not in pools:
+            continue
         path = folder / f"monitor_{len(out)}.toml"
         path.write_text(f"""[monitor]
 name = "TEP from its nominal set"
@@ -429,7 +431,7 @@ hold = 1
         fam = next(c for c in rep["claims"] if c["kind"] == "family")
         out[label] = {"alarm": {k: alarm(X) for k, X in test.items()}, "claim": fam["interval"],
                       "method": rep["threshold_design"].get("method"), "records": rep.get("nominal_records"),
-                      "lambda": (rep.get("smoothing") or {}).get("lambda")}
+                      "lambda": (rep.get("smoothing") or {}).get("lambda"), "report": rep}
     return out
 
 

@@ -194,6 +194,73 @@ def _conformal(names: list[str], f_fit: list, alarm, level: float):
     return (np.asarray(thr, float), td), None
 
 
+def _level_limit(f_fit: list, k: int, q: float) -> float:
+    """The ``q`` quantile (the next sample up) of feature ``k`` pooled over the records ``f_fit``."""
+    return float(np.quantile(np.concatenate([f.values[0][:, k] for f in f_fit]), q, method="higher"))
+
+
+def _over_records(r: np.ndarray, level: float) -> dict:
+    """Mean of per-record rates ``r`` with its t-interval over the records and the spread of one new
+    record's rate (t prediction interval), both clipped at 0."""
+    from scipy.stats import t as student
+
+    J, m = r.size, float(np.mean(r))
+    sd = float(np.std(r, ddof=1)) if J > 1 else 0.0
+    tq = float(student.ppf(0.5 + level / 2.0, J - 1))
+    return {"rate": m, "interval": [max(0.0, m - tq * sd / np.sqrt(J)), m + tq * sd / np.sqrt(J)],
+            "spread": [max(0.0, m - tq * sd * np.sqrt(1.0 + 1.0 / J)), m + tq * sd * np.sqrt(1.0 + 1.0 / J)],
+            "sd": sd, "records": J, "per_record": r.tolist()}
+
+
+def _new_record_levels(names: list[str], f_fit: list, folds: list, each: float, level: float) -> dict:
+    """Per-sample thresholds for a NEW record, chosen from the records left out in turn.
+
+    Each record's rate varies with its own level, so the rate pooled over the records is not what a
+    user sees on the next one. For every feature, the lowest quantile level ``q`` (a grid from
+    ``1 - 4 each`` to ``1 - each / 50``) at which the mean over the records of the left-out rate
+    (record ``j`` measured against the ``q`` quantile of the others' features, whitening refitted on
+    them; records weighted alike) is at most ``each``; the thresholds are the ``q`` quantiles of the
+    fit parts ``f_fit``. The claimed interval is the t-interval over the records of that mean.
+
+    Returns
+    -------
+    dict
+        ``levels``, ``thresholds``, ``ci`` (per feature), ``per_feature`` and ``family`` (rates over
+        the records, :func:`_over_records`), ``rests_on``; or ``{"supported": False, "why": ...}``
+        when even the highest level leaves a mean rate above ``each``.
+    """
+    grid = 1.0 - each * np.geomspace(4.0, 0.02, 161)       # ascending: the first met is the lowest
+    levels, per_feature, alarms = [], [], [np.zeros(z.n_samples, bool) for _, z in folds]
+    for k, name in enumerate(names):
+        pooled = [np.concatenate([f.values[0][:, k] for f in others]) for others, _ in folds]
+        zs = [z.values[0][:, k] for _, z in folds]
+        chosen = None
+        for q in grid:
+            r = np.array([np.mean(zj > np.quantile(pj, q, method="higher")) for pj, zj in zip(pooled, zs)])
+            if r.mean() <= each:
+                chosen = float(q)
+                break
+        if chosen is None:
+            return {"supported": False, "why": f"feature {name!r}: even at the quantile level {grid[-1]:.6g} "
+                    f"the left-out records measure {r.mean():.3g} per sample on average (target {each:.3g})"}
+        levels.append(chosen)
+        per_feature.append(_over_records(r, level))
+        for j, (pj, zj) in enumerate(zip(pooled, zs)):
+            alarms[j] |= zj > np.quantile(pj, chosen, method="higher")
+    fam = _over_records(np.array([np.mean(a) for a in alarms]), level)
+    J = len(folds)
+    return {"supported": True, "levels": levels,
+            "thresholds": [_level_limit(f_fit, k, q) for k, q in enumerate(levels)],
+            "ci": [p["interval"] for p in per_feature], "per_feature": per_feature, "family": fam,
+            "claim": "per sample on a new record", "level": level,
+            "rests_on": (f"{J} nominal records, each left out in turn: whitening refitted on the others "
+                         "(whole, after the warm-up), the threshold at a quantile level of their features, "
+                         "measured on the left-out record; the level is the lowest whose mean left-out "
+                         "rate (records weighted alike) is at most the target; interval: t over the "
+                         f"{J} records at {level:g}; one new record's own rate spreads over "
+                         f"{fam['spread'][0]:.3g}..{fam['spread'][1]:.3g} (any threshold)")}
+
+
 def _record_widened(td: dict, f_fit: list) -> dict:
     """A tail or empirical threshold design's intervals widened for records at their own levels:
     each half-width around the achieved rate times ``sqrt(tau_records / tau)`` (the design effect of
@@ -455,15 +522,8 @@ def logged_thresholds(raw, groups: dict[str, list[str]], alarm, dt: float, nomin
         f = dd["featurise"](x)
         return dd["smooth"].run(f) if dd["smooth"] is not None else f
 
-    f_meas = [statistics(d, p[1]) for p in parts]
-    hold = Hold(names, thr, Z=alarm.hold, absolute=True)
-    for c, m in zip(claims, _measure(claims, hold, f_meas, per, dt, level)):
-        if m is not None:
-            c["measured"] = m
-            c["verdict"] = verdict(c["interval"], m["interval"])
-    record_check = []
+    folds, record_check = [], []
     if len(parts) >= 2:
-        loro = []
         for i, p in enumerate(parts):
             row = {"record": where_of[i], "samples": int(p[2].shape[0])}
             try:
@@ -475,12 +535,42 @@ def logged_thresholds(raw, groups: dict[str, list[str]], alarm, dt: float, nomin
                 row["skipped"] = f"the other records cannot support the target: {str(exc)[:300]}"
                 record_check.append(row)
                 continue
-            hi = Hold(di["names"], di["thr"], Z=alarm.hold, absolute=True)
-            al = hi.run(statistics(di, p[2])).values[0]
-            loro.append(al)
-            row["thresholds"] = np.atleast_1d(di["thr"]).tolist()
-            row["rate"] = float(np.mean(np.any(al > 0.5, axis=1)))    # any threshold, per sample
             record_check.append(row)
+            folds.append((row, di, statistics(di, p[2])))
+    new_record = None
+    if len(folds) >= 3 and per == "sample" and alarm.hold == 1 and smooth is None:
+        # a user runs the monitor on a NEW record: choose each threshold so that the mean of the
+        # left-out records' rates (each record weighted alike) meets the target
+        new_record = _new_record_levels(names, d["f_fit"], [(di["f_fit"], z) for _, di, z in folds],
+                                        float(alarm.pfa) / len(names), level)
+        if new_record["supported"]:
+            thr = np.asarray(new_record.pop("thresholds"), float)
+            td = {**{k: v for k, v in td.items() if k not in ("threshold", "ci")}, "threshold": thr.tolist(),
+                  "ci": new_record["ci"], "target": float(alarm.pfa) / len(names),
+                  "method": "new-record quantile (leave-one-record-out)", "pooled_method": td.get("method"),
+                  "pooled_threshold": np.atleast_1d(np.asarray(td["threshold"], float)).tolist(),
+                  "new_record": new_record}
+            claims = _claims(names, td, alarm, "nominal logs (new record: leave-one-record-out)")
+            for c in claims:
+                c["per_what"] = "sample on a new record"
+                c["rests_on"] = new_record["rests_on"]
+            claims[len(names)]["interval"] = new_record["family"]["interval"]
+            claims[len(names)]["method"] = "mean over the left-out records of their any-threshold rate"
+    f_meas = [statistics(d, p[1]) for p in parts]
+    hold = Hold(names, thr, Z=alarm.hold, absolute=True)
+    for c, m in zip(claims, _measure(claims, hold, f_meas, per, dt, level)):
+        if m is not None:
+            c["measured"] = m
+            c["verdict"] = verdict(c["interval"], m["interval"])
+    if folds:
+        loro = []
+        for row, di, z in folds:
+            t_i = di["thr"] if new_record is None or not new_record["supported"] else \
+                [_level_limit(di["f_fit"], k, q) for k, q in enumerate(new_record["levels"])]
+            al = Hold(di["names"], np.asarray(t_i, float), Z=alarm.hold, absolute=True).run(z).values[0]
+            loro.append(al)
+            row["thresholds"] = np.atleast_1d(np.asarray(t_i, float)).tolist()
+            row["rate"] = float(np.mean(np.any(al > 0.5, axis=1)))    # any threshold, per sample
         for c in claims:
             if c["kind"] == "decision" or not loro:
                 continue
@@ -515,6 +605,6 @@ def logged_thresholds(raw, groups: dict[str, list[str]], alarm, dt: float, nomin
     never = {name: [0, k] for name, k in zip(names_all, n_in) if k > 0}
     return {"white": d["white"], "features": d["features"], "thr": thr, "td": td, "claims": claims,
             "records": len(parts), "smooth": smooth, "names": names, "in_sample": never,
-            "record_check": record_check,
+            "record_check": record_check, "new_record": new_record,
             "fit_hours": sum(f.n_samples for f in d["f_fit"]) * dt / 3600.0,
             "measure_hours": sum(f.n_samples for f in f_meas) * dt / 3600.0}
