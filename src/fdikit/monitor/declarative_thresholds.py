@@ -556,6 +556,11 @@ def logged_thresholds(raw, groups: dict[str, list[str]], alarm, dt: float, nomin
                 c["rests_on"] = new_record["rests_on"]
             claims[len(names)]["interval"] = new_record["family"]["interval"]
             claims[len(names)]["method"] = "mean over the left-out records of their any-threshold rate"
+        else:
+            td = {**td, "new_record": new_record}
+            warnings.warn(f"design: no threshold meets the target pfa = {alarm.pfa:g} per sample on a new "
+                          f"record ({new_record['why']}): the pooled thresholds are kept, their claim is "
+                          "the pooled records' rate, not a new record's", UserWarning, stacklevel=3)
     f_meas = [statistics(d, p[1]) for p in parts]
     hold = Hold(names, thr, Z=alarm.hold, absolute=True)
     for c, m in zip(claims, _measure(claims, hold, f_meas, per, dt, level)):
