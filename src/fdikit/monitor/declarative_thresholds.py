@@ -523,6 +523,11 @@ def logged_thresholds(raw, groups: dict[str, list[str]], alarm, dt: float, nomin
         return dd["smooth"].run(f) if dd["smooth"] is not None else f
 
     folds, record_check = [], []
+    if smooth is not None and smoothing.lam is None:
+        # the left-out records are judged at the deployed constant, not one each refit would choose
+        from .declarative_smoothing import SmoothingSpec
+
+        smoothing = SmoothingSpec("ewma", float(td["smoothing"]["lambda"]), smoothing.candidates)
     if len(parts) >= 2:
         for i, p in enumerate(parts):
             row = {"record": where_of[i], "samples": int(p[2].shape[0])}
@@ -538,10 +543,16 @@ def logged_thresholds(raw, groups: dict[str, list[str]], alarm, dt: float, nomin
             record_check.append(row)
             folds.append((row, di, statistics(di, p[2])))
     new_record = None
-    if len(folds) >= 3 and per == "sample" and alarm.hold == 1 and smooth is None:
+    def fit_statistics(dd):
+        return [dd["smooth"].run(f) for f in dd["f_fit"]] if dd["smooth"] is not None else dd["f_fit"]
+
+    if len(folds) >= 3 and per == "sample" and alarm.hold == 1:
         # a user runs the monitor on a NEW record: choose each threshold so that the mean of the
         # left-out records' rates (each record weighted alike) meets the target
-        new_record = _new_record_levels(names, d["f_fit"], [(di["f_fit"], z) for _, di, z in folds],
+        for _, di, _z in folds:
+            di["fit_stats"] = fit_statistics(di)
+        new_record = _new_record_levels(names, fit_statistics(d),
+                                        [(di["fit_stats"], z) for _, di, z in folds],
                                         float(alarm.pfa) / len(names), level)
         if new_record["supported"]:
             thr = np.asarray(new_record.pop("thresholds"), float)
@@ -550,10 +561,15 @@ def logged_thresholds(raw, groups: dict[str, list[str]], alarm, dt: float, nomin
                   "method": "new-record quantile (leave-one-record-out)", "pooled_method": td.get("method"),
                   "pooled_threshold": np.atleast_1d(np.asarray(td["threshold"], float)).tolist(),
                   "new_record": new_record}
-            claims = _claims(names, td, alarm, "nominal logs (new record: leave-one-record-out)")
+            ew = f", EWMA lambda {td['smoothing']['lambda']:g}" if smooth is not None else ""
+            claims = _claims(names, td, alarm, f"nominal logs (new record: leave-one-record-out{ew})")
             for c in claims:
                 c["per_what"] = "sample on a new record"
-                c["rests_on"] = new_record["rests_on"]
+                c["rests_on"] = new_record["rests_on"] + (f"; the statistics are the EWMA (lambda "
+                                                          f"{td['smoothing']['lambda']:g}) of the features"
+                                                          if smooth is not None else "")
+                if smooth is not None:
+                    c["smoothing"] = {"kind": "ewma", "lambda": td["smoothing"]["lambda"]}
             claims[len(names)]["interval"] = new_record["family"]["interval"]
             claims[len(names)]["method"] = "mean over the left-out records of their any-threshold rate"
         else:
@@ -571,7 +587,7 @@ def logged_thresholds(raw, groups: dict[str, list[str]], alarm, dt: float, nomin
         loro = []
         for row, di, z in folds:
             t_i = di["thr"] if new_record is None or not new_record["supported"] else \
-                [_level_limit(di["f_fit"], k, q) for k, q in enumerate(new_record["levels"])]
+                [_level_limit(di["fit_stats"], k, q) for k, q in enumerate(new_record["levels"])]
             al = Hold(di["names"], np.asarray(t_i, float), Z=alarm.hold, absolute=True).run(z).values[0]
             loro.append(al)
             row["thresholds"] = np.atleast_1d(np.asarray(t_i, float)).tolist()
