@@ -112,3 +112,20 @@ def test_a_target_no_level_meets_is_stated_not_hidden():
                             [([sig(x) for k, x in enumerate(recs[1:]) if k != j], sig(recs[1 + j]))
                              for j in range(3)], 0.05, 0.95)
     assert ok["supported"] and ok["family"]["rate"] <= 0.05 and len(ok["thresholds"]) == 1
+
+
+def test_smoothed_statistics_get_new_record_levels_at_the_deployed_constant():
+    """An EWMA design is set for a new record too, its left-out records judged at the deployed
+    constant; where the left-out designs are refused, the design says it kept the pooled thresholds."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        d = design_monitor({**DESIGN, "detect": {"smoothing": "ewma", "lambda": "auto"}},
+                           nominal=_records(3, 8))
+    td, claims = d["_report"]["threshold_design"], d["_report"]["claims"]
+    assert td["method"] == "new-record quantile (leave-one-record-out)"
+    assert all(c["smoothing"]["lambda"] == td["smoothing"]["lambda"] for c in claims)
+    assert "EWMA" in claims[0]["rests_on"]
+    with pytest.warns(UserWarning, match="on a new record .*only 0 of 8 records could be left out"):
+        d = design_monitor({**DESIGN, "detect": {"smoothing": "ewma", "lambda": 0.5}}, nominal=_records(3, 8))
+    td = d["_report"]["threshold_design"]
+    assert td["new_record"]["supported"] is False and td["method"] == "split-conformal quantile of the EWMA"

@@ -542,11 +542,14 @@ def logged_thresholds(raw, groups: dict[str, list[str]], alarm, dt: float, nomin
                 continue
             record_check.append(row)
             folds.append((row, di, statistics(di, p[2])))
-    new_record = None
     def fit_statistics(dd):
         return [dd["smooth"].run(f) for f in dd["f_fit"]] if dd["smooth"] is not None else dd["f_fit"]
 
-    if len(folds) >= 3 and per == "sample" and alarm.hold == 1:
+    new_record = None
+    if len(parts) >= 3 and len(folds) < 3 and per == "sample" and alarm.hold == 1:
+        new_record = {"supported": False, "why": f"only {len(folds)} of {len(parts)} records could be left "
+                      "out (the others could not support the target; see record_check): 3 are needed"}
+    if new_record is None and len(folds) >= 3 and per == "sample" and alarm.hold == 1:
         # a user runs the monitor on a NEW record: choose each threshold so that the mean of the
         # left-out records' rates (each record weighted alike) meets the target
         for _, di, _z in folds:
@@ -554,6 +557,7 @@ def logged_thresholds(raw, groups: dict[str, list[str]], alarm, dt: float, nomin
         new_record = _new_record_levels(names, fit_statistics(d),
                                         [(di["fit_stats"], z) for _, di, z in folds],
                                         float(alarm.pfa) / len(names), level)
+    if new_record is not None:
         if new_record["supported"]:
             thr = np.asarray(new_record.pop("thresholds"), float)
             td = {**{k: v for k, v in td.items() if k not in ("threshold", "ci")}, "threshold": thr.tolist(),
@@ -574,9 +578,10 @@ def logged_thresholds(raw, groups: dict[str, list[str]], alarm, dt: float, nomin
             claims[len(names)]["method"] = "mean over the left-out records of their any-threshold rate"
         else:
             td = {**td, "new_record": new_record}
-            warnings.warn(f"design: no threshold meets the target pfa = {alarm.pfa:g} per sample on a new "
-                          f"record ({new_record['why']}): the pooled thresholds are kept, their claim is "
-                          "the pooled records' rate, not a new record's", UserWarning, stacklevel=3)
+            warnings.warn(f"design: the thresholds cannot be set for the target pfa = {alarm.pfa:g} per "
+                          f"sample on a new record ({new_record['why']}): the pooled thresholds are kept, "
+                          "their claim is the pooled records' rate, not a new record's", UserWarning,
+                          stacklevel=3)
     f_meas = [statistics(d, p[1]) for p in parts]
     hold = Hold(names, thr, Z=alarm.hold, absolute=True)
     for c, m in zip(claims, _measure(claims, hold, f_meas, per, dt, level)):
