@@ -5,6 +5,14 @@ or more, each record left out in turn is measured by a design refitted on the ot
 intervals count the records' own levels (:func:`~fdikit.monitor.declarative_smoothing.record_tau`),
 and the samples a plant was identified on neither fit nor measure.
 
+A user runs the monitor on a *new* record, whose rate varies with its own level: with three records
+or more and a per-sample target without a hold (raw or smoothed statistics), each threshold is the
+quantile level of the fit parts at which the mean of the left-out records' rates (each record left
+out in turn, measured against that level of the others; records weighted alike) meets the target,
+and the claim is "per sample on a new record", its interval the t-interval over the records
+(:func:`_new_record_levels`). Fewer records (they cannot show a spread of levels), other targets, or
+left-out designs that are refused keep the pooled thresholds (the last two say so).
+
 Each design returns its *claims*: plain dicts that :func:`fdikit.evaluate.validate` re-measures on
 new nominal logs and the design report lists::
 
@@ -393,8 +401,12 @@ def logged_thresholds(raw, groups: dict[str, list[str]], alarm, dt: float, nomin
     left out in turn: whitening and thresholds are refitted on the others (each whole, after the warm-up) and
     measured on the whole left-out record (after the warm-up), which the refitted design never saw;
     the pooled rate over the left-out records is a second measurement of every claim
-    (``measured_records``). Samples a plant was identified on (``in_sample``) neither fit nor measure
-    (a record with too few others is left out; none left: refused, naming the logs).
+    (``measured_records``). With three records or more and a per-sample target without a hold, the
+    thresholds are set for a NEW record from those left-out rates (:func:`_new_record_levels`; the
+    claim "per sample on a new record", ``new_record`` in the threshold design), and the left-out
+    records are measured at the chosen levels. Samples a plant was identified on (``in_sample``)
+    neither fit nor measure (a record with too few others is left out; none left: refused, naming the
+    logs).
 
     Parameters
     ----------
@@ -440,8 +452,9 @@ def logged_thresholds(raw, groups: dict[str, list[str]], alarm, dt: float, nomin
         halves), ``measured_records`` (on the left-out records, two records or more) and
         ``verdict`` (the worse of the two), and ``records``/``fit_hours``/``measure_hours``;
         ``smooth`` (the :class:`~fdikit.detect.EWMA` stage or None), ``names`` (the hold's inputs),
-        ``in_sample`` (log -> the samples left out, ``[0, n]``) and ``record_check`` (per left-out record:
-        its rate, or why it was not refitted).
+        ``in_sample`` (log -> the samples left out, ``[0, n]``), ``record_check`` (per left-out record:
+        its rate, or why it was not refitted) and ``new_record`` (the new-record levels of
+        :func:`_new_record_levels`, or None: fewer than 3 records or another target).
 
     Raises
     ------
