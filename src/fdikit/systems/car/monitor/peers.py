@@ -85,7 +85,40 @@ _MEASURED = {"sig:front_wheel_sum": "w_front_sum", "sig:rear_wheel_sum": "w_rear
 _BLOCK = {"speed": "longitudinal", "yaw": "lateral"}
 
 
-class CarPeerSignals(ResidualGenerator):
+class PeerSignalsBase(ResidualGenerator):
+    """A stateless stage giving the members of redundant sensor groups (and raw values) as columns.
+
+    A subclass gives ``_columns(u, y)``, the output columns in :attr:`output_names` order; the
+    base stacks them, refuses a non-finite one by name (channel, sample, run), and runs the same
+    computation batch and step by step. Shared by :class:`CarPeerSignals` and the RAV4's
+    :class:`~fdikit.systems.car.monitor_rav4.peers.Rav4PeerSignals`.
+    """
+
+    _state_attrs = ()
+
+    def _columns(self, u: np.ndarray, y: np.ndarray) -> list[np.ndarray]:
+        raise NotImplementedError
+
+    def reset(self, runs: int = 1) -> None:
+        self._R = int(runs)
+
+    def _compute(self, u: np.ndarray, y: np.ndarray) -> np.ndarray:
+        out = np.stack(self._columns(u, y), axis=-1)
+        if not np.all(np.isfinite(out)):
+            run, k, j = np.argwhere(~np.isfinite(out))[0]
+            raise DataError(f"peer signal {self.output_names[j]!r} is not finite at sample {k} (run {run})")
+        return out
+
+    def _step(self, u, y):
+        return self._compute(u, y)
+
+    def run(self, signals: Signals) -> Signals:
+        u, y = self._inputs(signals)
+        self.reset(signals.runs)
+        return Signals(signals.t, self._compute(u, y), self.output_names, check=False)
+
+
+class CarPeerSignals(PeerSignalsBase):
     """The members of the simulated car's redundant groups and its raw sensor values.
 
     Outputs: ``sig:front_wheel_sum``, ``sig:rear_wheel_sum`` (rad/s, as measured),
@@ -146,30 +179,14 @@ class CarPeerSignals(ResidualGenerator):
     def from_dict(cls, d: dict[str, Any]) -> CarPeerSignals:
         return cls(d["k_f"], d["k_r"], d.get("params"))
 
-    def reset(self, runs: int = 1) -> None:
-        self._R = int(runs)
-
-    def _compute(self, u: np.ndarray, y: np.ndarray) -> np.ndarray:
+    def _columns(self, u: np.ndarray, y: np.ndarray) -> list[np.ndarray]:
         q = self.params
         pm, we, fs, rs, _ax, ay, r, fd, rd = (y[..., i] for i in range(9))
         U = np.maximum(q["r_w"] * np.abs(rs) / 2.0, 1.0)
         meas = dict(zip(self.y_names, (y[..., i] for i in range(9))))
         cols = [fs, rs, 2.0 * we / (q["i_gear"] * q["i_final"]), r, ay / U,
                 u[..., 0] * U / (self.L + self.K_us * U * U), fd / self.k_f, rd / self.k_r, pm]
-        cols += [meas[n] for n in sorted(set(_MEASURED.values()))]
-        out = np.stack(cols, axis=-1)
-        if not np.all(np.isfinite(out)):
-            run, k, j = np.argwhere(~np.isfinite(out))[0]
-            raise DataError(f"peer signal {self.output_names[j]!r} is not finite at sample {k} (run {run})")
-        return out
-
-    def _step(self, u, y):
-        return self._compute(u, y)
-
-    def run(self, signals: Signals) -> Signals:
-        u, y = self._inputs(signals)
-        self.reset(signals.runs)
-        return Signals(signals.t, self._compute(u, y), self.output_names, check=False)
+        return cols + [meas[n] for n in sorted(set(_MEASURED.values()))]
 
 
 _RAW_UNITS = {"w_front_sum": "rad/s", "w_rear_sum": "rad/s", "w_engine": "rad/s", "yaw_rate": "rad/s",

@@ -33,9 +33,9 @@ from typing import Any
 
 import numpy as np
 
-from ....base.stage import ResidualGenerator
 from ....errors import DataError
 from ....signals import Signals
+from ..monitor.peers import PeerSignalsBase
 from ..rav4 import RAV4
 from .channels import _RAW_U, _RAW_Y, Rav4Preprocessing
 
@@ -57,7 +57,7 @@ _RAW_OF = {"sig:wheel_fl": "raw:wheel_fl", "sig:wheel_fr": "raw:wheel_fr", "sig:
            "sig:lateral_accelerometer": "raw:accel_y", "sig:steering": "raw:steer_angle"}
 
 
-class Rav4PeerSignals(ResidualGenerator):
+class Rav4PeerSignals(PeerSignalsBase):
     """The members of the RAV4's redundant groups and the raw sensor values, from the raw CAN channels.
 
     ``sig:wheel_*`` (m/s); in rad/s: ``sig:yaw_rate`` (the gyro, offset removed),
@@ -101,10 +101,7 @@ class Rav4PeerSignals(ResidualGenerator):
     def from_dict(cls, d: dict[str, Any]) -> Rav4PeerSignals:
         return cls(Rav4Preprocessing.from_dict(d["pre"]), d["steer"], d["k_f"], d["k_r"])
 
-    def reset(self, runs: int = 1) -> None:
-        self._R = int(runs)
-
-    def _compute(self, u: np.ndarray, y: np.ndarray) -> np.ndarray:
+    def _columns(self, u: np.ndarray, y: np.ndarray) -> list[np.ndarray]:
         uu, yy = self.pre.apply(u, y)
         U = np.maximum(uu[..., 1], 1.0)
         c0 = self.steer[2]
@@ -114,20 +111,7 @@ class Rav4PeerSignals(ResidualGenerator):
         cols = [y[..., 2], y[..., 3], y[..., 4], y[..., 5], yy[..., 1], yy[..., 0] / U,
                 (uu[..., 0] - c0) * U / RAV4["L"], yy[..., 2] / self.k_f, yy[..., 3] / self.k_r,
                 np.median(y[..., 2:6], axis=-1) ** 2]
-        cols += [raw[n] for n in sorted(raw)]
-        out = np.stack(cols, axis=-1)
-        if not np.all(np.isfinite(out)):
-            run, k, j = np.argwhere(~np.isfinite(out))[0]
-            raise DataError(f"peer signal {self.output_names[j]!r} is not finite at sample {k} (run {run})")
-        return out
-
-    def _step(self, u, y):
-        return self._compute(u, y)
-
-    def run(self, signals: Signals) -> Signals:
-        u, y = self._inputs(signals)
-        self.reset(signals.runs)
-        return Signals(signals.t, self._compute(u, y), self.output_names, check=False)
+        return cols + [raw[n] for n in sorted(raw)]
 
 
 #: the fault-type stage's isolation with the CUSUM (PeerCUSUM merges the peer check's); its statistic
