@@ -13,12 +13,31 @@ from fdikit.codegen import (
     CMonitor,
     c_to_py_state,
     compile_shared,
+    driver_source,
     emit_monitor,
     generate_monitor,
     py_to_c_state,
 )
 
 STATUS = ("ok", "cannot_judge", "warmup")
+
+
+def sanitized_driver(gen: dict, where: Path) -> Path:
+    """The program of :func:`~fdikit.codegen.driver_source` over generated code ``gen`` (the result
+    of ``generate_monitor``), built in ``where`` under -fsanitize=address,undefined; the test is
+    skipped, with the compiler's words, where the sanitizer runtimes are missing."""
+    import pytest
+
+    from fdikit.errors import DataError
+
+    layout = gen["layout"]
+    cdir = Path(gen["files"][0]).parent
+    (where / "main.c").write_text(driver_source(layout))
+    try:
+        return compile_shared([where / "main.c", cdir / f"{layout['name']}.c"], where / "asan",
+                              sanitize=True, shared=False, extra=(f"-I{cdir}",))
+    except DataError as exc:   # a compiler without the sanitizer runtimes
+        pytest.skip(f"no sanitizer runtime: {str(exc)[-200:]}")
 
 
 def generated(mon, where: Path, name: str, f32: bool = True):

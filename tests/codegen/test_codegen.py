@@ -24,7 +24,6 @@ from fdikit.codegen import (
     c_to_py_state,
     compile_shared,
     config_digest,
-    driver_source,
     emit_monitor,
     find_compiler,
     generate,
@@ -48,6 +47,7 @@ from .equivalence import (
     py_stream,
     python_then_c,
     same,
+    sanitized_driver,
 )
 from .equivalence import generated as _build  # (the name the other codegen tests import)
 
@@ -384,13 +384,7 @@ def test_under_sanitizers(built, tmp_path):
     which = "mhsspt"   # the most C: filter, features, erfc/log/exp densities, the recursion, episodes
     _mon, gen, _c64, _c32, _em = built[which]
     layout = gen["layout"]
-    cdir = Path(gen["files"][0]).parent
-    (tmp_path / "main.c").write_text(driver_source(layout))
-    try:
-        exe = compile_shared([tmp_path / "main.c", cdir / f"{layout['name']}.c"], tmp_path / "asan",
-                             sanitize=True, shared=False, extra=(f"-I{cdir}",))
-    except DataError as exc:   # a compiler without the sanitizer runtimes
-        pytest.skip(f"no sanitizer runtime: {str(exc)[-200:]}")
+    exe = sanitized_driver(gen, tmp_path)
     t, x, _names, py_out, py_status, py_ev = _reference(built, which, 0)
     res = run_driver(exe, layout, t, x)
     assert np.array_equal(res["out"], py_out)

@@ -6,16 +6,12 @@ checkpoints cross between C and Python mid-episode."""
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 
 from fdikit.codegen import (
     CMonitor,
     c_to_py_state,
-    compile_shared,
-    driver_source,
     find_compiler,
     py_to_c_state,
     run_driver,
@@ -23,11 +19,11 @@ from fdikit.codegen import (
 from fdikit.codegen.fault_type import FaultTypeEmitter
 from fdikit.codegen.stages import stage_emitter
 from fdikit.detect import Hold
-from fdikit.errors import DataError
 from fdikit.isolate import FAULT_TYPES, FaultTypeClassifier
 from fdikit.monitor import Decision, Monitor
 from fdikit.residuals import FaultDetectionFilter, FilterDesign
 
+from .equivalence import sanitized_driver
 from .test_codegen import DT, _build
 
 pytestmark = pytest.mark.skipif(find_compiler() is None, reason="no C compiler (cc, gcc or clang) on PATH")
@@ -184,13 +180,7 @@ def test_classifier_and_groups_under_sanitizers(built, tmp_path):
     -fsanitize=address,undefined: the same numbers and events as Python."""
     mon, gen, _c64, _c32, _em = built
     layout = gen["layout"]
-    cdir = Path(gen["files"][0]).parent
-    (tmp_path / "main.c").write_text(driver_source(layout))
-    try:
-        exe = compile_shared([tmp_path / "main.c", cdir / f"{layout['name']}.c"], tmp_path / "asan",
-                             sanitize=True, shared=False, extra=(f"-I{cdir}",))
-    except DataError as exc:   # a compiler without the sanitizer runtimes
-        pytest.skip(f"no sanitizer runtime: {str(exc)[-200:]}")
+    exe = sanitized_driver(gen, tmp_path)
     t, x, names = _log(mon, 4)
     py_out, py_ev = _py(mon, t, x, names)
     res = run_driver(exe, layout, t, x)

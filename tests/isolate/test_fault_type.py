@@ -41,6 +41,16 @@ def test_gain_on_a_signal_far_from_zero_is_told_from_a_bias(kind):
     assert out[f"s:{other}"][0, 1500:].max() == 0.0
 
 
+def _assert_batch_streaming_round_trip(ftc, sig):
+    """``ftc`` gives the same numbers batch, sample by sample, and after a to_dict round trip."""
+    out = ftc.run(sig)
+    ftc.reset(1)
+    x = sig.values[:, :, sig.index(ftc.input_names)]
+    st = np.stack([ftc.step(x[:, k]) for k in range(sig.n_samples)], axis=1)
+    assert np.array_equal(out.values, st)
+    assert np.array_equal(FaultTypeClassifier.from_dict(ftc.to_dict()).run(sig).values, out.values)
+
+
 def test_without_excitation_a_bias_is_not_sure():
     # the signal does not move: a bias and a gain explain the residual alike; bias, confidence <= 0.5
     out = _ftc().run(_offset_signal("gain", swing=0.0))
@@ -52,12 +62,7 @@ def test_without_excitation_a_bias_is_not_sure():
 def test_batch_equals_streaming_and_round_trip():
     sig = _offset_signal("gain")
     ftc = _ftc()
-    out = ftc.run(sig)
-    ftc.reset(1)
-    x = sig.values[:, :, sig.index(ftc.input_names)]
-    st = np.stack([ftc.step(x[:, k]) for k in range(sig.n_samples)], axis=1)
-    assert np.array_equal(out.values, st)
-    assert np.array_equal(FaultTypeClassifier.from_dict(ftc.to_dict()).run(sig).values, out.values)
+    _assert_batch_streaming_round_trip(ftc, sig)
 
 
 def test_gain_of_a_sensor_with_an_offset_is_a_gain():
@@ -126,12 +131,7 @@ def test_hysteresis_batch_equals_streaming_and_round_trip():
     sig = _persisting("drift", 1, T=2500)
     ftc = FaultTypeClassifier(["s"], {"s": 0.023}, 1500, lookback=100, block=10, revise_after=50,
                               revise_conf=0.4)
-    out = ftc.run(sig)
-    ftc.reset(1)
-    x = sig.values[:, :, sig.index(ftc.input_names)]
-    st = np.stack([ftc.step(x[:, k]) for k in range(sig.n_samples)], axis=1)
-    assert np.array_equal(out.values, st)
-    assert np.array_equal(FaultTypeClassifier.from_dict(ftc.to_dict()).run(sig).values, out.values)
+    _assert_batch_streaming_round_trip(ftc, sig)
 
 
 def test_revision_rule():
