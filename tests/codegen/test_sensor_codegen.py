@@ -55,11 +55,13 @@ def _bank_monitor(seed=0, measured=False):
                           scale=2.0 if measured else 1.0)
     stuck = StuckDetector("r0", "r1", tol=0.6, scale=0.5, threshold=2.0, min_samples=3, warmup=5)
     count = StuckDetector("r2", tol=0.8, scale=4.0, warmup=2)
+    # rate channels too (group a: the rate of r5, group b: of r0), their filters in the C state
     peers = PeerCheck({"a": ["r0", "r1", "r2", "r3", "r4"], "b": ["r5", "r6"]},
-                      {**{f"r{i}": [0.01 * i, 0.9, 0.2] for i in range(5)}, "r5": [0.0, 1.1],
-                       "r6": [0.1, 0.8]},
+                      {**{f"r{i}": [0.01 * i, 0.9, 0.2, 0.003 * (i + 1)] for i in range(5)},
+                       "r5": [0.0, 1.1, -0.004], "r6": [0.1, 0.8, 0.002]},
                       {f"r{i}": 0.8 + 0.1 * i for i in range(7)}, DT, references={"a": ["r6"]},
-                      band_hz={"a": 2.0, "b": 5.0}, announce=["r0", "r2", "r5"], warmup=7)
+                      band_hz={"a": 2.0, "b": 5.0}, announce=["r0", "r2", "r5"], warmup=7,
+                      rates={"a": ["r5"], "b": ["r0"]}, rate_hz=3.0)
     hold = Hold(["r0:stuck", "r2:stuck"], 1.0, Z=2, absolute=False)
     alarms = [*hold.output_names, "peer:r0:isolated", "peer:r2:isolated", "peer:r5:isolated"]
     names = {a: a.split(":")[1] + ":" + a.split(":")[-1] for a in alarms}

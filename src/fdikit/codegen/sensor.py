@@ -101,9 +101,10 @@ class StuckEmitter(StageEmitter):
 
 
 class PeerCheckEmitter(StageEmitter):
-    """:class:`~fdikit.detect.PeerCheck`: each member against the median of its peers and the
-    references, a first-order low-pass started at the first residual, normalised statistics and
-    the group's isolated member; started again on resume."""
+    """:class:`~fdikit.detect.PeerCheck`: each member against the median of its peers, the
+    references and the rate channels' estimates (first-order filters started at the first sample),
+    a first-order low-pass started at the first residual, normalised statistics and the group's
+    isolated member; started again on resume."""
 
     kinds = ("PeerCheck",)
     handles_resume = True
@@ -112,13 +113,19 @@ class PeerCheckEmitter(StageEmitter):
     def __init__(self, obj: Any, prefix: str):
         super().__init__(obj, prefix)
         self.M = len(obj.members)
+        self.L = len(obj.rate_channels)
 
     def fields(self):
-        return [Field(f"{self.p}_z", "real", self.M), Field(f"{self.p}_k", "i64", 1)]
+        out = [Field(f"{self.p}_z", "real", self.M), Field(f"{self.p}_k", "i64", 1)]
+        if self.L:                                    # the rate channels' filters
+            out.append(Field(f"{self.p}_zr", "real", self.L))
+        return out
 
     def reset_code(self):
+        zr = (f"\n    {{ int i; for (i = 0; i < {self.L}; ++i) {self.f('zr')}[i] = FDK_R(0.0); }}"
+              if self.L else "")
         return (f"    {{ int i; for (i = 0; i < {self.M}; ++i) {self.f('z')}[i] = FDK_R(0.0); }}\n"
-                f"    {self.f('k')}[0] = 0;")
+                f"    {self.f('k')}[0] = 0;" + zr)
 
     def resume_code(self):
         return "    " + self.reset_code().replace("\n", "\n    ")
@@ -126,17 +133,27 @@ class PeerCheckEmitter(StageEmitter):
     def step_code(self, inp, out):
         o, M, f = self.obj, self.M, self.f
         n_in = len(inp)
-        lines = ["    {", f"        fdk_real px[{n_in}], e[{M}], st[{M}], iso[{M}], med;",
-                 "        int i;"]
+        L = self.L
+        lines = ["    {", f"        fdk_real px[{n_in}], e[{M}], st[{M}], iso[{M}], med"
+                 + (f", rt[{L}]" if L else "") + ";", "        int i;"]
         lines += [f"        px[{i}] = {v};" for i, v in enumerate(inp)]
         lines += [refuse_nonfinite("px", n_in)]
+        z, k = f("z"), f("k")
+        if L:                                         # the rate estimates (PeerCheck._step's order)
+            zr = f("zr")
+            for i, ci in enumerate(o._rate_in):
+                lines += [f"        if ({k}[0] == 0) {zr}[{i}] = px[{int(ci)}];",
+                          f"        else {zr}[{i}] = {zr}[{i}] + {rl(o._a_rate)} * (px[{int(ci)}] - {zr}[{i}]);",
+                          f"        rt[{i}] = (px[{int(ci)}] - {zr}[{i}]) * {rl(o._g_rate)};"]
         for j in range(M):
             c = o._c[j]
+            nr = len(o._refs[j])
             lines += median_code("med", [f"px[{int(p)}]" for p in o._peers[j]])
             lines.append(f"        e[{j}] = px[{int(o._self[j])}] - {rl(c[0])} - {rl(c[1])} * med;")
-            for r, d in zip(o._refs[j], c[2:]):
+            for r, d in zip(o._refs[j], c[2:2 + nr]):
                 lines.append(f"        e[{j}] = e[{j}] - {rl(d)} * px[{int(r)}];")
-        z, k = f("z"), f("k")
+            for r, d in zip(o._rates[j], c[2 + nr:]):
+                lines.append(f"        e[{j}] = e[{j}] - {rl(d)} * rt[{int(r)}];")
         lines += [f"        if ({k}[0] == 0) {{ for (i = 0; i < {M}; ++i) {z}[i] = e[i]; }}",
                   "        else {"]
         lines += [f"            {z}[{j}] = {z}[{j}] + {rl(a)} * (e[{j}] - {z}[{j}]);"
@@ -159,10 +176,15 @@ class PeerCheckEmitter(StageEmitter):
         return "\n".join(lines)
 
     def to_py(self, arrays):
-        return {"_z": arrays[f"{self.p}_z"].astype(float).reshape(1, -1), "_k": int(arrays[f"{self.p}_k"][0])}
+        zr = arrays[f"{self.p}_zr"].astype(float).reshape(1, -1) if self.L else np.zeros((1, 0))
+        return {"_z": arrays[f"{self.p}_z"].astype(float).reshape(1, -1), "_k": int(arrays[f"{self.p}_k"][0]),
+                "_zr": zr}
 
     def from_py(self, state):
-        return {f"{self.p}_z": np.ravel(state["_z"]), f"{self.p}_k": np.array([state["_k"]])}
+        out = {f"{self.p}_z": np.ravel(state["_z"]), f"{self.p}_k": np.array([state["_k"]])}
+        if self.L:
+            out[f"{self.p}_zr"] = np.ravel(state["_zr"])
+        return out
 
 
 class PeerCUSUMEmitter(StageEmitter):

@@ -50,6 +50,81 @@ def test_peer_check_names_the_member_batch_equals_streaming_and_round_trips():
     assert np.array_equal(pc._z, z) and pc._k == 1
 
 
+def _slipping_wheels(seed=0, T=4000, dt=0.02):
+    """Four wheels whose speeds depend on the acceleration: wheel j reads ``U + s_j a U`` (the slip of
+    a driven / braked wheel), ``U`` accelerating and braking in turn."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(T) * dt
+    a = 1.5 * np.sin(2 * np.pi * t / 14.0) + 0.5 * np.sin(2 * np.pi * t / 5.3)
+    U = 18.0 + np.cumsum(a) * dt
+    slip = np.array([0.012, 0.010, -0.004, -0.005])
+    x = U[:, None] * (1.0 + slip * a[:, None]) + 0.005 * rng.standard_normal((T, 4))
+    names = ["a", "b", "c", "d"]
+    sq = np.median(x, axis=1) ** 2
+    return Signals(t, np.column_stack([x, sq])[None], [*names, "sq"]), names
+
+
+def test_peer_check_rate_terms_follow_the_slip_and_stream_like_batch():
+    sig, names = _slipping_wheels()
+    half = Signals(sig.t[:2000], sig.values[:, :2000], sig.names)
+    plain = design_peer_check(half, {"w": names}, references={"w": ["sq"]})
+    rated = design_peer_check(half, {"w": names}, references={"w": ["sq"]}, rates={"w": ["sq"]},
+                              rate_hz=1.0, prefix="tpeer")
+    assert rated.rate_channels == ["sq"] and len(rated.coef["a"]) == 4
+    po, ro = plain.run(sig), rated.run(sig)
+    assert "tpeer:a:e" in ro.names and "peer:a:e" not in ro.names
+    held = slice(2200, None)
+    # the slip term takes the acceleration-dependent part out (held-out half): several times smaller
+    for m in names:
+        assert np.std(ro[f"tpeer:{m}:e"][0, held]) < 0.5 * np.std(po[f"peer:{m}:e"][0, held]), m
+    # a 1 % gain of "a": its slope on the reference is the gain with the slip term, not without
+    f = sig.values.copy()
+    f[0, 2500:, 0] *= 1.01
+    fs = Signals(sig.t, f, sig.names)
+    e, x = rated.run(fs)["tpeer:a:e"][0, 2600:], rated.run(fs)["tpeer:a:ref"][0, 2600:]
+    assert abs(np.polyfit(x, e, 1)[0] - 0.01) < 0.003
+    # step by step equals batch; the rate filter's state checkpoints and round-trips
+    assert np.array_equal(rated.run(fs).values, _stream(rated, fs))
+    r2 = PeerCheck.from_dict(rated.to_dict())
+    assert r2.prefix == "tpeer" and np.array_equal(r2.run(fs).values, rated.run(fs).values)
+    rated.reset(1)
+    x_in = fs.values[:, :, fs.index(rated.input_names)]
+    for k in range(300):
+        rated.step(x_in[:, k])
+    st = rated.get_state()
+    rest = np.stack([rated.step(x_in[:, k]) for k in range(300, 400)], axis=1)
+    r2.reset(1)
+    r2.set_state(st)
+    assert np.array_equal(np.stack([r2.step(x_in[:, k]) for k in range(300, 400)], axis=1), rest)
+    # a state saved before the rate terms loads into a check without them
+    plain.reset(1)
+    old = {k: v for k, v in plain.get_state().items() if k != "_zr"}
+    plain.set_state(old)
+    with pytest.raises(DataError, match="expected"):
+        r2.set_state({k: v for k, v in st.items() if k != "_zr"})
+
+
+@pytest.mark.parametrize("bad, match", [
+    (dict(rates={"v": ["sq"]}), "rates name unknown groups"),
+    (dict(rates={"w": "sq"}), "lists of channels"),
+    (dict(rate_hz=0.0), "rate_hz must be > 0"),
+    (dict(prefix="a:b"), "prefix"),
+])
+def test_peer_check_refuses_bad_rate_terms(bad, match):
+    kw = dict(rates={"w": ["sq"]})
+    kw.update(bad)
+    n = 2 + len(kw["rates"].get("w", [])) if isinstance(kw["rates"].get("w"), list) else 3
+    with pytest.raises(DataError, match=match):
+        PeerCheck({"w": ["a", "b", "c"]}, {m: [0.0, 1.0] + [0.0] * (n - 2) for m in "abc"},
+                  {m: 0.1 for m in "abc"}, 0.02, **kw)
+
+
+def test_peer_check_coef_length_counts_the_rate_terms():
+    with pytest.raises(DataError, match="3 finite numbers"):
+        PeerCheck({"w": ["a", "b", "c"]}, {m: [0.0, 1.0] for m in "abc"}, {m: 0.1 for m in "abc"}, 0.02,
+                  rates={"w": ["sq"]})
+
+
 def _classify(kind, seed=1):
     """Residual and reference of a synthetic sensor fault from sample 500 (isolated from 550)."""
     rng = np.random.default_rng(seed)
@@ -97,6 +172,33 @@ def test_fault_type_classifier_refuses_nan_before_state_changes():
     with pytest.raises(DataError, match="not finite"):
         ftc.step([[0.0, np.nan, 0.0, 1.0, 2.0]])
     assert all(np.array_equal(before[a], getattr(ftc, a), equal_nan=True) for a in ftc._state_attrs)
+
+
+def test_burst_unit_keeps_a_transient_before_the_onset_out_of_the_bursts():
+    """A nominal transient in the lookback window (before a bias) is a burst in units of a clean
+    residual's block spread, not in units of the detection residual's (``sigma_burst``)."""
+    rng = np.random.default_rng(3)
+    T, k = 1500, np.arange(1500)
+    e = 0.002 * rng.standard_normal(T) + 0.02 * (k >= 500)
+    e[450:460] += 0.006                              # one block-long nominal transient, below detection
+    ref = 0.05 * np.sin(k / 40.0)
+    stat = np.abs(e) / 0.01
+    iso = (stat >= 1) & (k >= 550)
+    sig = Signals(k * 0.02, np.column_stack([iso, stat, e, ref, ref + e])[None],
+                  ["peer:s:isolated", "peer:s", "peer:s:e", "peer:s:ref", "raw:s"])
+    kw = dict(raw={"s": "raw:s"}, stuck_after={"s": 60}, lookback=120, min_len=5, sigma_block={"s": 0.001})
+    typed = {}
+    for unit in (None, 0.004):
+        ftc = FaultTypeClassifier(["s"], {"s": 0.002}, 600, **kw,
+                                  sigma_burst=None if unit is None else {"s": unit})
+        out = ftc.run(sig)
+        typed[unit] = [t for t in FAULT_TYPES if out[f"s:{t}"][0, 700] == 1.0]   # window from 430
+        assert FaultTypeClassifier.from_dict(ftc.to_dict()).run(sig).equals(out)
+    assert typed == {None: ["intermittent"], 0.004: ["bias"]}, typed
+    with pytest.raises(DataError, match="sigma_burst names"):
+        FaultTypeClassifier(["s"], {"s": 0.002}, 600, sigma_burst={"t": 0.01})
+    with pytest.raises(DataError, match="sigma_burst must be finite"):
+        FaultTypeClassifier(["s"], {"s": 0.002}, 600, sigma_burst={"s": -1.0})
 
 
 # --- the real RAV4 minute -------------------------------------------------------------------------

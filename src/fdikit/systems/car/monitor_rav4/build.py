@@ -42,7 +42,8 @@ class Rav4Monitor:
     artifacts : dict
         The saveable parts ``{"filter", "features", "mhsspt", "hold"}``, with the sensor checks also
         ``"sensor_channels"``, ``"sensor_<i>"``, ``"sensor_hold"`` and, with the peer checks,
-        ``"peer_signals"``, ``"peer_check"``, ``"fault_type"``, ``"type_hold"`` (what :func:`design`
+        ``"peer_signals"``, ``"peer_check"``, ``"peer_cusum"``, ``"peer_typing"`` (the check with the
+        wheels' slip term that the fault typing reads), ``"fault_type"``, ``"type_hold"`` (what :func:`design`
         returns), generators first, each in the monitor's order.
     decision : Decision
     faults : list of str
@@ -263,7 +264,7 @@ def rav4_monitor(path: str | None = None, *, rate: float = 50.0, q_weight: float
         if peer_checks:
             psig = Rav4PeerSignals(pre, chk.coef["steer"], rec["k_f"], rec["k_r"])
             sk = round(max(warmup, sensor_warmup) / dt)
-            pc, cu, ftc, type_names = design_peer_stages(
+            pc, cu, tc, ftc, type_names = design_peer_stages(
                 psig.run(Signals(raw.t[cal_t], raw.values[:, cal_t], raw.names, check=False)), dt, skip=sk,
                 warmup=sk,
                 isolated_by={f"sig:{f}": [f"P:{f}:alarm"] for f in _TYPED_BY_MHSSPT if f in faults},
@@ -273,6 +274,8 @@ def rav4_monitor(path: str | None = None, *, rate: float = 50.0, q_weight: float
             procs["peer_check"] = pc
             if cu is not None:
                 procs["peer_cusum"] = cu
+            if tc is not None:
+                procs["peer_typing"] = tc
             procs.update(fault_type=ftc, type_hold=type_hold)
             sensor_names.update(type_names)
             rec["peer_checks"] = {"thresholds": pc.thresholds, "coef": pc.coef, "sigma": ftc.sigma,

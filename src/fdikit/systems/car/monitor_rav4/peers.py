@@ -39,7 +39,7 @@ from ..monitor.peers import PeerSignalsBase
 from ..rav4 import RAV4
 from .channels import _RAW_U, _RAW_Y, Rav4Preprocessing
 
-__all__ = ["PEER_GROUPS", "PEER_REFERENCES", "PEER_SENSORS", "Rav4PeerSignals", "design_peer_stages"]
+__all__ = ["PEER_GROUPS", "PEER_RATES", "PEER_REFERENCES", "PEER_SENSORS", "Rav4PeerSignals", "design_peer_stages"]
 
 #: Redundant groups: group -> members (channels of :class:`Rav4PeerSignals`).
 PEER_GROUPS = {"wheels": ["sig:wheel_fl", "sig:wheel_fr", "sig:wheel_rl", "sig:wheel_rr"],
@@ -47,6 +47,12 @@ PEER_GROUPS = {"wheels": ["sig:wheel_fl", "sig:wheel_fr", "sig:wheel_rl", "sig:w
                        "sig:yaw_rear"]}
 #: Group -> reference channels of :class:`Rav4PeerSignals` (affine terms of each member's fit).
 PEER_REFERENCES = {"wheels": ["sig:speed_sq"], "yaw": []}
+#: Group -> channels whose rate of change is an affine term too (:class:`~fdikit.detect.PeerCheck`'s
+#: ``rates``): the wheels' longitudinal slip under braking and traction moves a wheel's speed by about
+#: ``a U``, the rate of ``U^2 / 2`` (issue 27: without it a front wheel's residual keeps a slope of
+#: 0.014-0.022 per m/s of speed through the held-out half's braking, the size of a 1-2 % gain, so
+#: that small wheel gains could not be told from biases; with it 0.002-0.006).
+PEER_RATES = {"wheels": ["sig:speed_sq"], "yaw": []}
 #: Members that name a sensor -> that sensor (the others are peers only).
 PEER_SENSORS = {"sig:wheel_fl": "wheel_fl", "sig:wheel_fr": "wheel_fr", "sig:wheel_rl": "wheel_rl",
                 "sig:wheel_rr": "wheel_rr", "sig:yaw_rate": "yaw_rate",
@@ -127,12 +133,13 @@ def design_peer_stages(sig: Signals, dt: float, *, skip: int, warmup: int, band_
                        isolated_by=None, confirm: float = 0.5, gain_margin: float = 1.5,
                        cusum: bool = True, cusum_nu: float = 1.0, cusum_margin: float = 0.5,
                        cusum_groups: tuple[str, ...] = ("yaw",), revise_after_s: float = 1.0,
-                       revise_conf: float = 0.6):
+                       revise_conf: float = 0.6, rates=None, rate_hz: float = 0.5):
     """The peer check and the fault-type classifier designed on nominal :class:`Rav4PeerSignals`
     outputs ``sig`` (the calibration half).
 
     Each group of :data:`PEER_GROUPS` is fitted and thresholded on its own
-    (:func:`~fdikit.detect.design_peer_check`, references :data:`PEER_REFERENCES`): ``band_hz``
+    (:func:`~fdikit.detect.design_peer_check`, references :data:`PEER_REFERENCES`, rate channels
+    ``rates``, default :data:`PEER_RATES`, their filter's cut-off ``rate_hz``): ``band_hz``
     (default 0.2 Hz for the wheels, 0.1 Hz for the yaw group), ``per`` (the false-alarm period of
     ``pfa``; default 10 minutes each) and ``fit_skip`` (samples left out of the fit and the
     thresholds; default 0 for the wheels, ``skip`` for the yaw group, whose members are low-passed)
@@ -156,9 +163,14 @@ def design_peer_stages(sig: Signals, dt: float, *, skip: int, warmup: int, band_
     a bias (:class:`~fdikit.isolate.FaultTypeClassifier`'s ``revise_after``; 0 s: none); and the
     classifier's episode does not clear while the sensor is isolated (``hold_while_isolated``).
 
+    The classifier's residual and signal come from a second :class:`~fdikit.detect.PeerCheck`
+    (prefix ``tpeer``) with the rate terms ``rates`` (default :data:`PEER_RATES`); detection and
+    isolation stay on the first, without them (none when ``rates`` is empty).
+
     Returns
     -------
-    (PeerCheck, PeerCUSUM or None, FaultTypeClassifier, dict alarm channel -> announced name)
+    (PeerCheck, PeerCUSUM or None, PeerCheck for the typing or None, FaultTypeClassifier,
+    dict alarm channel -> announced name)
     """
     from ....detect import PeerCheck, design_peer_check, design_peer_cusum
     from ....isolate import FAULT_TYPES, FaultTypeClassifier
@@ -166,21 +178,38 @@ def design_peer_stages(sig: Signals, dt: float, *, skip: int, warmup: int, band_
     band = {"wheels": 0.2, "yaw": 0.1, **(band_hz or {})}
     per = {"wheels": 600.0, "yaw": 600.0, **(per or {})}
     fit_skip = {"wheels": 0, "yaw": skip, **(fit_skip or {})}
-    parts = [design_peer_check(sig, {g: ms}, references={g: PEER_REFERENCES[g]}, band_hz=band[g],
-                               announce=[m for m in ms if m in PEER_SENSORS], skip=fit_skip[g], pfa=pfa,
-                               per=per[g], margin=margin)
-             for g, ms in PEER_GROUPS.items()]
-    pc = PeerCheck(PEER_GROUPS, {m: c for p in parts for m, c in p.coef.items()},
-                   {m: h for p in parts for m, h in p.thresholds.items()}, parts[0].dt,
-                   references=PEER_REFERENCES, band_hz={g: band[g] for g in PEER_GROUPS},
-                   announce=list(PEER_SENSORS), warmup=warmup)
+    rates = PEER_RATES if rates is None else {g: list(rates.get(g, [])) for g in PEER_GROUPS}
+
+    def check(rt, prefix):
+        parts = [design_peer_check(sig, {g: ms}, references={g: PEER_REFERENCES[g]}, band_hz=band[g],
+                                   announce=[m for m in ms if m in PEER_SENSORS], skip=fit_skip[g], pfa=pfa,
+                                   per=per[g], margin=margin, rates={g: rt.get(g, [])}, rate_hz=rate_hz)
+                 for g, ms in PEER_GROUPS.items()]
+        return PeerCheck(PEER_GROUPS, {m: c for p in parts for m, c in p.coef.items()},
+                         {m: h for p in parts for m, h in p.thresholds.items()}, parts[0].dt,
+                         references=PEER_REFERENCES, band_hz={g: band[g] for g in PEER_GROUPS},
+                         announce=list(PEER_SENSORS), warmup=warmup, rates=rt, rate_hz=rate_hz, prefix=prefix)
+
+    pc = check({}, "peer")
     nom = pc.run(sig)
-    sigma = {m: float(np.std(nom[f"peer:{m}:e"][0, skip:])) for m in PEER_SENSORS}
+    # the fault-type stage reads a second check with the rate terms (its residual and reference: a
+    # gain's slope on the signal without the slip's); detection stays on the first, whose thresholds
+    # the rate terms would tighten on the calibration half below what the held-out half reaches
+    tc = check(rates, "tpeer") if any(rates.values()) else None
+    tnom = tc.run(sig) if tc is not None else nom
+    P = tc.prefix if tc is not None else "peer"
+    sigma = {m: float(np.std(tnom[f"{P}:{m}:e"][0, skip:])) for m in PEER_SENSORS}
     blk = max(1, round(block_s / dt))
     sig_blk = {}
     for m in PEER_SENSORS:
-        e = nom[f"peer:{m}:e"][0, skip:]
+        e = tnom[f"{P}:{m}:e"][0, skip:]
         sig_blk[m] = float(np.std(e[:e.size // blk * blk].reshape(-1, blk).mean(axis=1)))
+    # the burst rule's unit: the detection residual's block-mean spread (a nominal transient that the
+    # detection does not call out is no burst; the typing residual's spread is smaller in-sample)
+    sig_burst = {}
+    for m in PEER_SENSORS:
+        e = nom[f"peer:{m}:e"][0, skip:]
+        sig_burst[m] = max(sig_blk[m], float(np.std(e[:e.size // blk * blk].reshape(-1, blk).mean(axis=1))))
     stuck_after = {}
     for m, rawc in _RAW_OF.items():
         x = sig[rawc][0, skip:]
@@ -196,7 +225,7 @@ def design_peer_stages(sig: Signals, dt: float, *, skip: int, warmup: int, band_
 
     crit = {}
     for m in PEER_SENSORS:
-        e, x = nom[f"peer:{m}:e"][0, skip:], nom[f"peer:{m}:ref"][0, skip:]
+        e, x = tnom[f"{P}:{m}:e"][0, skip:], tnom[f"{P}:{m}:ref"][0, skip:]
         w = min(n(window_s), e.size)
         fb = [_gain_test(e[k:k + w], x[k:k + w], blk, sig_blk[m])[0]
               for k in range(0, e.size - w + 1, n(1.0))]
@@ -204,10 +233,11 @@ def design_peer_stages(sig: Signals, dt: float, *, skip: int, warmup: int, band_
     ftc = FaultTypeClassifier(list(PEER_SENSORS), sigma, n(window_s), raw=_RAW_OF, stuck_after=stuck_after,
                               lookback=n(lookback_s), min_len=n(0.2), spike_max=n(0.2), burst_gap=n(0.5),
                               clear_after=n(clear_after_s), isolated_by=isolated_by, confirm=confirm,
-                              block=blk, sigma_block=sig_blk,
+                              block=blk, sigma_block=sig_blk, sigma_burst=sig_burst,
                               gain_crit=crit, revise_after=n(revise_after_s) if revise_after_s > 0 else 0,
                               revise_conf=revise_conf, hold_while_isolated=revise_after_s > 0,
-                              channels=_CUSUM_CHANNELS if cusum else None)
+                              channels={**(_CUSUM_CHANNELS if cusum else {}), "r": P + ":{m}:e",
+                                        "x": P + ":{m}:ref"})
     names = {f"{m}:{t}": f"{s}:{t}" for m, s in PEER_SENSORS.items() for t in FAULT_TYPES}
     cu = None
     if cusum:
@@ -216,4 +246,4 @@ def design_peer_stages(sig: Signals, dt: float, *, skip: int, warmup: int, band_
         rest = [m for g in PEER_GROUPS if g not in cusum_groups for m in PEER_GROUPS[g] if m in PEER_SENSORS]
         cu = design_peer_cusum(nom, groups, skip=skip, nu=cusum_nu, margin=cusum_margin, warmup=warmup,
                                passthrough=rest, announce=ann)
-    return pc, cu, ftc, names
+    return pc, cu, tc, ftc, names
