@@ -117,8 +117,8 @@ static void fdk_ftc_gain_test(const double *bs, int64_t b0, int64_t nb, int64_t 
 /* _classify over the window's blocks b0 .. b0 + nb - 1 (ring slot b % NR of bs[NR * 5], be[NR * 5]) */
 static void fdk_ftc_classify(const double *bs, const int64_t *be, int64_t b0, int64_t nb, int64_t NR,
                              int64_t B, double sigma, int64_t min_len, double prefer, int64_t burst_gap,
-                             int64_t spike_max, double sig_blk, double gain_crit, double sig_burst, int64_t *typ,
-                             double *conf)
+                             int64_t spike_max, double sig_blk, double gain_crit, double sig_burst,
+                             int64_t *typ, double *conf)
 {
     double sr = 0.0, sar = 0.0, sxr = 0.0, sxx = 0.0, sbv = -HUGE_VAL, sd = -HUGE_VAL, sg = -HUGE_VAL;
     double S0 = 0.0, S1 = 0.0, S2 = 0.0, e0, e1, e2, smax, esum, fb, fg, c, q;
@@ -321,7 +321,8 @@ class FaultTypeEmitter(StageEmitter):
                   f"b0, done - b0, {NR}, {B},",
                   f"                                     SIGMA[j], {int(o.min_len)}, {lit(o.prefer)}, "
                   f"{int(o.burst_gap)}, {int(o.spike_max)}, SIGBLK[j],",
-                  f"                                     GAINC[j], SIGBURST[j], &{f('dtype')}[j], &{f('dconf')}[j]);",
+                  f"                                     GAINC[j], SIGBURST[j], &{f('dtype')}[j], "
+                  f"&{f('dconf')}[j]);",
                   "                }",
                   "                if (is_stuck) {",
                   f"                    double z = (double){f('zero')}[j];",

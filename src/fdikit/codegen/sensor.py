@@ -143,7 +143,8 @@ class PeerCheckEmitter(StageEmitter):
             zr = f("zr")
             for i, ci in enumerate(o._rate_in):
                 lines += [f"        if ({k}[0] == 0) {zr}[{i}] = px[{int(ci)}];",
-                          f"        else {zr}[{i}] = {zr}[{i}] + {rl(o._a_rate)} * (px[{int(ci)}] - {zr}[{i}]);",
+                          f"        else {zr}[{i}] = {zr}[{i}] + {rl(o._a_rate)} * "
+                          f"(px[{int(ci)}] - {zr}[{i}]);",
                           f"        rt[{i}] = (px[{int(ci)}] - {zr}[{i}]) * {rl(o._g_rate)};"]
         for j in range(M):
             c = o._c[j]

@@ -119,7 +119,8 @@ _BASE_MIN = 4
 
 
 @njit(cache=True)
-def _classify(bs, be, b0, nb, NR, B, sigma, min_len, prefer, burst_gap, spike_max, sig_blk, gain_crit, sig_burst):
+def _classify(bs, be, b0, nb, NR, B, sigma, min_len, prefer, burst_gap, spike_max, sig_blk, gain_crit,
+              sig_burst):
     """Type and confidence of one member's fault from the aggregates of its window's blocks ``b0``
     .. ``b0 + nb - 1`` (block numbers; ring slot ``b % NR``) of ``B`` samples (see the module
     docstring); change points at block boundaries."""

@@ -39,7 +39,8 @@ from ..monitor.peers import PeerSignalsBase
 from ..rav4 import RAV4
 from .channels import _RAW_U, _RAW_Y, Rav4Preprocessing
 
-__all__ = ["PEER_GROUPS", "PEER_RATES", "PEER_REFERENCES", "PEER_SENSORS", "Rav4PeerSignals", "design_peer_stages"]
+__all__ = ["PEER_GROUPS", "PEER_RATES", "PEER_REFERENCES", "PEER_SENSORS", "Rav4PeerSignals",
+           "design_peer_stages"]
 
 #: Redundant groups: group -> members (channels of :class:`Rav4PeerSignals`).
 PEER_GROUPS = {"wheels": ["sig:wheel_fl", "sig:wheel_fr", "sig:wheel_rl", "sig:wheel_rr"],
