@@ -304,7 +304,8 @@ def test_faulty_drive_through_design_and_monitor(tmp_path):
     shutil.copy(EXAMPLE, tmp_path / "monitor.toml")
     rc, text = _cli("design", tmp_path / "monitor.toml", "--json")
     assert rc == 0
-    assert set(json.loads(text)["artifacts"]) == {"car"}
+    # the fused monitor and the design report (its claims, issue 26)
+    assert set(json.loads(text)["artifacts"]) == {"car", "design_report"}
     sc = SCENARIOS["accel_bias_0.8"]
     res = simulate_drive(sc.kind, sc.speed, duration=sc.duration, faults=[Bias(sc.target, sc.magnitude,
                                                                                  start=sc.onset)],

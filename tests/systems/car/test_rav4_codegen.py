@@ -1,9 +1,9 @@
 """The RAV4 lateral monitor as C (issue 29) on the real minute: the chain up to the peer checks
-(``generate(..., stop_after="peer_check")``) and the full chain with the peer CUSUM, the fault-type
-classifier and its hold (the decision's groups: type revisions are change events; ``confirm_after``:
-the unspecific names wait for the peer evidence) give bitwise the Python
-monitor's outputs, statuses and events, with injected faults, NaN samples and a gap; checkpoints
-cross between C and Python; the float32 variant's error is measured."""
+(``generate(..., stop_after="peer_check")``) and the full chain with the peer CUSUM, the typing peer
+check (with the rate terms), the fault-type classifier and its hold (the decision's groups: type
+revisions are change events; ``confirm_after``: the unspecific names wait for the peer evidence)
+give bitwise the Python monitor's outputs, statuses and events, with injected faults, NaN samples
+and a gap; checkpoints cross between C and Python; the float32 variant's error is measured."""
 
 from __future__ import annotations
 
@@ -109,7 +109,9 @@ def test_rav4_full_chain_c_equals_python(rav4_full, spec):
     the name they replace included."""
     res, c64 = rav4_full
     mon = res["monitor"]
-    assert res["layout"]["stages"][-4:] == ["PeerCheck", "PeerCUSUM", "FaultTypeClassifier", "Hold"]
+    # the detection peer check, its CUSUM, the typing peer check (the wheels' slip term), the typing
+    assert res["layout"]["stages"][-5:] == ["PeerCheck", "PeerCUSUM", "PeerCheck", "FaultTypeClassifier",
+                                            "Hold"]
     assert mon.decision.confirm_after > 0 and res["layout"]["n_tentative"] > 0
     assert res["seconds"] < 2.0
     t, x = _log(mon, spec, bad=True)
