@@ -307,7 +307,7 @@ def design_peer_check(nominal: Signals, groups: Mapping[str, Sequence[str]], *,
                       band_hz: float | Mapping[str, float] = 1.0, announce: Sequence[str] | None = None,
                       skip: int = 0, warmup: int = 0, pfa: float = 1.0, per: str | float = "hour",
                       margin: float = 0.0, rates: Mapping[str, Sequence[str]] | None = None,
-                      rate_hz: float = 0.5, prefix: str = "peer") -> PeerCheck:
+                      rate_hz: float = 0.5, prefix: str = "peer", fit_hz: float | None = None) -> PeerCheck:
     """A :class:`PeerCheck` fitted and thresholded on nominal (fault-free) data.
 
     Each member's coefficients are the least-squares fit of the member on the median of its peers,
@@ -323,6 +323,14 @@ def design_peer_check(nominal: Signals, groups: Mapping[str, Sequence[str]], *,
         Fault-free data holding every member and reference channel.
     groups, references, band_hz, announce, warmup, rates, rate_hz, prefix
         As :class:`PeerCheck`.
+    fit_hz : float, optional
+        Fit the coefficients on the member and its regressors (the peers' median, the references,
+        the rates) low-passed alike (first order, this cut-off in Hz, from the record's start): the
+        map at the frequencies below it. Where a peer's high-frequency noise is large (a yaw rate
+        from wheel-speed differences), the sample-wise fit shrinks the gain on the peers (errors in
+        the regressor) and the prediction follows the member's slow changes only in part: a
+        residual read in 0.5 s block means (the fault typing's gain test) then keeps a slope on the
+        prediction that no fault made. Default: the samples as they are.
     skip : int
         Samples at the start left out of the fit and of the thresholds.
     pfa, per, margin
@@ -355,14 +363,25 @@ def design_peer_check(nominal: Signals, groups: Mapping[str, Sequence[str]], *,
                       references=refs, band_hz=band_hz, announce=announce, warmup=0, rates=rts,
                       rate_hz=rate_hz)
     rate = probe.rate_estimates(nominal.values[:, :, nominal.index(probe.input_names)])
+    if fit_hz is not None and not (np.isfinite(fit_hz) and fit_hz > 0):
+        raise DataError(f"fit_hz must be > 0 (Hz) or None, got {fit_hz!r}")
+    a_fit = None if fit_hz is None else 1.0 - np.exp(-2.0 * np.pi * float(fit_hz) * dt)
+
+    def col(v):                                        # (R, T) -> the fitted samples, low-passed
+        if a_fit is not None:
+            v = v.copy()
+            for k in range(1, v.shape[1]):
+                v[:, k] = v[:, k - 1] + a_fit * (v[:, k] - v[:, k - 1])
+        return v[:, skip:].ravel()
+
     coef: dict[str, list[float]] = {}
     for g, ms in groups.items():
         for m in ms:
-            peers = np.median([nominal[p][:, skip:] for p in ms if p != m], axis=0).ravel()
-            X = np.column_stack([np.ones_like(peers), peers]
-                                + [nominal[r][:, skip:].ravel() for r in refs[g]]
-                                + [rate[:, skip:, probe.rate_channels.index(r)].ravel() for r in rts[g]])
-            c = np.linalg.lstsq(X, nominal[m][:, skip:].ravel(), rcond=None)[0]
+            peers = col(np.median([nominal[p] for p in ms if p != m], axis=0))
+            X = np.column_stack([col(np.ones_like(nominal[m])), peers]
+                                + [col(nominal[r]) for r in refs[g]]
+                                + [col(rate[:, :, probe.rate_channels.index(r)]) for r in rts[g]])
+            c = np.linalg.lstsq(X, col(nominal[m]), rcond=None)[0]
             coef[m] = [float(v) for v in c]
     probe = PeerCheck(groups, coef, {m: 1.0 for ms in groups.values() for m in ms}, dt,
                       references=refs, band_hz=band_hz, announce=announce, warmup=0, rates=rts,

@@ -104,6 +104,35 @@ def test_peer_check_rate_terms_follow_the_slip_and_stream_like_batch():
         r2.set_state({k: v for k, v in st.items() if k != "_zr"})
 
 
+def test_peer_check_fit_hz_undoes_the_shrinkage_of_a_noisy_peer():
+    """A member whose peers carry loud high-frequency noise: the sample-wise fit shrinks the gain on
+    the peers (its prediction's block means move less than the member's); fitted low-passed
+    (``fit_hz``) the block means agree, so a gain test on them sees no nominal slope."""
+    rng = np.random.default_rng(5)
+    T, dt = 6000, 0.02
+    t = np.arange(T) * dt
+    y = 0.02 * np.sin(2 * np.pi * t / 9.0) + 0.01 * np.sin(2 * np.pi * t / 3.1)
+    x = np.column_stack([y + 0.0005 * rng.standard_normal(T)]
+                        + [y + 0.03 * rng.standard_normal(T) for _ in range(3)])
+    names = ["g", "p1", "p2", "p3"]
+    sig = Signals(t, x[None], names)
+
+    def block_slope(pc):
+        out = pc.run(sig)
+        P = pc.prefix
+        ref, e = out[f"{P}:g:ref"][0, 3000:], out[f"{P}:g:e"][0, 3000:]
+        rb, eb = ref.reshape(-1, 25).mean(axis=1), e.reshape(-1, 25).mean(axis=1)
+        return np.polyfit(rb, eb, 1)[0]
+
+    half = Signals(t[:3000], x[None, :3000], names)
+    raw = design_peer_check(half, {"y": names}, announce=["g"])
+    fit = design_peer_check(half, {"y": names}, announce=["g"], fit_hz=1.0)
+    assert raw.coef["g"][1] < 0.6 < 0.9 < fit.coef["g"][1] < 1.1, (raw.coef["g"], fit.coef["g"])
+    assert block_slope(raw) > 0.5 and abs(block_slope(fit)) < 0.1
+    with pytest.raises(DataError, match="fit_hz"):
+        design_peer_check(half, {"y": names}, fit_hz=-1.0)
+
+
 @pytest.mark.parametrize("bad, match", [
     (dict(rates={"v": ["sq"]}), "rates name unknown groups"),
     (dict(rates={"w": "sq"}), "lists of channels"),

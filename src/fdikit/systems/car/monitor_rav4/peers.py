@@ -134,7 +134,8 @@ def design_peer_stages(sig: Signals, dt: float, *, skip: int, warmup: int, band_
                        isolated_by=None, confirm: float = 0.5, gain_margin: float = 1.5,
                        cusum: bool = True, cusum_nu: float = 1.0, cusum_margin: float = 0.5,
                        cusum_groups: tuple[str, ...] = ("yaw",), revise_after_s: float = 1.0,
-                       revise_conf: float = 0.6, rates=None, rate_hz: float = 0.5):
+                       revise_conf: float = 0.6, rates=None, rate_hz: float = 0.5,
+                       typing_fit_hz=None):
     """The peer check and the fault-type classifier designed on nominal :class:`Rav4PeerSignals`
     outputs ``sig`` (the calibration half).
 
@@ -165,8 +166,14 @@ def design_peer_stages(sig: Signals, dt: float, *, skip: int, warmup: int, band_
     classifier's episode does not clear while the sensor is isolated (``hold_while_isolated``).
 
     The classifier's residual and signal come from a second :class:`~fdikit.detect.PeerCheck`
-    (prefix ``tpeer``) with the rate terms ``rates`` (default :data:`PEER_RATES`); detection and
-    isolation stay on the first, without them (none when ``rates`` is empty).
+    (prefix ``tpeer``) with the rate terms ``rates`` (default :data:`PEER_RATES`), its groups
+    fitted at the cut-off ``typing_fit_hz`` (group -> Hz, default ``{"yaw": 1.0}``:
+    :func:`~fdikit.detect.design_peer_check`'s ``fit_hz``; the sample-wise fit of the yaw rate on
+    its noisy peers gives a prediction whose 0.5 s block means move 2.5 times less than the gyro's,
+    so that a nominal yaw rate looked like a gain of 2.5 to the gain test and its level had to be
+    56.6; fitted at 1 Hz the block means agree, slope 0.98 on the held-out half, and the level is
+    the floor, 25); detection and isolation stay on the first check (no second check when
+    ``rates`` and ``typing_fit_hz`` are empty).
 
     Returns
     -------
@@ -181,10 +188,12 @@ def design_peer_stages(sig: Signals, dt: float, *, skip: int, warmup: int, band_
     fit_skip = {"wheels": 0, "yaw": skip, **(fit_skip or {})}
     rates = PEER_RATES if rates is None else {g: list(rates.get(g, [])) for g in PEER_GROUPS}
 
-    def check(rt, prefix):
+    def check(rt, prefix, fit_hz=None):
+        fit_hz = dict(fit_hz or {})
         parts = [design_peer_check(sig, {g: ms}, references={g: PEER_REFERENCES[g]}, band_hz=band[g],
                                    announce=[m for m in ms if m in PEER_SENSORS], skip=fit_skip[g], pfa=pfa,
-                                   per=per[g], margin=margin, rates={g: rt.get(g, [])}, rate_hz=rate_hz)
+                                   per=per[g], margin=margin, rates={g: rt.get(g, [])}, rate_hz=rate_hz,
+                                   fit_hz=fit_hz.get(g))
                  for g, ms in PEER_GROUPS.items()]
         return PeerCheck(PEER_GROUPS, {m: c for p in parts for m, c in p.coef.items()},
                          {m: h for p in parts for m, h in p.thresholds.items()}, parts[0].dt,
@@ -196,7 +205,8 @@ def design_peer_stages(sig: Signals, dt: float, *, skip: int, warmup: int, band_
     # the fault-type stage reads a second check with the rate terms (its residual and reference: a
     # gain's slope on the signal without the slip's); detection stays on the first, whose thresholds
     # the rate terms would tighten on the calibration half below what the held-out half reaches
-    tc = check(rates, "tpeer") if any(rates.values()) else None
+    typing_fit_hz = {"yaw": 1.0} if typing_fit_hz is None else dict(typing_fit_hz)
+    tc = check(rates, "tpeer", typing_fit_hz) if any(rates.values()) or typing_fit_hz else None
     tnom = tc.run(sig) if tc is not None else nom
     P = tc.prefix if tc is not None else "peer"
     sigma = {m: float(np.std(tnom[f"{P}:{m}:e"][0, skip:])) for m in PEER_SENSORS}
