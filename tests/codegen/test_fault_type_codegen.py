@@ -38,8 +38,7 @@ def _monitor(revise_after=0):
                               stuck_after={"a": 40, "c": 30}, isolated_by={"b": ["ext:b"]}, confirm=0.5,
                               lookback=30, min_len=5, spike_max=8, burst_gap=20, clear_after=150, block=10,
                               gain_crit={"a": 20.0, "b": 25.0, "c": 30.0}, revise_after=revise_after,
-                              revise_conf=0.3 if revise_after else 0.0, hold_while_isolated=revise_after > 0,
-                              sigma_burst={"a": 0.05, "b": 0.02})       # c: its sigma_block
+                              revise_conf=0.3 if revise_after else 0.0, hold_while_isolated=revise_after > 0)
     ins = ftc.input_names
     n = len(ins)
     d = FilterDesign(np.zeros((0, 0)), np.zeros((0, 0)), np.zeros((0, n)), np.zeros((n, 0)), np.zeros((n, 0)),

@@ -63,6 +63,7 @@ static int64_t fdk_ftc_block_episodes(const double *bs, int64_t b0, int64_t nb, 
             below += 1;
         }
     }
+    if (n_ep == 2 && below < gap) n_ep = 1;   /* the second burst has not ended: a step after a blip */
     return n_ep;
 }
 
@@ -117,8 +118,7 @@ static void fdk_ftc_gain_test(const double *bs, int64_t b0, int64_t nb, int64_t 
 /* _classify over the window's blocks b0 .. b0 + nb - 1 (ring slot b % NR of bs[NR * 5], be[NR * 5]) */
 static void fdk_ftc_classify(const double *bs, const int64_t *be, int64_t b0, int64_t nb, int64_t NR,
                              int64_t B, double sigma, int64_t min_len, double prefer, int64_t burst_gap,
-                             int64_t spike_max, double sig_blk, double gain_crit, double sig_burst,
-                             int64_t *typ, double *conf)
+                             int64_t spike_max, double sig_blk, double gain_crit, int64_t *typ, double *conf)
 {
     double sr = 0.0, sar = 0.0, sxr = 0.0, sxx = 0.0, sbv = -HUGE_VAL, sd = -HUGE_VAL, sg = -HUGE_VAL;
     double S0 = 0.0, S1 = 0.0, S2 = 0.0, e0, e1, e2, smax, esum, fb, fg, c, q;
@@ -183,7 +183,7 @@ static void fdk_ftc_classify(const double *bs, const int64_t *be, int64_t b0, in
         }
     }
     if (n_ep < 2) {
-        g = fdk_ftc_block_episodes(bs, b0, nb, NR, ib, sig_burst, burst_gap / B > 1 ? burst_gap / B : 1);
+        g = fdk_ftc_block_episodes(bs, b0, nb, NR, ib, sig_blk, burst_gap / B > 1 ? burst_gap / B : 1);
         if (g > n_ep) n_ep = g;
     }
     if (n_ep >= 2) { *typ = 4; *conf = 1.0 - ldexp(1.0, (int)-(n_ep - 1)); return; }
@@ -273,7 +273,6 @@ class FaultTypeEmitter(StageEmitter):
                  f"        static const double SIGMA[{M}] = {{{arr(o._sigma, lit)}}};",
                  f"        static const double SIGBLK[{M}] = {{{arr(o._sig_blk, lit)}}};",
                  f"        static const double GAINC[{M}] = {{{arr(o._gain_crit, lit)}}};",
-                 f"        static const double SIGBURST[{M}] = {{{arr(o._sig_burst, lit)}}};",
                  f"        double v[{n_in}], stat;",
                  "        int64_t i, slot, done, j, c, k;",
                  "        int is_stuck, iso, decide;"]
@@ -321,8 +320,7 @@ class FaultTypeEmitter(StageEmitter):
                   f"b0, done - b0, {NR}, {B},",
                   f"                                     SIGMA[j], {int(o.min_len)}, {lit(o.prefer)}, "
                   f"{int(o.burst_gap)}, {int(o.spike_max)}, SIGBLK[j],",
-                  f"                                     GAINC[j], SIGBURST[j], &{f('dtype')}[j], "
-                  f"&{f('dconf')}[j]);",
+                  f"                                     GAINC[j], &{f('dtype')}[j], &{f('dconf')}[j]);",
                   "                }",
                   "                if (is_stuck) {",
                   f"                    double z = (double){f('zero')}[j];",

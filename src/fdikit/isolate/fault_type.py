@@ -39,8 +39,9 @@ each sample between announces the latest decision (or stuck, checked per sample)
   typed biases as gains once the signal moved.)
 * **intermittent** -- at least two episodes of the normalised residual above 1 in the window,
   separated by ``burst_gap`` samples below ``release``, or of the residual's block means above 5
-  block-mean standard deviations, separated by blocks below 2 (short bursts that a low-passed
-  statistic smears into one); **spike** -- one episode no longer than
+  block-mean standard deviations, separated by blocks below 2, the second one ended or a third
+  begun (short bursts that a low-passed statistic smears into one; a blip before a step is no
+  burst); **spike** -- one episode no longer than
   ``spike_max`` samples, followed by ``burst_gap`` samples below ``release``;
 * otherwise a step and a ramp with an unknown change point ``j`` compete by their GLR (``sigma``
   the nominal residual's standard deviation): a step ``r_i = b`` (**bias**),
@@ -119,8 +120,7 @@ _BASE_MIN = 4
 
 
 @njit(cache=True)
-def _classify(bs, be, b0, nb, NR, B, sigma, min_len, prefer, burst_gap, spike_max, sig_blk, gain_crit,
-              sig_burst):
+def _classify(bs, be, b0, nb, NR, B, sigma, min_len, prefer, burst_gap, spike_max, sig_blk, gain_crit):
     """Type and confidence of one member's fault from the aggregates of its window's blocks ``b0``
     .. ``b0 + nb - 1`` (block numbers; ring slot ``b % NR``) of ``B`` samples (see the module
     docstring); change points at block boundaries."""
@@ -195,7 +195,7 @@ def _classify(bs, be, b0, nb, NR, B, sigma, min_len, prefer, burst_gap, spike_ma
     if n_ep < 2:
         # bursts shorter than the statistic's low-pass smear into one episode there: count them on
         # the residual's block means too
-        n_ep = max(n_ep, _block_episodes(bs, b0, nb, NR, ib, sig_burst, max(1, burst_gap // B)))
+        n_ep = max(n_ep, _block_episodes(bs, b0, nb, NR, ib, sig_blk, max(1, burst_gap // B)))
     if n_ep >= 2:
         return _INTER, 1.0 - 0.5 ** (n_ep - 1)
     if first >= 0:
@@ -216,7 +216,9 @@ _BURST_ON, _BURST_OFF = 5.0, 2.0
 def _block_episodes(bs, b0, nb, NR, ib, sig_blk, gap):
     """Episodes of the residual over blocks ``b0 .. b0 + nb - 1`` (``ib`` one over the block
     length): runs of block means with ``|mean| >= 5 sig_blk``, separated by at least ``gap`` blocks
-    below ``2 sig_blk``."""
+    below ``2 sig_blk``. Two episodes count as one while the second has not ended (``gap`` quiet
+    blocks after it): a nominal blip before a step is not an intermittent fault; a third episode,
+    or the second one's end, makes it one."""
     n_ep, seen, below = 0, False, 0
     s = b0 % NR
     for m in range(nb):
@@ -229,6 +231,8 @@ def _block_episodes(bs, b0, nb, NR, ib, sig_blk, gap):
             seen, below = True, 0
         elif z < _BURST_OFF:
             below += 1
+    if n_ep == 2 and below < gap:
+        n_ep = 1                                      # the second burst has not ended: a step after a blip
     return n_ep
 
 
@@ -319,8 +323,7 @@ _RETURN = 3
 
 @njit(cache=True)
 def _run_kernel(V, ix, ixx, confirm, iraw, stuck, sigma, NB, lookback, min_len, spike_max, burst_gap,
-                release, clear_after, prefer, block, sig_blk, gain_crit, sig_burst, revise_after, revise_conf,
-                hold_iso,
+                release, clear_after, prefer, block, sig_blk, gain_crit, revise_after, revise_conf, hold_iso,
                 k, bs, be, active, onset, typ, conf, below, zero, last, cand, cnt, left, dtyp, dconf, out):
     """The classifier over samples V (R, T, inputs) from sample count k, state updated in place;
     outputs into out (R, T, outputs). Returns the new sample count. Each sample adds to its block's
@@ -366,7 +369,7 @@ def _run_kernel(V, ix, ixx, confirm, iraw, stuck, sigma, NB, lookback, min_len, 
                         b0 = max(onset[run, j] // B, done - NB)
                         dtyp[run, j], dconf[run, j] = _classify(
                             bs[run, j], be[run, j], b0, done - b0, NR, B, sigma[j], min_len, prefer,
-                            burst_gap, spike_max, sig_blk[j], gain_crit[j], sig_burst[j])
+                            burst_gap, spike_max, sig_blk[j], gain_crit[j])
                     if is_stuck:
                         z = float(zero[run, j])
                         nt, nc = _STUCK, z / (z + stuck[j])
@@ -433,11 +436,6 @@ class FaultTypeClassifier(ResidualProcessor):
     sigma_block : mapping str -> float, optional
         Member -> standard deviation of a block mean of its nominal residual (default
         ``sigma / sqrt(block)``, right for white noise).
-    sigma_burst : mapping str -> float, optional
-        Member -> the block-mean level unit of the burst rule (bursts above 5, quiet below 2;
-        default ``sigma_block``): where the residual typed is cleaner than the one detection reads
-        (more model terms), the detection residual's, so that a nominal transient the detection
-        does not call out is not a burst either.
     gain_crit : float or mapping str -> float
         Level of the gain test's F statistic (the slope of the residual on the signal, in units of
         the block-mean noise variance) above which the fault is a gain. Per member, or one for all.
@@ -478,8 +476,7 @@ class FaultTypeClassifier(ResidualProcessor):
                  spike_max: int = 10, burst_gap: int = 25, release: float = 0.5, clear_after: int = 250,
                  prefer: float = 6.0, block: int = 10, sigma_block: Mapping[str, float] | None = None,
                  gain_crit: float | Mapping[str, float] = 25.0, revise_after: int = 0,
-                 revise_conf: float = 0.0, hold_while_isolated: bool = False,
-                 sigma_burst: Mapping[str, float] | None = None):
+                 revise_conf: float = 0.0, hold_while_isolated: bool = False):
         self.members = [str(m) for m in members]
         if not self.members:
             raise DataError("FaultTypeClassifier needs at least one member")
@@ -509,13 +506,6 @@ class FaultTypeClassifier(ResidualProcessor):
         self.sigma_block = {m: float(sb.get(m, self.sigma[m] / np.sqrt(self.block))) for m in self.members}
         if any(not (np.isfinite(v) and v > 0) for v in self.sigma_block.values()):
             raise DataError(f"sigma_block must be finite and > 0 per member, got {self.sigma_block}")
-        sbu = dict(sigma_burst or {})
-        bad = sorted(set(sbu) - set(self.members))
-        if bad:
-            raise DataError(f"sigma_burst names {bad}, not members {self.members}")
-        self.sigma_burst = {m: float(sbu.get(m, self.sigma_block[m])) for m in self.members}
-        if any(not (np.isfinite(v) and v > 0) for v in self.sigma_burst.values()):
-            raise DataError(f"sigma_burst must be finite and > 0 per member, got {self.sigma_burst}")
         ch = {"isolated": "peer:{m}:isolated", "stat": "peer:{m}", "r": "peer:{m}:e", "x": "peer:{m}:ref"}
         ch.update(dict(channels or {}))
         self.channels = ch
@@ -549,7 +539,6 @@ class FaultTypeClassifier(ResidualProcessor):
         self._sigma = np.array([self.sigma[m] for m in self.members])
         self._sig_blk = np.array([self.sigma_block[m] for m in self.members])
         self._gain_crit = np.array([self.gain_crit[m] for m in self.members])
-        self._sig_burst = np.array([self.sigma_burst[m] for m in self.members])
         self.output_names = [f"{m}:{t}" for m in self.members for t in FAULT_TYPES]
         self.output_names += [f"{m}:confidence" for m in self.members] + [f"{m}:active" for m in self.members]
         self.reset(1)
@@ -619,7 +608,7 @@ class FaultTypeClassifier(ResidualProcessor):
         self._k = _run_kernel(v, self._ix, self._ixx, self.confirm, self._iraw, self._stuck, self._sigma,
                               self.n_blocks, self.lookback, self.min_len, self.spike_max, self.burst_gap,
                               self.release, self.clear_after, self.prefer, self.block, self._sig_blk,
-                              self._gain_crit, self._sig_burst, self.revise_after, self.revise_conf,
+                              self._gain_crit, self.revise_after, self.revise_conf,
                               self.hold_while_isolated, self._k, self._bs, self._be, self._active,
                               self._onset, self._type, self._conf, self._below, self._zero, self._last,
                               self._cand, self._cnt, self._left, self._dtype, self._dconf, out)
@@ -658,8 +647,7 @@ class FaultTypeClassifier(ResidualProcessor):
                 "burst_gap": self.burst_gap, "release": self.release, "clear_after": self.clear_after,
                 "prefer": self.prefer, "block": self.block, "sigma_block": self.sigma_block,
                 "gain_crit": self.gain_crit, "revise_after": self.revise_after,
-                "revise_conf": self.revise_conf, "hold_while_isolated": self.hold_while_isolated,
-                "sigma_burst": self.sigma_burst}
+                "revise_conf": self.revise_conf, "hold_while_isolated": self.hold_while_isolated}
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> FaultTypeClassifier:

@@ -203,31 +203,31 @@ def test_fault_type_classifier_refuses_nan_before_state_changes():
     assert all(np.array_equal(before[a], getattr(ftc, a), equal_nan=True) for a in ftc._state_attrs)
 
 
-def test_burst_unit_keeps_a_transient_before_the_onset_out_of_the_bursts():
-    """A nominal transient in the lookback window (before a bias) is a burst in units of a clean
-    residual's block spread, not in units of the detection residual's (``sigma_burst``)."""
+def test_a_blip_before_a_step_is_no_burst_but_two_ended_bursts_are():
+    """The block-mean burst rule: a nominal blip in the lookback window followed by a step is one
+    episode while the step lasts (a bias, not an intermittent fault); bursts below the detection
+    level (the sample rule does not see them) that end are an intermittent fault once the second
+    has ended."""
+    k = np.arange(1500)
     rng = np.random.default_rng(3)
-    T, k = 1500, np.arange(1500)
-    e = 0.002 * rng.standard_normal(T) + 0.02 * (k >= 500)
-    e[450:460] += 0.006                              # one block-long nominal transient, below detection
     ref = 0.05 * np.sin(k / 40.0)
-    stat = np.abs(e) / 0.01
-    iso = (stat >= 1) & (k >= 550)
-    sig = Signals(k * 0.02, np.column_stack([iso, stat, e, ref, ref + e])[None],
-                  ["peer:s:isolated", "peer:s", "peer:s:e", "peer:s:ref", "raw:s"])
-    kw = dict(raw={"s": "raw:s"}, stuck_after={"s": 60}, lookback=120, min_len=5, sigma_block={"s": 0.001})
-    typed = {}
-    for unit in (None, 0.004):
-        ftc = FaultTypeClassifier(["s"], {"s": 0.002}, 600, **kw,
-                                  sigma_burst=None if unit is None else {"s": unit})
+
+    def typed(e, iso, at):
+        stat = np.abs(e) / 0.01
+        sig = Signals(k * 0.02, np.column_stack([iso, stat, e, ref, ref + e])[None],
+                      ["peer:s:isolated", "peer:s", "peer:s:e", "peer:s:ref", "raw:s"])
+        ftc = FaultTypeClassifier(["s"], {"s": 0.002}, 600, lookback=120, min_len=5, sigma_block={"s": 0.001})
         out = ftc.run(sig)
-        typed[unit] = [t for t in FAULT_TYPES if out[f"s:{t}"][0, 700] == 1.0]   # window from 430
-        assert FaultTypeClassifier.from_dict(ftc.to_dict()).run(sig).equals(out)
-    assert typed == {None: ["intermittent"], 0.004: ["bias"]}, typed
-    with pytest.raises(DataError, match="sigma_burst names"):
-        FaultTypeClassifier(["s"], {"s": 0.002}, 600, sigma_burst={"t": 0.01})
-    with pytest.raises(DataError, match="sigma_burst must be finite"):
-        FaultTypeClassifier(["s"], {"s": 0.002}, 600, sigma_burst={"s": -1.0})
+        return [[t for t in FAULT_TYPES if out[f"s:{t}"][0, j] == 1.0] for j in at]
+
+    e = 0.0003 * rng.standard_normal(k.size) + 0.02 * (k >= 500)
+    e[450:460] += 0.006                          # one block-long blip, below detection, then the step
+    assert typed(e, (np.abs(e) >= 0.01) & (k >= 550), [700, 1000]) == [["bias"], ["bias"]]
+    e = 0.0003 * rng.standard_normal(k.size)
+    on = (k >= 500) & ((k - 500) % 60 < 10)      # 10-sample bursts every 60 samples, below detection
+    e[on] += 0.006
+    got = typed(e, k >= 550, [565, 640])         # the second burst still on / ended
+    assert got == [["bias"], ["intermittent"]], got
 
 
 # --- the real RAV4 minute -------------------------------------------------------------------------

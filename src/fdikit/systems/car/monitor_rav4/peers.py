@@ -215,12 +215,6 @@ def design_peer_stages(sig: Signals, dt: float, *, skip: int, warmup: int, band_
     for m in PEER_SENSORS:
         e = tnom[f"{P}:{m}:e"][0, skip:]
         sig_blk[m] = float(np.std(e[:e.size // blk * blk].reshape(-1, blk).mean(axis=1)))
-    # the burst rule's unit: the detection residual's block-mean spread (a nominal transient that the
-    # detection does not call out is no burst; the typing residual's spread is smaller in-sample)
-    sig_burst = {}
-    for m in PEER_SENSORS:
-        e = nom[f"peer:{m}:e"][0, skip:]
-        sig_burst[m] = max(sig_blk[m], float(np.std(e[:e.size // blk * blk].reshape(-1, blk).mean(axis=1))))
     stuck_after = {}
     for m, rawc in _RAW_OF.items():
         x = sig[rawc][0, skip:]
@@ -244,7 +238,7 @@ def design_peer_stages(sig: Signals, dt: float, *, skip: int, warmup: int, band_
     ftc = FaultTypeClassifier(list(PEER_SENSORS), sigma, n(window_s), raw=_RAW_OF, stuck_after=stuck_after,
                               lookback=n(lookback_s), min_len=n(0.2), spike_max=n(0.2), burst_gap=n(0.5),
                               clear_after=n(clear_after_s), isolated_by=isolated_by, confirm=confirm,
-                              block=blk, sigma_block=sig_blk, sigma_burst=sig_burst,
+                              block=blk, sigma_block=sig_blk,
                               gain_crit=crit, revise_after=n(revise_after_s) if revise_after_s > 0 else 0,
                               revise_conf=revise_conf, hold_while_isolated=revise_after_s > 0,
                               channels={**(_CUSUM_CHANNELS if cusum else {}), "r": P + ":{m}:e",
