@@ -344,8 +344,10 @@ def main():
     n = before = n_wrong_ok = n_det = n_comp = n_t5 = n_tf = n_typed_cases = 0
     n_changes = collections.Counter()                  # type changes of the named sensor per run
     grid = cases(a.quick, a.fraction)
-    for sensor, typ, m, _sign, t0, spec in grid:
+    n_x0 = n_x0_stuck = 0                              # x0 gains: the signal frozen at zero
+    for sensor, typ, m, sign, t0, spec in grid:
         n += 1
+        x0 = typ == "gain" and 1 + sign * m == 0      # a x0 gain is a sensor stuck at zero
         r = run_rav4_log(DATA, spec)
         j = judge(r, [sensor], t0)
         before += j["before"]
@@ -361,9 +363,12 @@ def main():
                 n_t5 += j["typ5"] == typ
                 n_tf += j["typf"] == typ
                 n_changes[j["changes"]] += 1
-                typ5[typ][j["typ5"]] += 1
-                typf[typ][j["typf"]] += 1
-                typq[typ][j["typq"]] += 1
+                row = "gain x0" if x0 else typ
+                typ5[row][j["typ5"]] += 1
+                typf[row][j["typf"]] += 1
+                typq[row][j["typq"]] += 1
+                n_x0 += x0
+                n_x0_stuck += x0 and j["typf"] == "stuck"
         sig = inject(raw, parse_inject(spec), pre)
         for p, first in peer_first(sig).items():
             if first is None:
@@ -388,12 +393,15 @@ def main():
          typq, [*list(TYPES), "bias?", "spike", "(untyped)"])
     n_q = sum(row.get("bias?", 0) for row in typq.values())
     n_dec = n_typed_cases - n_q
-    n_rdec = sum(row.get(ty, 0) for ty, row in typq.items())
+    n_rdec = sum(row.get(ty.split()[0], 0) for ty, row in typq.items())
     pc = lambda a, b: f"{a}/{b} ({100 * a / max(b, 1):.1f} %)"  # noqa: E731
     print(f"\nTARGETS: right component {pc(n_comp, n_det)} of detected (target >= 95 %); right type at +5 s "
           f"{pc(n_t5, n_typed_cases)}, final {pc(n_tf, n_typed_cases)} (target >= 90 %); "
           f"<= 1 wrong after the onset in {n_wrong_ok}/{n} ({100 * n_wrong_ok / n:.1f} %, target >= 95 %); "
           f"announcements before an onset {before}; detected {n_det}/{n}")
+    print(f"a x0 gain ('gain x0' rows: the factor 1 - 1.0 freezes the signal at zero, the data of a "
+          f"sensor stuck at zero): {n_x0} typed runs, {n_x0_stuck} typed stuck; counting stuck as right "
+          f"for them too, right type final {pc(n_tf + n_x0_stuck, n_typed_cases)}")
     print(f"with the confidence: right type final among the decided {pc(n_rdec, n_dec)}; undecided "
           f"('bias?': bias or gain) {n_q} (true bias {typq['bias'].get('bias?', 0)}, true gain "
           f"{typq['gain'].get('bias?', 0)})")
@@ -453,7 +461,8 @@ def main():
         print(f"  {k:28} {v}")
     print(f"\ntotal {time.time() - t_start:.0f} s (pid {os.getpid()})")
     summary = {"runs": n, "detected": n_det, "right_component": n_comp, "typed": n_typed_cases,
-               "right_type_final": n_tf, "right_type_5s": n_t5, "right_type_among_decided": [n_rdec, n_dec],
+               "right_type_final": n_tf, "right_type_5s": n_t5,
+               "gain_x0_typed_stuck": n_x0_stuck, "right_type_among_decided": [n_rdec, n_dec],
                "undecided_bias_or_gain": n_q, "wrong_after_onset_ok": n_wrong_ok, "before_onset": before,
                "fault_free_announcements": len(nominal["announcements"]),
                "targets": {"right_component": n_comp / max(n_det, 1) >= 0.95,
