@@ -158,7 +158,23 @@ def design_peer_stages(sig: Signals, dt: float, *, skip: int, warmup: int, band_
     deviations, threshold the nominal maximum times ``1 + cusum_margin``) on the members of
     ``cusum_groups`` (the yaw group: the wheels' residuals follow the speed, and a CUSUM tuned on
     the calibration half alarms on the held-out half) isolates what the peer check's threshold
-    misses; the classifier reads its merged outputs.
+    misses; the classifier reads its merged outputs. Measured (issue 27, the cases where a raw
+    Page-Hinkley still wins): a small yaw-group fault (``gain:YAW_RATE:1.5@45``, ``bias:STEER_ANGLE:-1.5@40``,
+    steering drifts of 0.1-0.2 deg/s) is missed because the peer-only member ``sig:yaw_rear`` has the
+    group's largest CUSUM: its reference, the median of 4 peers (the mean of the middle two), moves by
+    up to half of the faulty member's shift, its threshold is the group's tightest, and its residual
+    drifts up on the held-out half (fault-free CUSUM 1.4 at 58 s). A drift ``cusum_nu`` of 2 announced
+    ``lateral_accelerometer:bias`` at 56.1 s on the fault-free minute; 3 recovers the five runs but
+    puts three thresholds on their floor (a 3-sigma level test) and loses two yaw gains and a steering
+    intermittent; a yaw group without ``sig:yaw_front`` (medians of 3) false-alarms likewise. A CUSUM
+    on the wheels (``cusum_groups`` with ``"wheels"``) announces a 1 % front-left gain from 50 s after
+    2.0 s but ``wheel_rl:bias`` twice on the fault-free minute.
+
+    The stuck check waits for the longest run of equal raw samples of the calibration half times
+    ``1 + stuck_margin`` (at least 0.5 s). For the steering (``STEER_ANGLE``, 1.5 deg steps) that
+    run is 5.78 s, so ``stuck_after`` is 11.56 s; the held-out half holds a fault-free run of 7.82 s
+    (25.66-33.48 s), so a margin below 0.36 announces ``steering:stuck`` on the fault-free minute (0.3:
+    at 33.4 s) and 0.5 would leave 11 %: the margin stays 1.
 
     The announced type has hysteresis (issue 27): a revised type must win for ``revise_after_s``
     seconds in a row with a confidence of at least ``revise_conf``, and a drift never falls back to
