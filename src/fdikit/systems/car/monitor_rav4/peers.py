@@ -135,7 +135,7 @@ def design_peer_stages(sig: Signals, dt: float, *, skip: int, warmup: int, band_
                        cusum: bool = True, cusum_nu: float = 1.0, cusum_margin: float = 0.5,
                        cusum_groups: tuple[str, ...] = ("yaw",), revise_after_s: float = 1.0,
                        revise_conf: float = 0.6, rates=None, rate_hz: float = 0.5,
-                       typing_fit_hz=None):
+                       typing_fit_hz=None, cusum_transfer: bool = True):
     """The peer check and the fault-type classifier designed on nominal :class:`Rav4PeerSignals`
     outputs ``sig`` (the calibration half).
 
@@ -158,17 +158,25 @@ def design_peer_stages(sig: Signals, dt: float, *, skip: int, warmup: int, band_
     deviations, threshold the nominal maximum times ``1 + cusum_margin``) on the members of
     ``cusum_groups`` (the yaw group: the wheels' residuals follow the speed, and a CUSUM tuned on
     the calibration half alarms on the held-out half) isolates what the peer check's threshold
-    misses; the classifier reads its merged outputs. Measured (issue 27, the cases where a raw
-    Page-Hinkley still wins): a small yaw-group fault (``gain:YAW_RATE:1.5@45``, ``bias:STEER_ANGLE:-1.5@40``,
-    steering drifts of 0.1-0.2 deg/s) is missed because the peer-only member ``sig:yaw_rear`` has the
-    group's largest CUSUM: its reference, the median of 4 peers (the mean of the middle two), moves by
-    up to half of the faulty member's shift, its threshold is the group's tightest, and its residual
-    drifts up on the held-out half (fault-free CUSUM 1.4 at 58 s). A drift ``cusum_nu`` of 2 announced
-    ``lateral_accelerometer:bias`` at 56.1 s on the fault-free minute; 3 recovers the five runs but
-    puts three thresholds on their floor (a 3-sigma level test) and loses two yaw gains and a steering
-    intermittent; a yaw group without ``sig:yaw_front`` (medians of 3) false-alarms likewise. A CUSUM
-    on the wheels (``cusum_groups`` with ``"wheels"``) announces a 1 % front-left gain from 50 s after
-    2.0 s but ``wheel_rl:bias`` twice on the fault-free minute.
+    misses; the classifier reads its merged outputs. With ``cusum_transfer`` (default) a peer only
+    (``sig:yaw_front``, ``sig:yaw_rear``) that is the group's largest no longer hides the largest
+    announced member when its excess is what that member's fault explains through the median of its
+    peers (:func:`~fdikit.detect.design_peer_cusum` ``coef``). Measured (issue 27, the cases where a
+    raw Page-Hinkley still won): small yaw-group faults were missed because ``sig:yaw_rear``, whose
+    reference is the median of 4 peers (the mean of the middle two: it moves by up to half of a
+    faulty peer's shift) and whose threshold is the group's tightest, had the largest CUSUM (e.g.
+    ``bias:STEER_ANGLE:-1.5@40``: steering 2.0, yaw_rear 3.9 at 45 s). Full grid, before -> with the
+    transfer: steering bias 17 -> 18 of 18, drift 15 -> 17, accelerometer gain 6 -> 7, detected 482 ->
+    486 of 525, right component 475 -> 479, 0 announcements before an onset and on the fault-free
+    minute both, <= 1 wrong after the onset 521 both. Still missed: ``gain:YAW_RATE:1.5@45`` (a bias of
+    0.22 deg/s, under the 0.5 deg/s floor; yaw_rear's CUSUM rises to 1.4 by 58 s on the fault-free
+    minute too, more than the transfer explains) and ``drift:STEER_ANGLE:-0.1/s@45``. Tried and not
+    kept: a drift ``cusum_nu`` of 2 announced ``lateral_accelerometer:bias`` at 56.1 s on the fault-free
+    minute; 3 put three thresholds on their floor (a 3-sigma level test) and lost two yaw gains and a
+    steering intermittent; a yaw group without ``sig:yaw_front`` (medians of 3) false-alarmed likewise;
+    no peer-only veto at all named yaw-group sensors for wheel faults (<= 1 wrong after the onset 521
+    -> 462 of 525). A CUSUM on the wheels (``cusum_groups`` with ``"wheels"``) announces a 1 %
+    front-left gain from 50 s after 2.0 s but ``wheel_rl:bias`` twice on the fault-free minute.
 
     The stuck check waits for the longest run of equal raw samples of the calibration half times
     ``1 + stuck_margin`` (at least 0.5 s). For the steering (``STEER_ANGLE``, 1.5 deg steps) that
@@ -272,5 +280,5 @@ def design_peer_stages(sig: Signals, dt: float, *, skip: int, warmup: int, band_
         ann = [m for ms in groups.values() for m in ms if m in PEER_SENSORS]
         rest = [m for g in PEER_GROUPS if g not in cusum_groups for m in PEER_GROUPS[g] if m in PEER_SENSORS]
         cu = design_peer_cusum(nom, groups, skip=skip, nu=cusum_nu, margin=cusum_margin, warmup=warmup,
-                               passthrough=rest, announce=ann)
+                               passthrough=rest, announce=ann, coef=pc.coef if cusum_transfer else None)
     return pc, cu, tc, ftc, names
