@@ -130,6 +130,18 @@ def test_transfer_lets_a_peer_only_moved_by_the_faulty_member_not_hide_it():
     x2[0, 10:, 2] = 0.6                      # c moved by twice a's shift: more than a's fault explains
     out2 = cu.run(Signals(s.t, x2, s.names))
     assert out2["cusum:a"][0, -1] > 1.0 and out2["cusum:a:isolated"].max() == 0
+    # the peer only's own fault-free level (up to its threshold) is allowed on top of the transfer: c
+    # at 0.88 before a's fault, then moved by 0.5 per sample against the bound's 2.2 x 0.25 = 0.55: without
+    # the "+ 1" it would block a until 0.88 + 0.5 n <= 0.55 n (n >= 18 samples), with it from g_a >= 1
+    T3 = {"a": {"c": 2.2}, "b": {"c": 2.2}, "c": {"a": 0.25, "b": 0.25}}
+    x3 = x.copy()
+    x3[0, 8:10, 2] = 0.16                    # c's fault-free bump: 2 x 0.44
+    x3[0, 10:, 2] = 0.175
+    cu3 = PeerCUSUM({"g": list("abc")}, mean, nu, h, announce=["a", "b"], transfer=T3)
+    out3 = cu3.run(Signals(s.t, x3, names))
+    assert _brute(x3[0, :, 2], 0.0, 0.05)[9] / h["c"] == pytest.approx(0.88)      # c is not an output
+    k3 = int(np.flatnonzero(out3["cusum:a:isolated"][0])[0])
+    assert out3["cusum:a"][0, k3 - 1] < 1.0 <= out3["cusum:a"][0, k3] and k3 - 10 < 18
     # batch == streaming, round trip, repr
     cu.reset(1)
     stream = np.stack([cu.step(x[:, j]) for j in range(200)], axis=1)

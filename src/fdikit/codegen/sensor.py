@@ -262,7 +262,8 @@ def _transfer_code(T, ga, gp) -> list[str]:
     lines += [f"            if (g[{m}] > g[a]) a = {m};" for m in ga[1:]]
     lines += ["            ok = (g[a] >= FDK_R(1.0)) && (" + " || ".join(f"b == {p}" for p in gp) + ");"]
     for m in ga:
-        conds = " && ".join(f"(g[{p}] <= {rl(T[m, p])} * g[{m}]) && (g[{m}] > {rl(T[p, m])} * g[{p}])"
+        conds = " && ".join(f"(g[{p}] <= {rl(T[m, p])} * g[{m}] + FDK_R(1.0)) && "
+                            f"(g[{m}] > {rl(T[p, m])} * g[{p}])"
                             for p in gp)
         lines += [f"            if (a == {m}) ok = ok && {conds};"]
     lines += ["            if (ok) iso[a] = FDK_R(1.0); }"]

@@ -18,9 +18,11 @@ two), ``|c_1| f`` of an odd number (``c_1`` its fitted gain on the median). With
 of these bounds (:func:`design_peer_cusum` ``coef``: ``T[a][b]``, the normalised CUSUM of ``b``
 per unit of ``a``'s that a large fault on ``a`` can cause, ``|c_1,b| k h_a / h_b``) the group's
 largest announced member ``m`` with ``g_m >= 1`` is isolated also when a peer only is larger, if
-every peer only ``p`` stays within what ``m``'s fault explains (``g_p <= T[m][p] g_m``) and ``m``
-is beyond what ``p``'s fault explains (``g_m > T[p][m] g_p``) (issue 27: on the RAV4 the rear axle's
-yaw rate, the group's tightest member, rose above a small steering fault's own CUSUM and hid it).
+every peer only ``p`` stays within what ``m``'s fault explains plus what ``p`` reaches without a
+fault, its own threshold (``g_p <= T[m][p] g_m + 1``), and ``m`` is beyond what ``p``'s fault
+explains (``g_m > T[p][m] g_p``) (issue 27: on the RAV4 the rear axle's yaw rate, the group's
+tightest member, rose above a small steering fault's own CUSUM and hid it; its fault-free CUSUM
+reaches 1.4 on the held-out half, which the bound without the ``+ 1`` did not allow).
 """
 
 from __future__ import annotations
@@ -68,7 +70,8 @@ class PeerCUSUM(ResidualProcessor):
     Outputs per member ``m``: ``cusum:m`` (``max(g+, g-)`` over the threshold), ``cusum:m:stat``
     (the larger of it and ``peer:m``) and ``cusum:m:isolated`` (1 where the peer check isolates
     ``m`` or ``m``'s CUSUM is its group's largest and >= 1, or, with ``transfer``, its group's
-    largest announced one, >= 1, and every larger peer only explained by ``m``'s fault).
+    largest announced one, >= 1, and every larger peer only explained by ``m``'s fault and its own
+    threshold).
 
     Examples
     --------
@@ -160,12 +163,13 @@ class PeerCUSUM(ResidualProcessor):
             best = gi[np.argmax(g[:, gi], axis=1)]
             iso[rows, best] = g[rows, best] >= 1.0
             if self._T is not None and ga.size and gp:
-                # a peer only is the largest: its excess explained by the largest announced member's fault
+                # a peer only is the largest: explained by the largest announced member's fault plus its
+                # own fault-free level (up to its threshold, g = 1)
                 m = ga[np.argmax(g[:, ga], axis=1)]
                 gm = g[rows, m]
                 ok = (gm >= 1.0) & np.isin(best, gp)
                 for p in gp:
-                    ok &= (g[:, p] <= self._T[m, p] * gm) & (gm > self._T[p, m] * g[:, p])
+                    ok &= (g[:, p] <= self._T[m, p] * gm + 1.0) & (gm > self._T[p, m] * g[:, p])
                 iso[rows, m] = np.maximum(iso[rows, m], ok)
         g, iso = g[:, self._oix], iso[:, self._oix]
         return np.concatenate([g, np.maximum(g, peer), np.maximum(iso, iso_p)], axis=1)
