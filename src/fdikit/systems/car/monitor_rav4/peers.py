@@ -182,7 +182,11 @@ def design_peer_stages(sig: Signals, dt: float, *, skip: int, warmup: int, band_
     ``1 + stuck_margin`` (at least 0.5 s). For the steering (``STEER_ANGLE``, 1.5 deg steps) that
     run is 5.78 s, so ``stuck_after`` is 11.56 s; the held-out half holds a fault-free run of 7.82 s
     (25.66-33.48 s), so a margin below 0.36 announces ``steering:stuck`` on the fault-free minute (0.3:
-    at 33.4 s) and 0.5 would leave 11 %: the margin stays 1.
+    at 33.4 s) and 0.5 would leave 11 %: the margin stays 1. (A frozen ``STEER_ANGLE`` alone leaves
+    ``STEER_FRACTION`` moving, so the measured angle still moves within +-0.7 deg and only this check
+    sees it: ``stuck:STEER_ANGLE@35`` after 11.3 s; the whole message frozen,
+    ``stuck:STEER_ANGLE_SENSOR@35``, is announced after 3.9 s by the stuck check against the steering
+    the yaw rate says.)
 
     The announced type has hysteresis (issue 27): a revised type must win for ``revise_after_s``
     seconds in a row with a confidence of at least ``revise_conf``, and a drift never falls back to
