@@ -230,10 +230,13 @@ class PeerCUSUMEmitter(StageEmitter):
         lines.append("        }")
         lines += [f"        g[{j}] = (({up}[{j}] >= {lo}[{j}]) ? {up}[{j}] : {lo}[{j}]) / {rl(h)}; "
                   f"iso[{j}] = FDK_R(0.0);" for j, h in enumerate(o._h)]
-        for gi in o._gidx:
+        for gi, ga, gp in zip(o._gidx, o._gann, o._gpeer, strict=True):
             lines += [f"        {{ int b = {gi[0]};"]
             lines += [f"          if (g[{m}] > g[b]) b = {m};" for m in gi[1:]]
-            lines += ["          iso[b] = (g[b] >= FDK_R(1.0)) ? FDK_R(1.0) : FDK_R(0.0); }"]
+            lines += ["          iso[b] = (g[b] >= FDK_R(1.0)) ? FDK_R(1.0) : FDK_R(0.0);"]
+            if o._T is not None and ga.size and gp:
+                lines += _transfer_code(o._T, ga, gp)
+            lines += ["        }"]
         for a, j in enumerate(o._oix):
             pe, ip = f"px[{M + a}]", f"px[{M + A + a}]"
             lines += [f"        {out[a]} = g[{j}];",
@@ -250,6 +253,21 @@ class PeerCUSUMEmitter(StageEmitter):
     def from_py(self, state):
         return {f"{self.p}_up": np.ravel(state["_up"]), f"{self.p}_lo": np.ravel(state["_lo"]),
                 f"{self.p}_k": np.array([state["_k"]])}
+
+
+def _transfer_code(T, ga, gp) -> list[str]:
+    """C of PeerCUSUM's transfer rule in one group (``b`` its largest member, ``g``, ``iso``): the
+    largest announced member isolated when a peer only is the largest and explained by its fault."""
+    lines = [f"          {{ int a = {ga[0]}, ok;"]
+    lines += [f"            if (g[{m}] > g[a]) a = {m};" for m in ga[1:]]
+    lines += ["            ok = (g[a] >= FDK_R(1.0)) && (" + " || ".join(f"b == {p}" for p in gp) + ");"]
+    for m in ga:
+        conds = " && ".join(f"(g[{p}] <= {rl(T[m, p])} * g[{m}] + FDK_R(1.0)) && "
+                            f"(g[{m}] > {rl(T[p, m])} * g[{p}])"
+                            for p in gp)
+        lines += [f"            if (a == {m}) ok = ok && {conds};"]
+    lines += ["            if (ok) iso[a] = FDK_R(1.0); }"]
+    return lines
 
 
 def _register() -> None:

@@ -10,6 +10,19 @@ largest of its group and at least 1; the thresholds come from nominal data
 (:func:`design_peer_cusum`). Its outputs merge with the peer check's so a fault-type stage reads
 either: ``cusum:m:stat`` is the larger of the two normalised statistics and ``cusum:m:isolated``
 is 1 where either isolates ``m``.
+
+A member compared but not announced (a peer only) blocks the isolation while its CUSUM is the
+group's largest. Its reference, the median of its peers, moves with a faulty announced member:
+by up to ``|c_1| f / 2`` for a shift ``f`` of one of an even number of peers (the mean of the middle
+two), ``|c_1| f`` of an odd number (``c_1`` its fitted gain on the median). With the *transfer*
+of these bounds (:func:`design_peer_cusum` ``coef``: ``T[a][b]``, the normalised CUSUM of ``b``
+per unit of ``a``'s that a large fault on ``a`` can cause, ``|c_1,b| k h_a / h_b``) the group's
+largest announced member ``m`` with ``g_m >= 1`` is isolated also when a peer only is larger, if
+every peer only ``p`` stays within what ``m``'s fault explains plus what ``p`` reaches without a
+fault, its own threshold (``g_p <= T[m][p] g_m + 1``), and ``m`` is beyond what ``p``'s fault
+explains (``g_m > T[p][m] g_p``) (issue 27: on the RAV4 the rear axle's yaw rate, the group's
+tightest member, rose above a small steering fault's own CUSUM and hid it; its fault-free CUSUM
+reaches 1.4 on the held-out half, which the bound without the ``+ 1`` did not allow).
 """
 
 from __future__ import annotations
@@ -46,12 +59,19 @@ class PeerCUSUM(ResidualProcessor):
     passthrough : sequence of str
         Further members without a CUSUM: their outputs are the peer check's (``cusum:m`` is 0), so
         that a fault-type stage reads every member from this stage.
+    transfer : mapping str -> mapping str -> float, optional
+        ``transfer[a][b]`` (>= 0): the normalised CUSUM of member ``b`` per unit of ``a``'s that a
+        fault on ``a`` can cause (see the module docstring), for every announced ``a`` and peer only
+        ``b`` of a group and back (missing pairs: 0). Default none: a peer only that is the group's
+        largest always blocks.
 
     Notes
     -----
     Outputs per member ``m``: ``cusum:m`` (``max(g+, g-)`` over the threshold), ``cusum:m:stat``
     (the larger of it and ``peer:m``) and ``cusum:m:isolated`` (1 where the peer check isolates
-    ``m`` or ``m``'s CUSUM is its group's largest and >= 1).
+    ``m`` or ``m``'s CUSUM is its group's largest and >= 1, or, with ``transfer``, its group's
+    largest announced one, >= 1, and every larger peer only explained by ``m``'s fault and its own
+    threshold).
 
     Examples
     --------
@@ -67,7 +87,8 @@ class PeerCUSUM(ResidualProcessor):
 
     def __init__(self, groups: Mapping[str, Sequence[str]], mean: Mapping[str, float],
                  nu: Mapping[str, float], thresholds: Mapping[str, float], *, warmup: int = 0,
-                 passthrough: Sequence[str] = (), announce: Sequence[str] | None = None):
+                 passthrough: Sequence[str] = (), announce: Sequence[str] | None = None,
+                 transfer: Mapping[str, Mapping[str, float]] | None = None):
         if isinstance(groups, str) or not isinstance(groups, Mapping):
             raise DataError(f"PeerCUSUM groups must map a group to its members, got {groups!r}")
         self.groups = {str(g): [str(m) for m in ms] for g, ms in groups.items()}
@@ -104,6 +125,12 @@ class PeerCUSUM(ResidualProcessor):
         self._nu = np.array([self.nu.get(m, 0.0) for m in self.members])
         self._h = np.array([self.thresholds.get(m, np.inf) for m in self.members])
         self._gidx = [np.array([self.members.index(m) for m in ms], np.int64) for ms in self.groups.values()]
+        self.transfer, self._T = _transfer(transfer, cus, self.members)
+        ann = set(self.announce)
+        # per group: its announced members and its peers only (the transfer rule's candidates and vetoes)
+        self._gann = [np.array([self.members.index(m) for m in ms if m in ann], np.int64)
+                      for ms in self.groups.values()]
+        self._gpeer = [[self.members.index(m) for m in ms if m not in ann] for ms in self.groups.values()]
         self.reset(1)
 
     def reset(self, runs: int = 1) -> None:
@@ -132,29 +159,63 @@ class PeerCUSUM(ResidualProcessor):
         g = np.maximum(self._up, self._lo) / self._h
         iso = np.zeros_like(g)
         rows = np.arange(self._R)
-        for gi in self._gidx:
+        for gi, ga, gp in zip(self._gidx, self._gann, self._gpeer, strict=True):
             best = gi[np.argmax(g[:, gi], axis=1)]
             iso[rows, best] = g[rows, best] >= 1.0
+            if self._T is not None and ga.size and gp:
+                # a peer only is the largest: explained by the largest announced member's fault plus its
+                # own fault-free level (up to its threshold, g = 1)
+                m = ga[np.argmax(g[:, ga], axis=1)]
+                gm = g[rows, m]
+                ok = (gm >= 1.0) & np.isin(best, gp)
+                for p in gp:
+                    ok &= (g[:, p] <= self._T[m, p] * gm + 1.0) & (gm > self._T[p, m] * g[:, p])
+                iso[rows, m] = np.maximum(iso[rows, m], ok)
         g, iso = g[:, self._oix], iso[:, self._oix]
         return np.concatenate([g, np.maximum(g, peer), np.maximum(iso, iso_p)], axis=1)
 
     def __repr__(self) -> str:
         return (f"PeerCUSUM(groups={self.groups}, thresholds={self.thresholds}, warmup={self.warmup}, "
-                f"passthrough={self.passthrough}, announce={self.announce})")
+                f"passthrough={self.passthrough}, announce={self.announce}"
+                + (f", transfer={self.transfer}" if self.transfer is not None else "") + ")")
 
     def to_dict(self) -> dict[str, Any]:
-        return {"groups": self.groups, "mean": self.mean, "nu": self.nu, "thresholds": self.thresholds,
-                "warmup": self.warmup, "passthrough": self.passthrough, "announce": self.announce}
+        d = {"groups": self.groups, "mean": self.mean, "nu": self.nu, "thresholds": self.thresholds,
+             "warmup": self.warmup, "passthrough": self.passthrough, "announce": self.announce}
+        if self.transfer is not None:
+            d["transfer"] = self.transfer
+        return d
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> PeerCUSUM:
         return cls(d["groups"], d["mean"], d["nu"], d["thresholds"], warmup=d["warmup"],
-                   passthrough=d.get("passthrough", ()), announce=d.get("announce"))
+                   passthrough=d.get("passthrough", ()), announce=d.get("announce"),
+                   transfer=d.get("transfer"))
+
+
+def _transfer(transfer, cus, members):
+    """The checked transfer mapping and its (M, M) matrix (None, None without one)."""
+    if transfer is None:
+        return None, None
+    if isinstance(transfer, str) or not isinstance(transfer, Mapping):
+        raise DataError(f"PeerCUSUM transfer must map a member to {{member: factor}}, got {transfer!r}")
+    bad = [(a, b) for a, row in transfer.items() for b in row if a not in cus or b not in cus or a == b]
+    if bad:
+        raise DataError(f"PeerCUSUM transfer names pairs {bad} that are not two members of its groups")
+    out = {str(a): {str(b): float(v) for b, v in row.items()} for a, row in transfer.items()}
+    if any(not (np.isfinite(v) and v >= 0) for row in out.values() for v in row.values()):
+        raise DataError(f"PeerCUSUM transfer factors must be finite and >= 0, got {out}")
+    T = np.zeros((len(members), len(members)))
+    for a, row in out.items():
+        for b, v in row.items():
+            T[members.index(a), members.index(b)] = v
+    return out, T
 
 
 def design_peer_cusum(nominal: Signals, groups: Mapping[str, Sequence[str]], *, skip: int = 0,
                       nu: float = 1.0, margin: float = 0.5, warmup: int = 0,
-                      passthrough: Sequence[str] = (), announce: Sequence[str] | None = None) -> PeerCUSUM:
+                      passthrough: Sequence[str] = (), announce: Sequence[str] | None = None,
+                      coef: Mapping[str, Sequence[float]] | None = None) -> PeerCUSUM:
     """A :class:`PeerCUSUM` on nominal (fault-free) :class:`~fdikit.detect.PeerCheck` outputs.
 
     Per member, from the samples from ``skip`` on: the mean and standard deviation ``s`` of
@@ -176,6 +237,11 @@ def design_peer_cusum(nominal: Signals, groups: Mapping[str, Sequence[str]], *, 
         Threshold margin over the nominal maximum (>= 0).
     warmup, passthrough, announce
         As :class:`PeerCUSUM`.
+    coef : mapping str -> sequence of float, optional
+        The peer check's coefficients (:class:`~fdikit.detect.PeerCheck` ``coef``: ``c_1``, the gain
+        on the peers' median, second): with them the :class:`PeerCUSUM` ``transfer`` between each
+        announced member ``a`` and each peer only ``b`` of a group, ``|c_1,b| k h_a / h_b`` (``k``
+        1/2 for an even number of peers, 1 for an odd one; ``h`` the thresholds) and back.
 
     Returns
     -------
@@ -200,4 +266,17 @@ def design_peer_cusum(nominal: Signals, groups: Mapping[str, Sequence[str]], *, 
             lo = np.maximum(0.0, lo - e[:, k] + mean[m] - drift[m])
             top = max(top, float(up.max()), float(lo.max()))
         thr[m] = max(top, s) * (1.0 + margin)
-    return PeerCUSUM(groups, mean, drift, thr, warmup=warmup, passthrough=passthrough, announce=announce)
+    transfer = None
+    if coef is not None:
+        ann = set(members if announce is None else announce)
+        transfer = {}
+        for ms in groups.values():
+            k = 0.5 if (len(ms) - 1) % 2 == 0 else 1.0     # the median of an even / odd number of peers
+            for a in ms:
+                for b in ms:
+                    if a != b and (a in ann) != (b in ann):
+                        if b not in coef or len(coef[b]) < 2:
+                            raise DataError(f"design_peer_cusum: coef lacks the peer gain of {b!r}")
+                        transfer.setdefault(a, {})[b] = abs(float(coef[b][1])) * k * thr[a] / thr[b]
+    return PeerCUSUM(groups, mean, drift, thr, warmup=warmup, passthrough=passthrough, announce=announce,
+                     transfer=transfer)

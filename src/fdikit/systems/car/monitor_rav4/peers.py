@@ -135,7 +135,7 @@ def design_peer_stages(sig: Signals, dt: float, *, skip: int, warmup: int, band_
                        cusum: bool = True, cusum_nu: float = 1.0, cusum_margin: float = 0.5,
                        cusum_groups: tuple[str, ...] = ("yaw",), revise_after_s: float = 1.0,
                        revise_conf: float = 0.6, rates=None, rate_hz: float = 0.5,
-                       typing_fit_hz=None):
+                       typing_fit_hz=None, cusum_transfer: bool = True):
     """The peer check and the fault-type classifier designed on nominal :class:`Rav4PeerSignals`
     outputs ``sig`` (the calibration half).
 
@@ -158,7 +158,35 @@ def design_peer_stages(sig: Signals, dt: float, *, skip: int, warmup: int, band_
     deviations, threshold the nominal maximum times ``1 + cusum_margin``) on the members of
     ``cusum_groups`` (the yaw group: the wheels' residuals follow the speed, and a CUSUM tuned on
     the calibration half alarms on the held-out half) isolates what the peer check's threshold
-    misses; the classifier reads its merged outputs.
+    misses; the classifier reads its merged outputs. With ``cusum_transfer`` (default) a peer only
+    (``sig:yaw_front``, ``sig:yaw_rear``) that is the group's largest no longer hides the largest
+    announced member when its excess is what that member's fault explains through the median of its
+    peers plus its own threshold (:func:`~fdikit.detect.design_peer_cusum` ``coef``). Measured (issue
+    27, the cases where a raw Page-Hinkley still won): small yaw-group faults were missed because
+    ``sig:yaw_rear``, whose reference is the median of 4 peers (the mean of the middle two: it moves
+    by up to half of a faulty peer's shift) and whose threshold is the group's tightest, had the
+    largest CUSUM (``bias:STEER_ANGLE:-1.5@40``: steering 2.0, yaw_rear 3.9 at 45 s); its fault-free
+    CUSUM also reaches 1.4 on the held-out half (58 s), hence the ``+ 1``. Full grid, before -> with
+    the transfer: yaw-rate gain 17 -> 18 of 18, steering bias 17 -> 18, drift 15 -> 18, accelerometer
+    gain 6 -> 9, detected 482 -> 490 of 525, right component 475 -> 483 (98.6 %), 0 announcements
+    before an onset and on the fault-free minute both, <= 1 wrong after the onset 521 both (the bound
+    without the ``+ 1``: 486 detected; no peer-only veto at all: 490 detected but <= 1 wrong after the
+    onset 462, yaw-group sensors named for wheel faults). Tried and not kept: a drift ``cusum_nu`` of 2
+    announced ``lateral_accelerometer:bias`` at 56.1 s on the fault-free minute; 3 put three thresholds
+    on their floor (a 3-sigma level test) and lost two yaw gains and a steering intermittent; a yaw
+    group without ``sig:yaw_front`` (medians of 3) false-alarmed likewise. A CUSUM on the wheels
+    (``cusum_groups`` with ``"wheels"``) announces a 1 % front-left gain from 50 s after 2.0 s but
+    ``wheel_rl:bias`` twice on the fault-free minute.
+
+    The stuck check waits for the longest run of equal raw samples of the calibration half times
+    ``1 + stuck_margin`` (at least 0.5 s). For the steering (``STEER_ANGLE``, 1.5 deg steps) that
+    run is 5.78 s, so ``stuck_after`` is 11.56 s; the held-out half holds a fault-free run of 7.82 s
+    (25.66-33.48 s), so a margin below 0.36 announces ``steering:stuck`` on the fault-free minute (0.3:
+    at 33.4 s) and 0.5 would leave 11 %: the margin stays 1. (A frozen ``STEER_ANGLE`` alone leaves
+    ``STEER_FRACTION`` moving, so the measured angle still moves within +-0.7 deg and only this check
+    sees it: ``stuck:STEER_ANGLE@35`` after 11.3 s; the whole message frozen,
+    ``stuck:STEER_ANGLE_SENSOR@35``, is announced after 3.9 s by the stuck check against the steering
+    the yaw rate says.)
 
     The announced type has hysteresis (issue 27): a revised type must win for ``revise_after_s``
     seconds in a row with a confidence of at least ``revise_conf``, and a drift never falls back to
@@ -250,5 +278,5 @@ def design_peer_stages(sig: Signals, dt: float, *, skip: int, warmup: int, band_
         ann = [m for ms in groups.values() for m in ms if m in PEER_SENSORS]
         rest = [m for g in PEER_GROUPS if g not in cusum_groups for m in PEER_GROUPS[g] if m in PEER_SENSORS]
         cu = design_peer_cusum(nom, groups, skip=skip, nu=cusum_nu, margin=cusum_margin, warmup=warmup,
-                               passthrough=rest, announce=ann)
+                               passthrough=rest, announce=ann, coef=pc.coef if cusum_transfer else None)
     return pc, cu, tc, ftc, names
