@@ -120,8 +120,8 @@ static void fdk_ftc_classify(const double *bs, const int64_t *be, int64_t b0, in
                              int64_t B, double sigma, int64_t min_len, double prefer, int64_t burst_gap,
                              int64_t spike_max, double sig_blk, double gain_crit, int64_t *typ, double *conf)
 {
-    double sr = 0.0, sar = 0.0, sxr = 0.0, sxx = 0.0, sbv = -HUGE_VAL, sd = -HUGE_VAL, sg = -HUGE_VAL;
-    double S0 = 0.0, S1 = 0.0, S2 = 0.0, e0, e1, e2, smax, esum, fb, fg, c, q;
+    double sr = 0.0, sar = 0.0, sbv = -HUGE_VAL, sd = -HUGE_VAL;
+    double S0 = 0.0, S1 = 0.0, e0, e1, smax, esum, fb, fg, dg, c, q;
     int64_t qq, m, s, L, Lb = 0, first = -1, last = -1, n_ep = 0, below = 0, g;
     int by_time;
     double ib, r0;
@@ -131,8 +131,6 @@ static void fdk_ftc_classify(const double *bs, const int64_t *be, int64_t b0, in
         if (qq > 0) s = s > 0 ? s - 1 : NR - 1;
         sr += bs[s * 5];
         sar += (double)(qq * B + B - 1) * bs[s * 5] - bs[s * 5 + 1];
-        sxr += bs[s * 5 + 3];
-        sxx += bs[s * 5 + 4];
         L = (qq + 1) * B;
         if (L < min_len) continue;
         s_tr = (double)L * sr - sar;
@@ -140,19 +138,15 @@ static void fdk_ftc_classify(const double *bs, const int64_t *be, int64_t b0, in
         if (sr * sr / (double)L > sbv) { sbv = sr * sr / (double)L; Lb = qq + 1; }
         q = s_tr * s_tr / stt;
         if (q > sd) sd = q;
-        q = sxx > 0 ? sxr * sxr / sxx : 0.0;
-        if (q > sg) sg = q;
     }
     if (nb * B >= min_len) {
         double s2 = sigma * sigma;
-        S0 = sbv / s2; S1 = sd / s2; S2 = sg / s2;
+        S0 = sbv / s2; S1 = sd / s2;
     }
-    smax = S2 > S1 ? S2 : S1;
-    smax = smax > S0 ? smax : S0;
+    smax = S1 > S0 ? S1 : S0;
     e0 = exp(0.5 * (S0 - smax));
     e1 = exp(0.5 * (S1 - smax));
-    e2 = exp(0.5 * (S2 - smax));
-    esum = e0 + e1 + e2;
+    esum = e0 + e1;
     g = Lb - 1 > 0 ? Lb - 1 : 0;
     ib = 1.0 / (double)B;
     r0 = 0.0;
@@ -168,6 +162,8 @@ static void fdk_ftc_classify(const double *bs, const int64_t *be, int64_t b0, in
     fdk_ftc_gain_test(bs, b0 + nb - g, g, NR, ib, sig_blk, r0, &fb, &fg, &by_time);
     if (by_time && S1 > S0 + prefer) fb = 0.0;
     if (fb >= gain_crit) { *typ = 2; *conf = 1.0 / (1.0 + exp(-0.5 * (fb - gain_crit))); return; }
+    dg = fb - fg;   /* a gain through the fault-free level against a step, both one parameter */
+    if (fg < gain_crit && dg >= prefer && !by_time) { *typ = 2; *conf = 1.0 / (1.0 + exp(-0.5 * dg)); return; }
     s = b0 % NR;
     for (m = 0; m < nb; ++m) {
         const int64_t *e;
@@ -269,6 +265,7 @@ class FaultTypeEmitter(StageEmitter):
                  f"        static const int IX[{4 * M}] = {{{ix}}};",
                  f"        static const int IXX[{max(M * K, 1)}] = {{{ixx}}};",
                  f"        static const int IRAW[{M}] = {{{arr(o._iraw)}}};",
+                 f"        static const int IOFF[{M}] = {{{arr(o._ioff)}}};",
                  f"        static const int64_t STUCK[{M}] = {{{arr(o._stuck)}}};",
                  f"        static const double SIGMA[{M}] = {{{arr(o._sigma, lit)}}};",
                  f"        static const double SIGBLK[{M}] = {{{arr(o._sig_blk, lit)}}};",
@@ -282,9 +279,11 @@ class FaultTypeEmitter(StageEmitter):
                   f"        i = k % {B};",
                   f"        slot = (k / {B}) % {NR};",
                   f"        for (j = 0; j < {M}; ++j) {{",
+                  "            double x = v[IX[4 * j + 3]];",
+                  "            if (IOFF[j] >= 0) x = x + v[IOFF[j]];",
                   f"            fdk_ftc_accumulate({f('bs')} + (j * {NR} + slot) * 5, "
                   f"{f('be')} + (j * {NR} + slot) * 5, i, v[IX[4 * j + 2]],",
-                  f"                               v[IX[4 * j + 3]], v[IX[4 * j + 1]], {lit(o.release)}, "
+                  f"                               x, v[IX[4 * j + 1]], {lit(o.release)}, "
                   f"{int(o.burst_gap)});",
                   "            if (IRAW[j] >= 0) {",
                   "                double raw = v[IRAW[j]];",

@@ -124,10 +124,10 @@ def _classify(bs, be, b0, nb, NR, B, sigma, min_len, prefer, burst_gap, spike_ma
     """Type and confidence of one member's fault from the aggregates of its window's blocks ``b0``
     .. ``b0 + nb - 1`` (block numbers; ring slot ``b % NR``) of ``B`` samples (see the module
     docstring); change points at block boundaries."""
-    # the GLRs [S_b, S_d, S_g], each maximised over the change point (segments of at least min_len
+    # the GLRs [S_b, S_d], each maximised over the change point (segments of at least min_len
     # samples ending at the newest sample): sums over the last q blocks, newest first
-    sr = sar = sxr = sxx = 0.0
-    sb = sd = sg = -np.inf
+    sr = sar = 0.0
+    sb = sd = -np.inf
     Lb = 0                                            # the step's change point: the last Lb blocks
     s = (b0 + nb - 1) % NR                            # ring slots stepped, not taken modulo NR
     for q in range(nb):
@@ -135,8 +135,6 @@ def _classify(bs, be, b0, nb, NR, B, sigma, min_len, prefer, burst_gap, spike_ma
             s = s - 1 if s > 0 else NR - 1
         sr += bs[s, _SR]
         sar += (q * B + B - 1) * bs[s, _SR] - bs[s, _SIR]     # age (0 = newest) times r
-        sxr += bs[s, _SXR]
-        sxx += bs[s, _SXX]
         L = (q + 1) * B
         if L < min_len:
             continue
@@ -145,14 +143,13 @@ def _classify(bs, be, b0, nb, NR, B, sigma, min_len, prefer, burst_gap, spike_ma
         if sr * sr / L > sb:
             sb, Lb = sr * sr / L, q + 1
         sd = max(sd, s_tr * s_tr / stt)
-        sg = max(sg, sxr * sxr / sxx if sxx > 0 else 0.0)
-    S0 = S1 = S2 = 0.0
+    S0 = S1 = 0.0
     if nb * B >= min_len:
         s2 = sigma * sigma
-        S0, S1, S2 = sb / s2, sd / s2, sg / s2
-    smax = max(S0, max(S1, S2))
-    e0, e1, e2 = np.exp(0.5 * (S0 - smax)), np.exp(0.5 * (S1 - smax)), np.exp(0.5 * (S2 - smax))
-    esum = e0 + e1 + e2
+        S0, S1 = sb / s2, sd / s2
+    smax = max(S0, S1)
+    e0, e1 = np.exp(0.5 * (S0 - smax)), np.exp(0.5 * (S1 - smax))
+    esum = e0 + e1
     # the gain test over the blocks after the change point's: that block holds the change at block
     # resolution, its mean mixes the samples before and after it
     nl = max(Lb - 1, 0)
@@ -174,6 +171,12 @@ def _classify(bs, be, b0, nb, NR, B, sigma, min_len, prefer, burst_gap, spike_ma
         fb = 0.0                                      # a drift, which the signal happens to follow
     if fb >= gain_crit:                               # the residual follows the signal: a gain
         return _GAIN, 1.0 / (1.0 + np.exp(-0.5 * (fb - gain_crit)))
+    # a gain through the fault-free level against a step, both one parameter: the gain's mean fixes
+    # its slope, the signal's moves must follow (a sensor's zero offset, ``gain_offset``, makes the
+    # mean large against the moves; a step has no slope)
+    dg = fb - fg
+    if fg < gain_crit and dg >= prefer and not by_time:
+        return _GAIN, 1.0 / (1.0 + np.exp(-0.5 * dg))
     # episodes of the residual out, separated by at least burst_gap samples below release
     first = last = -1
     n_ep = 0
@@ -322,7 +325,7 @@ _RETURN = 3
 
 
 @njit(cache=True)
-def _run_kernel(V, ix, ixx, confirm, iraw, stuck, sigma, NB, lookback, min_len, spike_max, burst_gap,
+def _run_kernel(V, ix, ixx, confirm, iraw, ioff, stuck, sigma, NB, lookback, min_len, spike_max, burst_gap,
                 release, clear_after, prefer, block, sig_blk, gain_crit, revise_after, revise_conf, hold_iso,
                 k, bs, be, active, onset, typ, conf, below, zero, last, cand, cnt, left, dtyp, dconf, out):
     """The classifier over samples V (R, T, inputs) from sample count k, state updated in place;
@@ -336,7 +339,10 @@ def _run_kernel(V, ix, ixx, confirm, iraw, stuck, sigma, NB, lookback, min_len, 
         i, slot = k % B, (k // B) % NR
         for run in range(R):
             for j in range(M):
-                _accumulate(bs[run, j, slot], be[run, j, slot], i, V[run, kk, ix[j, 2]], V[run, kk, ix[j, 3]],
+                x = V[run, kk, ix[j, 3]]
+                if ioff[j] >= 0:
+                    x = x + V[run, kk, ioff[j]]
+                _accumulate(bs[run, j, slot], be[run, j, slot], i, V[run, kk, ix[j, 2]], x,
                             V[run, kk, ix[j, 1]], release, burst_gap)
                 if iraw[j] >= 0:
                     raw = V[run, kk, iraw[j]]
@@ -471,7 +477,7 @@ class FaultTypeClassifier(ResidualProcessor):
     def __init__(self, members: Sequence[str], sigma: Mapping[str, float], window: int, *,
                  channels: Mapping[str, str] | None = None,
                  isolated_by: Mapping[str, Sequence[str]] | None = None, confirm: float = 0.0,
-                 raw: Mapping[str, str] | None = None,
+                 raw: Mapping[str, str] | None = None, gain_offset: Mapping[str, str] | None = None,
                  stuck_after: Mapping[str, int] | None = None, lookback: int = 50, min_len: int = 10,
                  spike_max: int = 10, burst_gap: int = 25, release: float = 0.5, clear_after: int = 250,
                  prefer: float = 6.0, block: int = 10, sigma_block: Mapping[str, float] | None = None,
@@ -515,6 +521,10 @@ class FaultTypeClassifier(ResidualProcessor):
         if bad or set(self.stuck_after) - set(self.raw):
             raise DataError(f"raw and stuck_after must name members, and every stuck_after member needs a "
                             f"raw channel; got raw {self.raw}, stuck_after {self.stuck_after}")
+        self.gain_offset = {str(k): str(v) for k, v in (gain_offset or {}).items()}
+        if isinstance(gain_offset, str) or set(self.gain_offset) - set(self.members):
+            raise DataError(f"gain_offset must map members to channels, got {gain_offset!r}; members "
+                            f"{self.members}")
         self.isolated_by = {str(k): [str(c) for c in v] for k, v in (isolated_by or {}).items()}
         if isinstance(isolated_by, str) or any(isinstance(v, str) for v in (isolated_by or {}).values()) \
                 or set(self.isolated_by) - set(self.members):
@@ -525,6 +535,8 @@ class FaultTypeClassifier(ResidualProcessor):
             names += self.isolated_by.get(m, [])
             if m in self.raw:
                 names.append(self.raw[m])
+            if m in self.gain_offset:
+                names.append(self.gain_offset[m])
         self.input_names = list(dict.fromkeys(names))
         ix = {n: i for i, n in enumerate(self.input_names)}
         self._ix = np.array([[ix[ch[k].format(m=m)] for k in ("isolated", "stat", "r", "x")]
@@ -535,6 +547,8 @@ class FaultTypeClassifier(ResidualProcessor):
                               + [-1] * (K - len(self.isolated_by.get(m, []))) for m in self.members],
                              np.int64).reshape(len(self.members), K)
         self._iraw = np.array([ix[self.raw[m]] if m in self.raw else -1 for m in self.members], np.int64)
+        self._ioff = np.array([ix[self.gain_offset[m]] if m in self.gain_offset else -1 for m in self.members],
+                              np.int64)
         self._stuck = np.array([self.stuck_after.get(m, 0) for m in self.members], np.int64)
         self._sigma = np.array([self.sigma[m] for m in self.members])
         self._sig_blk = np.array([self.sigma_block[m] for m in self.members])
@@ -605,7 +619,7 @@ class FaultTypeClassifier(ResidualProcessor):
     def _advance(self, v: np.ndarray) -> np.ndarray:
         """Samples v (runs, T, inputs) through the kernel -> outputs (runs, T, outputs)."""
         out = np.empty((v.shape[0], v.shape[1], len(self.output_names)))
-        self._k = _run_kernel(v, self._ix, self._ixx, self.confirm, self._iraw, self._stuck, self._sigma,
+        self._k = _run_kernel(v, self._ix, self._ixx, self.confirm, self._iraw, self._ioff, self._stuck, self._sigma,
                               self.n_blocks, self.lookback, self.min_len, self.spike_max, self.burst_gap,
                               self.release, self.clear_after, self.prefer, self.block, self._sig_blk,
                               self._gain_crit, self.revise_after, self.revise_conf,
@@ -641,7 +655,7 @@ class FaultTypeClassifier(ResidualProcessor):
     def to_dict(self) -> dict[str, Any]:
         return {"members": self.members, "sigma": self.sigma, "window": self.window,
                 "channels": self.channels, "isolated_by": self.isolated_by,
-                "confirm": self.confirm, "raw": self.raw,
+                "confirm": self.confirm, "raw": self.raw, "gain_offset": self.gain_offset,
                 "stuck_after": self.stuck_after,
                 "lookback": self.lookback, "min_len": self.min_len, "spike_max": self.spike_max,
                 "burst_gap": self.burst_gap, "release": self.release, "clear_after": self.clear_after,

@@ -123,7 +123,7 @@ class Rav4PeerSignalsEmitter(StageEmitter):
         raw = {"raw:wheel_fl": y[2], "raw:wheel_fr": y[3], "raw:wheel_rl": y[4], "raw:wheel_rr": y[5],
                "raw:yaw_rate": y[0], "raw:accel_y": y[1], "raw:steer_angle": u[0]}
         lines = ["    {", *preprocessing_code(o.pre, u, y),
-                 "        fdk_real U = pre_U > FDK_R(1.0) ? pre_U : FDK_R(1.0), v[17], m;", "        int i;",
+                 "        fdk_real U = pre_U > FDK_R(1.0) ? pre_U : FDK_R(1.0), v[20], m;", "        int i;",
                  "        if (pre_U != pre_U) U = pre_U;"]
         cols = [y[2], y[3], y[4], y[5], "pre_yaw", "pre_ay / U",
                 f"(pre_steer - {rl(o.steer[2])}) * U / {rl(RAV4['L'])}", f"pre_fd / {rl(o.k_f)}",
@@ -132,9 +132,12 @@ class Rav4PeerSignalsEmitter(StageEmitter):
         lines += median_code("m", y[2:6])
         lines.append("        v[9] = m * m;")
         lines += [f"        v[{10 + i}] = {raw[n]};" for i, n in enumerate(sorted(raw))]
+        p = o.pre
+        lines += [f"        v[17] = {rl(p.b_r)} + FDK_R(0.0) * U;", f"        v[18] = {rl(p.ay_sign * p.b_ay)} / U;",
+                  f"        v[19] = ({rl(o.steer[2])} - ({u[1]} - {rl(p.delta_0)}) / {rl(p.i_s)}) * U / {rl(RAV4['L'])};"]
         n = len(o.output_names)
-        if n != 17:
-            raise DataError(f"stage {type(o).__name__} with {n} outputs cannot be generated (17 expected)")
+        if n != 20:
+            raise DataError(f"stage {type(o).__name__} with {n} outputs cannot be generated (20 expected)")
         lines += [refuse_nonfinite("v", n)]
         lines += [f"        {out[i]} = v[{i}];" for i in range(n)]
         lines.append("    }")

@@ -64,6 +64,13 @@ _RAW_OF = {"sig:wheel_fl": "raw:wheel_fl", "sig:wheel_fr": "raw:wheel_fr", "sig:
            "sig:lateral_accelerometer": "raw:accel_y", "sig:steering": "raw:steer_angle"}
 
 
+#: The channel of each member's zero offset that the signal conditioning removed, in the member's
+#: units (:class:`Rav4PeerSignals` outputs; the wheels have none): a gain of the raw sensor makes the
+#: member's residual ``(g - 1) (x + offset)``, the fault-type stage's ``gain_offset``.
+GAIN_OFFSETS = {"sig:yaw_rate": "zero:sig:yaw_rate", "sig:lateral_accelerometer": "zero:sig:lateral_accelerometer",
+                "sig:steering": "zero:sig:steering"}
+
+
 class Rav4PeerSignals(PeerSignalsBase):
     """The members of the RAV4's redundant groups and the raw sensor values, from the raw CAN channels.
 
@@ -95,8 +102,9 @@ class Rav4PeerSignals(PeerSignalsBase):
                             f"got {steer}, {k_f}, {k_r}")
         self.u_names, self.y_names = list(_RAW_U), list(_RAW_Y)
         self.output_names = ([m for ms in PEER_GROUPS.values() for m in ms] + ["sig:speed_sq"]
-                             + sorted(set(_RAW_OF.values())))
-        self.output_units = ["m/s"] * 4 + ["rad/s"] * 5 + ["m^2/s^2"] + ["-"] * len(set(_RAW_OF.values()))
+                             + sorted(set(_RAW_OF.values())) + list(GAIN_OFFSETS.values()))
+        self.output_units = (["m/s"] * 4 + ["rad/s"] * 5 + ["m^2/s^2"] + ["-"] * len(set(_RAW_OF.values()))
+                             + ["rad/s"] * len(GAIN_OFFSETS))
 
     def __repr__(self) -> str:
         return f"Rav4PeerSignals(steer={self.steer}, k_f={self.k_f:g}, k_r={self.k_r:g})"
@@ -118,7 +126,13 @@ class Rav4PeerSignals(PeerSignalsBase):
         cols = [y[..., 2], y[..., 3], y[..., 4], y[..., 5], yy[..., 1], yy[..., 0] / U,
                 (uu[..., 0] - c0) * U / RAV4["L"], yy[..., 2] / self.k_f, yy[..., 3] / self.k_r,
                 np.median(y[..., 2:6], axis=-1) ** 2]
-        return cols + [raw[n] for n in sorted(raw)]
+        p = self.pre
+        # what the conditioning removed from each member, in its units: a gain of the raw sensor
+        # scales the member plus this (the yaw-rate offset; the accelerometer's over U; the steering
+        # member's c_0 and the hand-wheel angle's fine part and offset)
+        zero = [p.b_r + 0.0 * U, (p.ay_sign * p.b_ay) / U,
+                (c0 - (u[..., 1] - p.delta_0) / p.i_s) * U / RAV4["L"]]
+        return cols + [raw[n] for n in sorted(raw)] + zero
 
 
 #: the fault-type stage's isolation with the CUSUM (PeerCUSUM merges the peer check's); its statistic
@@ -135,7 +149,7 @@ def design_peer_stages(sig: Signals, dt: float, *, skip: int, warmup: int, band_
                        cusum: bool = True, cusum_nu: float = 1.0, cusum_margin: float = 0.5,
                        cusum_groups: tuple[str, ...] = ("yaw",), revise_after_s: float = 1.0,
                        revise_conf: float = 0.6, rates=None, rate_hz: float = 0.5,
-                       typing_fit_hz=None, cusum_transfer: bool = True):
+                       typing_fit_hz=None, cusum_transfer: bool = True, gain_offset: bool = True):
     """The peer check and the fault-type classifier designed on nominal :class:`Rav4PeerSignals`
     outputs ``sig`` (the calibration half).
 
@@ -264,6 +278,7 @@ def design_peer_stages(sig: Signals, dt: float, *, skip: int, warmup: int, band_
               for k in range(0, e.size - w + 1, n(1.0))]
         crit[m] = max(gain_crit, gain_margin * max(fb, default=0.0))
     ftc = FaultTypeClassifier(list(PEER_SENSORS), sigma, n(window_s), raw=_RAW_OF, stuck_after=stuck_after,
+                              gain_offset=GAIN_OFFSETS if gain_offset else None,
                               lookback=n(lookback_s), min_len=n(0.2), spike_max=n(0.2), burst_gap=n(0.5),
                               clear_after=n(clear_after_s), isolated_by=isolated_by, confirm=confirm,
                               block=blk, sigma_block=sig_blk,
