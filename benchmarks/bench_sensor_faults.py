@@ -92,6 +92,22 @@ half grid, against 208), the gain test's change point maximised over the window 
 gains: the braking's slope in a short window; 204 of 238), a line-in-time test for late-detected
 drifts (no change: F 11-17 against 25).
 
+Wave 3, session 5 (2026-12-03). The fault-type stage also decides a gain when the gain through the
+residual's fault-free level (one parameter: its mean fixes its slope) beats the step (one
+parameter) by ``prefer`` and fits, and the signal it regresses on is the reference plus the zero
+offset the conditioning removed (the gyro's -0.38 deg/s, the accelerometer's, the hand-wheel
+angle's): on this straight a yaw-rate gain's residual is mostly the gain times that offset, a step
+to the old test (x3 typed bias with confidence 1, x2 intermittent: its residual crosses the
+threshold as the yaw rate moves). Its bias and drift confidence is the softmax of the step and the
+ramp (a sample-wise gain GLR, which the offset makes as large as the step's, took it away). Full
+grid, main -> this (same machine): right type at the end 425 -> 452 of 483 (88.0 -> 93.6 %; 458,
+94.8 %, with the x0 gains typed stuck), at +5 s 381 -> 391; gain 42 -> 68 of 91 (+ 6 x0 typed
+stuck; yaw rate 4 -> 14 of 15, wheels 38 -> 51 of 70, accelerometer 0 -> 3 of 9), drift 123 ->
+124 of 126, bias 120 of 120 and intermittent 119 of 119 unchanged; detected 490 and right component
+483 unchanged; <= 1 wrong after the onset 521 -> 520 of 525 (``bias:STEER_ANGLE:6@35``: its wrong
+``yaw_rate:bias`` at 39.6 s, there before, is now also revised to a drift); 0 announcements before
+an onset and on the fault-free minute.
+
 Run: ``PYTHONPATH=src python benchmarks/bench_sensor_faults.py [--quick] [--fraction F]``
 (``--quick``: one onset, the middle magnitude, one combination and the artefacts; ``--fraction``:
 every 1/F-th case of the grid).

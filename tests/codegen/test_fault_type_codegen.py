@@ -35,6 +35,7 @@ def _monitor(revise_after=0):
     """The classifier's inputs passed through as residuals, its types held and announced, one
     group per sensor (``revise_after``: the announced type's hysteresis, issue 27)."""
     ftc = FaultTypeClassifier(M, {m: 0.1 for m in M}, 300, raw={"a": "raw:a", "c": "raw:c"},
+                              gain_offset={"b": "off:b"},
                               stuck_after={"a": 40, "c": 30}, isolated_by={"b": ["ext:b"]}, confirm=0.5,
                               lookback=30, min_len=5, spike_max=8, burst_gap=20, clear_after=150, block=10,
                               gain_crit={"a": 20.0, "b": 25.0, "c": 30.0}, revise_after=revise_after,
@@ -75,6 +76,7 @@ def _log(mon, seed, T=4000, gap=True):
         raw[3300:3340] = raw[3300]
         cols[f"raw:{m}"] = raw
     cols["ext:b"] = ((k > 2600) & (k < 2700)).astype(float)
+    cols["off:b"] = -4.0 + 0.5 * np.sin(k / 300)              # b's zero offset (issue 27: a gain scales it)
     names = list(mon.input_names)             # (the monitor's order, which the C takes)
     X = np.column_stack([cols[c[3:]] for c in names])
     X[777, 2] = np.nan

@@ -6,7 +6,7 @@ import itertools
 import numpy as np
 import pytest
 
-from fdikit import Signals
+from fdikit import DataError, Signals
 from fdikit.isolate import FaultTypeClassifier
 
 
@@ -258,3 +258,56 @@ def test_gain_without_offset_is_a_line_through_the_fault_free_level():
     fb1, fg1, _ = _gain_test_blocks(bs, 0, nb, nb, 1.0 / B, 0.003, 0.1)
     assert fg0 > 100.0 and fg1 < 10.0
     assert fb0 == pytest.approx(fb1, rel=1e-9) and fb0 > 100.0
+
+
+def _offset_log(kind, seed, T=3000):
+    """A sensor whose conditioning removes a zero offset of -2 (a gyro's): its true signal moves by
+    only 0.02 around zero, and from sample 1000 a x1.5 gain (of the raw reading, offset included:
+    ``r = 0.5 (x - 2)``) or a -1 bias, under white noise of 0.05."""
+    rng = np.random.default_rng(seed)
+    k = np.arange(T)
+    x, o = 0.02 * np.sin(k / 60.0), -2.0
+    on = k >= 1000
+    e = 0.05 * rng.standard_normal(T) + np.where(on, 0.5 * (x + o) if kind == "gain" else -1.0, 0.0)
+    stat = np.abs(e) / 0.3
+    return Signals(k * 0.02, np.column_stack([(stat >= 1) & (k >= 1020), stat, e, x, np.full(T, o)])[None],
+                   ["peer:s:isolated", "peer:s", "peer:s:e", "peer:s:ref", "zero:s"])
+
+
+def _final(out):
+    from fdikit.isolate import FAULT_TYPES
+
+    return [t for t in FAULT_TYPES if out[f"s:{t}"][0, -1] == 1.0], float(out["s:confidence"][0, -1])
+
+
+def test_a_gain_of_a_sensor_with_a_zero_offset_is_typed_a_gain():
+    """Issue 27: a yaw-rate gain on a straight road was typed a bias (its residual is mostly the gain
+    times the gyro's offset, which the conditioning removed). With ``gain_offset`` the gain through
+    the fault-free level, whose mean fixes its slope, beats the step (both one parameter), and a step
+    is told from it by the same test."""
+    kw = {"lookback": 50, "block": 10}
+    typed, wrong_without = [], 0
+    for seed in range(10):
+        sig = _offset_log("gain", seed)
+        (t_off, _c), (t_no, c_no) = (
+            _final(FaultTypeClassifier(["s"], {"s": 0.05}, 1500, gain_offset=off, **kw).run(s))
+            for off, s in (({"s": "zero:s"}, sig),
+                           (None, Signals(sig.t, sig.values[:, :, :4], sig.names[:4]))))
+        typed.append(t_off)
+        wrong_without += t_no == ["bias"] and c_no > 0.9        # confidently wrong without the offset
+        b, cb = _final(FaultTypeClassifier(["s"], {"s": 0.05}, 1500, gain_offset={"s": "zero:s"}, **kw)
+                       .run(_offset_log("bias", seed)))
+        assert b == ["bias"], (seed, b, cb)
+    assert typed == [["gain"]] * 10, typed
+    assert wrong_without >= 3, wrong_without
+
+
+def test_gain_offset_names_members_and_round_trips():
+    with pytest.raises(DataError, match="gain_offset must map members"):
+        FaultTypeClassifier(["s"], {"s": 0.05}, 100, gain_offset={"t": "zero:t"})
+    ftc = FaultTypeClassifier(["s"], {"s": 0.05}, 100, gain_offset={"s": "zero:s"})
+    assert "zero:s" in ftc.input_names
+    assert FaultTypeClassifier.from_dict(ftc.to_dict()).gain_offset == {"s": "zero:s"}
+    old = {k: v for k, v in ftc.to_dict().items() if k != "gain_offset"}   # saved before it existed
+    assert FaultTypeClassifier.from_dict(old).input_names == ["peer:s:isolated", "peer:s", "peer:s:e",
+                                                             "peer:s:ref"]

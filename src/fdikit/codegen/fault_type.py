@@ -163,7 +163,9 @@ static void fdk_ftc_classify(const double *bs, const int64_t *be, int64_t b0, in
     if (by_time && S1 > S0 + prefer) fb = 0.0;
     if (fb >= gain_crit) { *typ = 2; *conf = 1.0 / (1.0 + exp(-0.5 * (fb - gain_crit))); return; }
     dg = fb - fg;   /* a gain through the fault-free level against a step, both one parameter */
-    if (fg < gain_crit && dg >= prefer && !by_time) { *typ = 2; *conf = 1.0 / (1.0 + exp(-0.5 * dg)); return; }
+    if (fg < gain_crit && dg >= prefer && !by_time) {
+        *typ = 2; *conf = 1.0 / (1.0 + exp(-0.5 * dg)); return;
+    }
     s = b0 % NR;
     for (m = 0; m < nb; ++m) {
         const int64_t *e;

@@ -34,9 +34,15 @@ each sample between announces the latest decision (or stuck, checked per sample)
   through the residual's fault-free level (the mean of the ring's blocks before the onset, else
   zero), the gain without an offset, is also ruled out (``F_g >= gain_crit``), and is revised to a
   gain as the signal moves: a bias at most 0.5 sure says the data cannot tell it from a gain.
-  (The sample-wise GLR ``S_g`` below is not used to decide
-  a gain: on a coloured residual a constant step beat by a few units of ``S_g`` out of thousands
-  typed biases as gains once the signal moved.)
+  It is also a gain when that line through the fault-free level, ``r = r_0 + theta x``, fits
+  (``F_g < gain_crit``) and beats the step ``r = r_0 + b`` by ``prefer``: ``F_b - F_g`` is the drop
+  of the sum of squares from the step to it, both one parameter -- the gain's mean fixes its slope
+  and the signal's moves must follow, where a step has none -- unless a line in time fits the
+  block means better than the line in x (a drift). ``x`` is the signal the gain scales: with
+  ``gain_offset`` the member's reference plus the zero offset that the signal conditioning removed
+  (a gyro's, a hand-wheel angle's), since a gain of the raw sensor scales the offset too (issue 27:
+  on a straight road the yaw rate moves by +-0.2 deg/s and a yaw-rate gain's residual is mostly
+  the gain times the gyro's -0.38 deg/s offset, a step to a test without it).
 * **intermittent** -- at least two episodes of the normalised residual above 1 in the window,
   separated by ``burst_gap`` samples below ``release``, or of the residual's block means above 5
   block-mean standard deviations, separated by blocks below 2, the second one ended or a third
@@ -46,9 +52,11 @@ each sample between announces the latest decision (or stuck, checked per sample)
 * otherwise a step and a ramp with an unknown change point ``j`` compete by their GLR (``sigma``
   the nominal residual's standard deviation): a step ``r_i = b`` (**bias**),
   ``S_b = max_j (sum r)^2 / (sigma^2 n)``; a ramp ``r_i = s (i - j + 1)`` (**drift**),
-  ``S_d = max_j (sum tau r)^2 / (sigma^2 sum tau^2)``; and ``S_g = max_j (sum x r)^2 / (sigma^2 sum
-  x^2)``. Drift wins over bias only when its statistic exceeds the bias one by ``prefer`` (a step
-  is the default explanation); the confidence is the softmax of ``S / 2`` over the three.
+  ``S_d = max_j (sum tau r)^2 / (sigma^2 sum tau^2)``. Drift wins over bias only when its
+  statistic exceeds the bias one by ``prefer`` (a step is the default explanation); the confidence
+  is the softmax of ``S / 2`` over the two (a gain is decided by the block test above; a
+  sample-wise GLR of the gain in this softmax, which a zero offset makes as large as the step's,
+  took the bias's and the drift's confidence away).
 
 With ``revise_after`` the announced type has hysteresis (issue 27: no flapping between types
 while one fault persists): the announced type is replaced only after it has lost ``revise_after``
@@ -84,6 +92,8 @@ _BIAS, _DRIFT, _GAIN, _STUCK, _INTER, _SPIKE = range(6)
 #: block), x, x r, x^2 (``_bs``); and of the normalised residual's episodes (``_be``): the index in the
 #: block of the first and last sample out (>= 1; -1: none), the samples below ``release`` before the
 #: first and after the last, and the episodes that start after the first in the block
+#: (the sums of x r and x^2 fed a sample-wise gain GLR that is no longer decided on; they stay, so
+#: that saved states keep their layout)
 _SR, _SIR, _SX, _SXR, _SXX = range(5)
 _FO, _LO, _BB, _BA, _NE = range(5)
 
@@ -419,6 +429,10 @@ class FaultTypeClassifier(ResidualProcessor):
         Level of the member's normalised residual that the ``isolated_by`` flags need (0: none).
     raw : mapping str -> str, optional
         Member -> channel of its raw signal for the stuck check (members without one have none).
+    gain_offset : mapping str -> str, optional
+        Member -> channel of the zero offset that the signal conditioning removed from it, in the
+        member's units: a gain of the raw sensor scales the member plus this, so the gain test's
+        signal is ``x`` plus it (members without one: ``x`` alone).
     stuck_after : mapping str -> int, optional
         Member -> zero increments in a row that make it stuck (default: no stuck check).
     lookback : int
@@ -547,8 +561,8 @@ class FaultTypeClassifier(ResidualProcessor):
                               + [-1] * (K - len(self.isolated_by.get(m, []))) for m in self.members],
                              np.int64).reshape(len(self.members), K)
         self._iraw = np.array([ix[self.raw[m]] if m in self.raw else -1 for m in self.members], np.int64)
-        self._ioff = np.array([ix[self.gain_offset[m]] if m in self.gain_offset else -1 for m in self.members],
-                              np.int64)
+        off = self.gain_offset
+        self._ioff = np.array([ix[off[m]] if m in off else -1 for m in self.members], np.int64)
         self._stuck = np.array([self.stuck_after.get(m, 0) for m in self.members], np.int64)
         self._sigma = np.array([self.sigma[m] for m in self.members])
         self._sig_blk = np.array([self.sigma_block[m] for m in self.members])
@@ -619,8 +633,9 @@ class FaultTypeClassifier(ResidualProcessor):
     def _advance(self, v: np.ndarray) -> np.ndarray:
         """Samples v (runs, T, inputs) through the kernel -> outputs (runs, T, outputs)."""
         out = np.empty((v.shape[0], v.shape[1], len(self.output_names)))
-        self._k = _run_kernel(v, self._ix, self._ixx, self.confirm, self._iraw, self._ioff, self._stuck, self._sigma,
-                              self.n_blocks, self.lookback, self.min_len, self.spike_max, self.burst_gap,
+        self._k = _run_kernel(v, self._ix, self._ixx, self.confirm, self._iraw, self._ioff, self._stuck,
+                              self._sigma, self.n_blocks, self.lookback, self.min_len, self.spike_max,
+                              self.burst_gap,
                               self.release, self.clear_after, self.prefer, self.block, self._sig_blk,
                               self._gain_crit, self.revise_after, self.revise_conf,
                               self.hold_while_isolated, self._k, self._bs, self._be, self._active,

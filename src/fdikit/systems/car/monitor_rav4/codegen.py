@@ -133,8 +133,10 @@ class Rav4PeerSignalsEmitter(StageEmitter):
         lines.append("        v[9] = m * m;")
         lines += [f"        v[{10 + i}] = {raw[n]};" for i, n in enumerate(sorted(raw))]
         p = o.pre
-        lines += [f"        v[17] = {rl(p.b_r)} + FDK_R(0.0) * U;", f"        v[18] = {rl(p.ay_sign * p.b_ay)} / U;",
-                  f"        v[19] = ({rl(o.steer[2])} - ({u[1]} - {rl(p.delta_0)}) / {rl(p.i_s)}) * U / {rl(RAV4['L'])};"]
+        lines += [f"        v[17] = {rl(p.b_r)} + FDK_R(0.0) * U;",
+                  f"        v[18] = {rl(p.ay_sign * p.b_ay)} / U;",
+                  f"        v[19] = ({rl(o.steer[2])} - ({u[1]} - {rl(p.delta_0)}) / {rl(p.i_s)}) * U "
+                  f"/ {rl(RAV4['L'])};"]
         n = len(o.output_names)
         if n != 20:
             raise DataError(f"stage {type(o).__name__} with {n} outputs cannot be generated (20 expected)")
