@@ -164,7 +164,7 @@ static void fdk_ftc_classify(const double *bs, const int64_t *be, int64_t b0, in
     if (fb >= gain_crit) { *typ = 2; *conf = 1.0 / (1.0 + exp(-0.5 * (fb - gain_crit))); return; }
     dg = fb - fg;   /* a gain through the fault-free level against a step, both one parameter */
     if (fg < gain_crit && dg >= prefer && !by_time) {
-        *typ = 2; *conf = 1.0 / (1.0 + exp(-0.5 * dg)); return;
+        *typ = 2; *conf = 1.0 / (1.0 + exp(-0.5 * (dg - prefer))); return;
     }
     s = b0 % NR;
     for (m = 0; m < nb; ++m) {

@@ -38,7 +38,10 @@ each sample between announces the latest decision (or stuck, checked per sample)
   (``F_g < gain_crit``) and beats the step ``r = r_0 + b`` by ``prefer``: ``F_b - F_g`` is the drop
   of the sum of squares from the step to it, both one parameter -- the gain's mean fixes its slope
   and the signal's moves must follow, where a step has none -- unless a line in time fits the
-  block means better than the line in x (a drift). ``x`` is the signal the gain scales: with
+  block means better than the line in x (a drift); its confidence is
+  ``1 / (1 + exp(-(F_b - F_g - prefer) / 2))``, 0.5 at the level as the first rule's is at
+  ``gain_crit`` (the gain's posterior against a step that is ``exp(prefer / 2)`` times likelier a
+  priori). ``x`` is the signal the gain scales: with
   ``gain_offset`` the member's reference plus the zero offset that the signal conditioning removed
   (a gyro's, a hand-wheel angle's), since a gain of the raw sensor scales the offset too (issue 27:
   on a straight road the yaw rate moves by +-0.2 deg/s and a yaw-rate gain's residual is mostly
@@ -186,7 +189,7 @@ def _classify(bs, be, b0, nb, NR, B, sigma, min_len, prefer, burst_gap, spike_ma
     # mean large against the moves; a step has no slope)
     dg = fb - fg
     if fg < gain_crit and dg >= prefer and not by_time:
-        return _GAIN, 1.0 / (1.0 + np.exp(-0.5 * dg))
+        return _GAIN, 1.0 / (1.0 + np.exp(-0.5 * (dg - prefer)))
     # episodes of the residual out, separated by at least burst_gap samples below release
     first = last = -1
     n_ep = 0
