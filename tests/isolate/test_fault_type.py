@@ -305,6 +305,8 @@ def test_a_gain_of_a_sensor_with_a_zero_offset_is_typed_a_gain():
 def test_gain_offset_names_members_and_round_trips():
     with pytest.raises(DataError, match="gain_offset must map members"):
         FaultTypeClassifier(["s"], {"s": 0.05}, 100, gain_offset={"t": "zero:t"})
+    with pytest.raises(DataError, match="gain_offset must map members"):
+        FaultTypeClassifier(["s"], {"s": 0.05}, 100, gain_offset="zero:s")
     ftc = FaultTypeClassifier(["s"], {"s": 0.05}, 100, gain_offset={"s": "zero:s"})
     assert "zero:s" in ftc.input_names
     assert FaultTypeClassifier.from_dict(ftc.to_dict()).gain_offset == {"s": "zero:s"}

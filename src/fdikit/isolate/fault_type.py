@@ -538,8 +538,10 @@ class FaultTypeClassifier(ResidualProcessor):
         if bad or set(self.stuck_after) - set(self.raw):
             raise DataError(f"raw and stuck_after must name members, and every stuck_after member needs a "
                             f"raw channel; got raw {self.raw}, stuck_after {self.stuck_after}")
+        if gain_offset is not None and not isinstance(gain_offset, Mapping):
+            raise DataError(f"gain_offset must map members to channels, got {gain_offset!r}")
         self.gain_offset = {str(k): str(v) for k, v in (gain_offset or {}).items()}
-        if isinstance(gain_offset, str) or set(self.gain_offset) - set(self.members):
+        if set(self.gain_offset) - set(self.members):
             raise DataError(f"gain_offset must map members to channels, got {gain_offset!r}; members "
                             f"{self.members}")
         self.isolated_by = {str(k): [str(c) for c in v] for k, v in (isolated_by or {}).items()}
